@@ -1,0 +1,95 @@
+/* fieldgripd's configuration: the INI file of SPEC.md "Configuration file", parsed with
+ * libinih, plus the command-line overrides.
+ *
+ * Every key has a built-in default (fg_conf_defaults), so the daemon runs without a file.
+ * Unknown sections and keys, malformed values and values out of range are errors whose
+ * message names the file, the line and the key ("/etc/fieldgrip/fieldgripd.conf:12: [train]
+ * steps: expected an integer from 1 to 10000000, got 'many'"). Relative paths in the file
+ * are taken relative to the file's folder. */
+#ifndef FG_DAEMON_CONF_H
+#define FG_DAEMON_CONF_H
+
+#include <stddef.h>
+
+#define FG_CONF_DEFAULT_PATH "/etc/fieldgrip/fieldgripd.conf"
+#define FG_CONF_DEFAULT_STATE_DIR "/var/lib/fieldgrip"
+#define FG_CONF_DEFAULT_LISTEN "127.0.0.1:7070"
+#define FG_SCENE_NAME_MAX 64
+
+typedef enum { FG_TRANSPORT_NONE = 0, FG_TRANSPORT_TCP, FG_TRANSPORT_RTU } fg_transport;
+typedef enum { FG_ENCODING_INT16 = 0, FG_ENCODING_FLOAT32 } fg_encoding;
+typedef enum { FG_GRIPPER_PANDA = 0, FG_GRIPPER_ROBOTIQ_2F85 } fg_gripper_model;
+
+/* A Modbus peer ([robot] or [gripper.modbus]). */
+typedef struct fg_conf_modbus {
+  fg_transport transport;
+  char *host;        /* tcp: name or address (IPv6 allowed) */
+  int port;          /* tcp: 1..65535 */
+  char *device;      /* rtu: serial device path */
+  int baud;          /* rtu */
+  char parity;       /* rtu: 'N', 'E' or 'O' (key "parity", default N) */
+  int unit_id;       /* 0..247 */
+  int timeout_ms;    /* response timeout, key "timeout_ms", 1..60000, default 500 */
+  /* [robot] only */
+  int base;          /* first holding register, 0..65535 - 20 */
+  fg_encoding encoding;
+  int ack_timeout_ms; /* 1..600000 */
+} fg_conf_modbus;
+
+/* A [scene NAME] section. */
+typedef struct fg_conf_scene {
+  char name[FG_SCENE_NAME_MAX + 1];
+  double workspace_min[3], workspace_max[3]; /* metres, world frame; min < max per axis */
+  double voxel_size;                         /* metres, > 0 */
+  double background[3];                      /* key "background", RGB in [0,1], default 1 1 1 */
+} fg_conf_scene;
+
+typedef struct fg_conf {
+  char *path;            /* the file read, or NULL for built-in defaults */
+  /* [http] */
+  char *listen;          /* "host:port", "[v6]:port" */
+  char *token;           /* NULL or "" = no authentication */
+  size_t max_upload_bytes; /* from max_upload_mb (1..4096) */
+  /* [state] */
+  char *state_dir;
+  char **import_dirs;    /* absolute paths */
+  size_t n_import_dirs;
+  /* [clip] */
+  char *clip_weights;    /* NULL when [clip] is absent */
+  char *clip_vocab;
+  /* [train] */
+  int train_steps;       /* 1..10000000, default 2000 */
+  int train_threads;     /* 0 = all cores, else 1..1024 */
+  int max_image_side;    /* 16..16384, default 400 */
+  /* [gripper] */
+  fg_gripper_model gripper_model;
+  /* [robot], [gripper.modbus] */
+  fg_conf_modbus robot;
+  fg_conf_modbus gripper_modbus;
+  /* [scene NAME] */
+  fg_conf_scene *scenes;
+  size_t n_scenes;
+} fg_conf;
+
+/* Allocates a configuration holding every built-in default. NULL on allocation failure. */
+fg_conf *fg_conf_defaults(void);
+
+/* Parses the file at path over the built-in defaults. On success *out is a new configuration
+ * the caller owns; on failure *out is NULL and err holds "FILE:LINE: [section] key: what is
+ * wrong" (or "FILE: cannot open: ..."). */
+int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen);
+
+/* Parses "host:port" / "[v6]:port" into host (malloc'd, brackets removed) and port (0..65535).
+ * FG_EINVAL with a detail otherwise. */
+int fg_conf_parse_listen(const char *listen, char **host, int *port);
+
+/* Checks a scene name: 1..64 characters of [A-Za-z0-9_.-], not starting with '.'.
+ * FG_EINVAL with a detail otherwise. */
+int fg_scene_name_validate(const char *name);
+
+/* Finds a [scene NAME] by name; NULL if absent. */
+const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name);
+
+void fg_conf_free(fg_conf *conf);
+
+#endif

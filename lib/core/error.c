@@ -1,0 +1,35 @@
+#include "core/error.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+
+static _Thread_local char detail[1024];
+
+const char *fg_strerror(int err) {
+  switch (err) {
+  case FG_OK: return "success";
+  case FG_EINVAL: return "invalid argument";
+  case FG_ENOMEM: return "out of memory";
+  case FG_EIO: return "input/output error";
+  case FG_ENOENT: return "not found";
+  case FG_EEXIST: return "already exists";
+  case FG_EFORMAT: return "unsupported or corrupt format";
+  case FG_ERANGE: return "value out of range";
+  case FG_EBUSY: return "busy";
+  case FG_ECANCELED: return "cancelled";
+  case FG_EPERM: return "not permitted";
+  default: return "unknown error";
+  }
+}
+
+int fg_fail(int err, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(detail, sizeof detail, fmt, ap);
+  va_end(ap);
+  return err;
+}
+
+const char *fg_error_detail(void) { return detail; }
+
+void fg_error_clear(void) { detail[0] = '\0'; }

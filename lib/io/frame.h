@@ -1,0 +1,73 @@
+/* A training frame as the state dir keeps it: one camera, its undistorted, downscaled RGB
+ * image and, optionally, its dense feature grid, in one binary file (".fgf") that training
+ * loads without decoding anything.
+ *
+ * File layout (little-endian):
+ *   header  struct fg_frame_file_header (FG_FRAME_HEADER_SIZE bytes, magic "FGFRAME\0")
+ *   pixels  uint16 [h][w][3], sRGB-encoded, 0..65535
+ *   feats   feat_dtype [feat_h][feat_w][feat_d] (absent when feat_d is 0)
+ *   crc     uint32, zlib crc32 of everything before it
+ * A reader refuses a wrong magic, an unknown version, sizes that disagree with the file's
+ * length, and a CRC mismatch. */
+#ifndef FG_IO_FRAME_H
+#define FG_IO_FRAME_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "io/camera.h"
+#include "io/npy.h"
+
+#define FG_FRAME_VERSION 1
+#define FG_FRAME_HEADER_SIZE 512
+#define FG_FRAME_SOURCE_MAX 256
+#define FG_FRAME_MAX_FEAT_D 4096
+
+typedef struct fg_frame {
+  double T_world_cam[16];  /* camera-to-world, OpenGL convention, metres, row-major */
+  fg_camera cam;           /* PINHOLE, sized to the stored image */
+  int src_w, src_h;        /* size of the image as received */
+  int undistorted;         /* 1 if an OPENCV camera was undistorted on ingest */
+  int64_t created_ms;      /* Unix time of ingest, milliseconds */
+  char source[FG_FRAME_SOURCE_MAX]; /* file name or upload name, for listings */
+  uint16_t *rgb;           /* [cam.h][cam.w][3]; owned; NULL after fg_frame_load_header */
+  int feat_h, feat_w, feat_d;
+  fg_dtype feat_dtype;     /* FG_DTYPE_NONE when the frame has no features */
+  void *feat;              /* [feat_h][feat_w][feat_d]; owned; NULL when none or header only */
+} fg_frame;
+
+/* Options of fg_frame_prepare. */
+typedef struct fg_ingest_opts {
+  float background_rgb[3]; /* alpha is composited on this, [0,1] */
+  int max_image_side;      /* long side after downscaling; 0 keeps the size */
+} fg_ingest_opts;
+
+/* Builds a frame from an encoded image, its camera and pose, and optional features:
+ *  - decodes (fg_image_decode) and composites alpha on the background;
+ *  - checks that cam->w/h equal the decoded size (FG_EINVAL naming both sizes otherwise);
+ *  - undistorts an OPENCV camera (intrinsics replaced by the undistorted pinhole ones) and
+ *    resamples the feature grid through the same mapping (bilinear at feature-cell centres);
+ *  - downscales with the area filter so the long side is at most max_image_side, scaling the
+ *    intrinsics by the exact size ratios;
+ *  - validates the pose (fg_pose_validate) and copies features ([h, w, D], f32 or f16, D in
+ *    1..FG_FRAME_MAX_FEAT_D, else FG_EINVAL); features keep their dtype.
+ * T_world_cam must already be in the OpenGL convention. On success the caller owns *out and
+ * frees it with fg_frame_clear; on failure *out holds nothing to free. */
+int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const fg_camera *cam,
+                     const double T_world_cam[16], const fg_npy *features,
+                     const fg_ingest_opts *opts);
+
+/* Writes a frame atomically (fsutil) to path. */
+int fg_frame_save(const fg_frame *frame, const char *path);
+
+/* Reads a whole frame, verifying its CRC. The caller owns *out (fg_frame_clear). */
+int fg_frame_load(const char *path, fg_frame *out);
+
+/* Reads only the header fields (rgb and feat stay NULL), checking the file's length against
+ * the sizes it declares but not the CRC: cheap enough for listings. */
+int fg_frame_load_header(const char *path, fg_frame *out);
+
+/* Frees pixels and features; safe on a zeroed frame. */
+void fg_frame_clear(fg_frame *frame);
+
+#endif
