@@ -1,1 +1,133 @@
-/* placeholder: being written */
+#include "api.h"
+
+#include "json.h"
+#include "metrics.h"
+
+#include "config.h"
+#include "core/error.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+const fg_route fg_api_routes[] = {
+  {"GET", "/v1/health", "/v1/health", fg_api_health, FG_ROUTE_PUBLIC},
+  {"GET", "/metrics", "/metrics", fg_api_metrics, 0},
+  {"GET", "/v1/scenes", "/v1/scenes", fg_api_scenes_list, 0},
+  {"POST", "/v1/scenes", "/v1/scenes", fg_api_scenes_create, 0},
+  {"GET", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_get, 0},
+  {"DELETE", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_delete, 0},
+  {"GET", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_list, 0},
+  {"POST", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_upload,
+   FG_ROUTE_MULTIPART | FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/scenes/{}/import", "/v1/scenes/{s}/import", fg_api_scene_import,
+   FG_ROUTE_OFFLOAD},
+};
+const size_t fg_api_n_routes = sizeof fg_api_routes / sizeof fg_api_routes[0];
+
+/* ---------------------------------------------------------------- configuration */
+
+/* Every configuration still in use stays on a short list until its last request ends;
+ * the head is the current one, which holds a reference of its own. */
+struct fg_conf_ref {
+  fg_conf *conf;
+  int refs; /* guarded by fg_app.conf_lock */
+  fg_conf_ref *next;
+};
+
+/* Drops one reference under the lock; returns the configuration to free, if it was the last. */
+static fg_conf_ref *unref_locked(fg_app *app, const fg_conf *conf) {
+  for (fg_conf_ref **p = &app->conf; *p; p = &(*p)->next) {
+    fg_conf_ref *r = *p;
+    if (r->conf != conf) continue;
+    if (--r->refs > 0) return NULL;
+    *p = r->next;
+    return r;
+  }
+  return NULL;
+}
+
+static void ref_free(fg_conf_ref *r) {
+  if (!r) return;
+  fg_conf_free(r->conf);
+  free(r);
+}
+
+void fg_app_set_conf(fg_app *app, fg_conf *conf) {
+  fg_conf_ref *r = calloc(1, sizeof *r);
+  if (!r) abort(); /* a few bytes at start-up or reload; nothing sensible to do without them */
+  r->conf = conf;
+  r->refs = 1;
+  pthread_mutex_lock(&app->conf_lock);
+  fg_conf_ref *old = app->conf;
+  r->next = old;
+  app->conf = r;
+  fg_conf_ref *dead = old ? unref_locked(app, old->conf) : NULL;
+  pthread_mutex_unlock(&app->conf_lock);
+  ref_free(dead);
+}
+
+void fg_app_clear_conf(fg_app *app) {
+  pthread_mutex_lock(&app->conf_lock);
+  fg_conf_ref *dead = app->conf ? unref_locked(app, app->conf->conf) : NULL;
+  pthread_mutex_unlock(&app->conf_lock);
+  ref_free(dead);
+}
+
+const fg_conf *fg_app_conf_acquire(fg_app *app) {
+  pthread_mutex_lock(&app->conf_lock);
+  app->conf->refs++;
+  const fg_conf *c = app->conf->conf;
+  pthread_mutex_unlock(&app->conf_lock);
+  return c;
+}
+
+void fg_app_conf_release(fg_app *app, const fg_conf *conf) {
+  pthread_mutex_lock(&app->conf_lock);
+  fg_conf_ref *dead = unref_locked(app, conf);
+  pthread_mutex_unlock(&app->conf_lock);
+  ref_free(dead);
+}
+
+/* ---------------------------------------------------------------- shared helpers */
+
+json_t *fg_api_body_object(fg_req *req, fg_resp *resp) {
+  char err[256];
+  json_t *body = fg_json_parse(req->body, req->body_len, err, sizeof err);
+  if (!body) {
+    fg_resp_error(resp, 400, "malformed_json", "the body is not valid JSON: %s", err);
+    return NULL;
+  }
+  if (!json_is_object(body)) {
+    json_decref(body);
+    fg_resp_error(resp, 400, "invalid_request", "the body must be a JSON object");
+    return NULL;
+  }
+  return body;
+}
+
+fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_store_get(req->app->store, req->params[0]);
+  if (!s)
+    fg_resp_error(resp, 404, "scene_not_found",
+                  "no scene named '%s'; GET /v1/scenes lists them, POST /v1/scenes creates one",
+                  req->params[0]);
+  return s;
+}
+
+/* ---------------------------------------------------------------- health and metrics */
+
+int fg_api_health(fg_req *req, fg_resp *resp) {
+  static const char body[] = "{\"status\":\"ok\",\"version\":\"" FG_VERSION "\"}";
+  fg_resp_take(resp, 200, "application/json", strdup(body), sizeof body - 1);
+  return 0;
+}
+
+int fg_api_metrics(fg_req *req, fg_resp *resp) {
+  fg_metrics_gauges g;
+  fg_store_totals(req->app->store, &g.scenes, &g.frames);
+  size_t len;
+  char *text = fg_metrics_render(&g, &len);
+  if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");
+  fg_resp_take(resp, 200, "text/plain; version=0.0.4; charset=utf-8", text, len);
+  return 0;
+}

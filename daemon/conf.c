@@ -1,1 +1,912 @@
-/* placeholder: being written */
+/* fieldgripd's configuration file: see conf.h and SPEC.md "Configuration file".
+ *
+ * libinih does the INI lexing (trimming, inline "; comments", "key = value" / "key: value"),
+ * but Debian builds it without line numbers in the handler. So we feed it through our own
+ * reader that reads one physical line at a time and counts them; inih calls the handler right
+ * after the line that holds the key, so the count is the key's line.
+ *
+ * The reader also classifies each line the same way inih will (comment, section header,
+ * key, continuation) because inih does not tell the handler about section headers
+ * (INI_CALL_HANDLER_ON_NEW_SECTION is off), truncates section names to 49 bytes, and treats
+ * any indented line after a key as a continuation of that key's value (INI_ALLOW_MULTILINE).
+ * Seeing headers lets us create empty [scene NAME] sections, remember header lines for the
+ * checks made at the end, and report duplicate and unknown sections even when they hold no
+ * keys. Continuation lines are refused with their own message (not "duplicate key"): no value
+ * here spans lines, and an indented "key = value" silently swallowed into the previous value
+ * would be a nasty surprise.
+ *
+ * Parsing stops at the first error: the reader returns end-of-file to inih once one has been
+ * recorded, so the message is always about the earliest bad line. */
+#include "conf.h"
+
+#include "core/error.h"
+
+#include <ini.h>
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/types.h>
+
+/* ---------------------------------------------------------------- sections and keys */
+
+typedef enum {
+  SEC_NONE = 0, /* before the first header */
+  SEC_HTTP,
+  SEC_STATE,
+  SEC_CLIP,
+  SEC_TRAIN,
+  SEC_GRIPPER,
+  SEC_ROBOT,
+  SEC_GRIPPER_MODBUS,
+  SEC_SCENE,
+  SEC_COUNT
+} conf_section;
+
+static const char *const section_names[SEC_COUNT] = {
+    [SEC_HTTP] = "http",       [SEC_STATE] = "state",  [SEC_CLIP] = "clip",
+    [SEC_TRAIN] = "train",     [SEC_GRIPPER] = "gripper", [SEC_ROBOT] = "robot",
+    [SEC_GRIPPER_MODBUS] = "gripper.modbus",
+};
+
+enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB };
+enum { K_DIR, K_IMPORT_DIRS };
+enum { K_WEIGHTS, K_VOCAB };
+enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE };
+enum { K_MODEL };
+/* [gripper.modbus] takes the first eight of these (gripper_modbus_keys); the rest are
+ * [robot] only. */
+enum {
+  K_TRANSPORT, K_HOST, K_PORT, K_DEVICE, K_BAUD, K_PARITY, K_UNIT_ID, K_TIMEOUT_MS,
+  K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS
+};
+enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
+
+#define MAX_KEYS 11
+
+static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
+static const char *const state_keys[] = {"dir", "import_dirs", NULL};
+static const char *const clip_keys[] = {"weights", "vocab", NULL};
+static const char *const train_keys[] = {"steps", "threads", "max_image_side", NULL};
+static const char *const gripper_keys[] = {"model", NULL};
+static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
+                                         "baud",      "parity",   "unit_id",        "timeout_ms",
+                                         "base",      "encoding", "ack_timeout_ms", NULL};
+static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
+                                                  "baud",      "parity", "unit_id", "timeout_ms",
+                                                  NULL};
+static const char *const scene_keys[] = {"workspace_min", "workspace_max", "voxel_size",
+                                         "background", NULL};
+
+static const char *const *const section_keys[SEC_COUNT] = {
+    [SEC_HTTP] = http_keys,       [SEC_STATE] = state_keys,   [SEC_CLIP] = clip_keys,
+    [SEC_TRAIN] = train_keys,     [SEC_GRIPPER] = gripper_keys, [SEC_ROBOT] = robot_keys,
+    [SEC_GRIPPER_MODBUS] = gripper_modbus_keys, [SEC_SCENE] = scene_keys,
+};
+
+static const char *const transport_names[] = {"none", "tcp", "rtu", NULL};
+static const char *const encoding_names[] = {"int16", "float32", NULL};
+static const char *const gripper_model_names[] = {"panda", "robotiq-2f85", NULL};
+
+/* Per-scene parse bookkeeping, parallel to fg_conf.scenes. */
+typedef struct scene_meta {
+  int header_line;
+  int key_line[4]; /* line of each scene key, 0 when not set */
+} scene_meta;
+
+typedef enum { LINE_BLANK, LINE_COMMENT, LINE_HEADER, LINE_KEY, LINE_CONTINUATION } line_kind;
+
+typedef struct conf_parse {
+  fg_conf *conf;
+  const char *path; /* as the caller gave it: messages name the file the user named */
+  char *base_dir;   /* the file's folder, absolute: relative paths are taken from here */
+  FILE *fp;
+
+  char *raw; /* the current physical line, without its newline */
+  size_t raw_cap;
+  int line;
+  line_kind kind;
+  int key_active;    /* mirrors inih's prev_name: an indented line now continues a value */
+  char last_key[64]; /* for the continuation message */
+
+  conf_section sec;
+  char sec_text[96]; /* the current header's text, e.g. "scene tabletop" */
+  size_t scene;      /* index into conf->scenes when sec == SEC_SCENE */
+  int sec_line[SEC_COUNT];
+  int key_line[SEC_COUNT][MAX_KEYS];
+  scene_meta *scene_meta;
+
+  int failed;    /* an error has been recorded */
+  int err_line;  /* its line, to keep the earliest of the end-of-file checks */
+  int err_code;
+  char err[768];
+} conf_parse;
+
+/* ---------------------------------------------------------------- errors */
+
+/* Records "FILE:LINE: [section] key: message" unless an error on an earlier line is already
+ * recorded, and returns 0 so that handler paths stay one line (inih's "failed" value). */
+__attribute__((format(printf, 5, 6))) static int fail_at(conf_parse *st, int line,
+                                                          const char *section, const char *key,
+                                                          const char *fmt, ...) {
+  if (st->failed && st->err_line <= line) return 0;
+  char msg[512];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  va_end(ap);
+  if (section && key)
+    snprintf(st->err, sizeof st->err, "%s:%d: [%s] %s: %s", st->path, line, section, key, msg);
+  else if (section)
+    snprintf(st->err, sizeof st->err, "%s:%d: [%s]: %s", st->path, line, section, msg);
+  else if (key)
+    snprintf(st->err, sizeof st->err, "%s:%d: %s: %s", st->path, line, key, msg);
+  else
+    snprintf(st->err, sizeof st->err, "%s:%d: %s", st->path, line, msg);
+  st->failed = 1;
+  st->err_line = line;
+  st->err_code = FG_EINVAL;
+  return 0;
+}
+
+/* An allocation failure while parsing: not the file's fault, but reported the same way. */
+static int fail_nomem(conf_parse *st) {
+  int earlier = st->failed && st->err_line <= st->line;
+  fail_at(st, st->line, NULL, NULL, "out of memory");
+  if (!earlier) st->err_code = FG_ENOMEM;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- paths */
+
+/* Joins base and p (unless p is absolute) and removes ".", ".." and repeated slashes
+ * lexically, so that the daemon logs and compares clean absolute paths. ".." is applied to
+ * the text, not through symlinks; the base itself comes from realpath(), so this only differs
+ * from the kernel's view when the value itself walks back out of a symlink. NULL on
+ * allocation failure. */
+static char *path_absolute(const char *base, const char *p) {
+  size_t blen = p[0] == '/' ? 0 : strlen(base);
+  size_t plen = strlen(p);
+  char *joined = malloc(blen + plen + 2);
+  char *out = malloc(blen + plen + 2);
+  if (!joined || !out) {
+    free(joined);
+    free(out);
+    return NULL;
+  }
+  memcpy(joined, base, blen);
+  joined[blen] = '/';
+  memcpy(joined + blen + 1, p, plen + 1);
+
+  size_t n = 0; /* out holds "/a/b" without a trailing slash ("" means "/") */
+  char *save = NULL;
+  for (char *c = strtok_r(joined, "/", &save); c; c = strtok_r(NULL, "/", &save)) {
+    if (strcmp(c, ".") == 0) continue;
+    if (strcmp(c, "..") == 0) {
+      while (n > 0 && out[n - 1] != '/') n--;
+      if (n > 0) n--; /* drop the slash too; ".." at the root stays at the root */
+      continue;
+    }
+    out[n++] = '/';
+    size_t clen = strlen(c);
+    memcpy(out + n, c, clen);
+    n += clen;
+  }
+  if (n == 0) out[n++] = '/';
+  out[n] = '\0';
+  free(joined);
+  return out;
+}
+
+/* The folder holding the file at path, made absolute through realpath() so that relative
+ * values do not depend on the daemon's working directory at reload time. The folder of a
+ * symlinked file is the link's folder, which is where the user looks. */
+static char *folder_of(const char *path) {
+  const char *slash = strrchr(path, '/');
+  char *dir;
+  if (!slash)
+    dir = strdup(".");
+  else if (slash == path)
+    dir = strdup("/");
+  else
+    dir = strndup(path, (size_t)(slash - path));
+  if (!dir) return NULL;
+  char *real = realpath(dir, NULL);
+  free(dir);
+  return real;
+}
+
+/* ---------------------------------------------------------------- value parsers */
+
+/* Each returns 1 and stores the value, or records an error naming the current line and key
+ * and returns 0. */
+
+static int parse_int(conf_parse *st, const char *key, const char *v, long lo, long hi, int *out) {
+  char *end;
+  errno = 0;
+  long x = strtol(v, &end, 10);
+  if (end == v || *end != '\0' || errno == ERANGE || x < lo || x > hi)
+    return fail_at(st, st->line, st->sec_text, key, "expected an integer from %ld to %ld, got '%s'",
+                   lo, hi, v);
+  *out = (int)x;
+  return 1;
+}
+
+/* Reads one finite number from *s, advancing it; 0 when there is none. */
+static int scan_double(const char **s, double *out) {
+  char *end;
+  errno = 0;
+  double x = strtod(*s, &end);
+  if (end == *s || errno == ERANGE || !isfinite(x)) return 0;
+  *s = end;
+  *out = x;
+  return 1;
+}
+
+static int parse_double(conf_parse *st, const char *key, const char *v, double *out) {
+  const char *s = v;
+  double x;
+  if (!scan_double(&s, &x) || *s != '\0')
+    return fail_at(st, st->line, st->sec_text, key, "expected a finite number, got '%s'", v);
+  *out = x;
+  return 1;
+}
+
+/* Three numbers separated by whitespace; what they mean ("x y z", "R G B") goes into the
+ * message. */
+static int parse_vec3(conf_parse *st, const char *key, const char *v, const char *what,
+                      double out[3]) {
+  const char *s = v;
+  double x[3];
+  for (int i = 0; i < 3; i++) {
+    if (!scan_double(&s, &x[i]) || (i < 2 && !isspace((unsigned char)*s)))
+      return fail_at(st, st->line, st->sec_text, key,
+                     "expected 3 finite numbers separated by spaces (%s), got '%s'", what, v);
+  }
+  if (*s != '\0')
+    return fail_at(st, st->line, st->sec_text, key,
+                   "expected exactly 3 numbers separated by spaces (%s), got '%s'", what, v);
+  memcpy(out, x, sizeof x);
+  return 1;
+}
+
+/* Matches v against a NULL-terminated list of names. */
+static int parse_enum(conf_parse *st, const char *key, const char *v, const char *const *names,
+                      int *out) {
+  char expected[160] = "";
+  for (int i = 0; names[i]; i++) {
+    if (strcmp(v, names[i]) == 0) {
+      *out = i;
+      return 1;
+    }
+    size_t n = strlen(expected);
+    snprintf(expected + n, sizeof expected - n, "%s%s", i == 0 ? "" : (names[i + 1] ? ", " : " or "),
+             names[i]);
+  }
+  return fail_at(st, st->line, st->sec_text, key, "expected %s, got '%s'", expected, v);
+}
+
+static int set_string(conf_parse *st, char **dst, const char *v) {
+  char *copy = strdup(v);
+  if (!copy) return fail_nomem(st);
+  free(*dst);
+  *dst = copy;
+  return 1;
+}
+
+/* A file or folder value, taken relative to the configuration file's folder. */
+static int set_path(conf_parse *st, const char *key, char **dst, const char *v) {
+  if (v[0] == '\0')
+    return fail_at(st, st->line, st->sec_text, key, "expected a path, got nothing");
+  char *p = path_absolute(st->base_dir, v);
+  if (!p) return fail_nomem(st);
+  free(*dst);
+  *dst = p;
+  return 1;
+}
+
+static void free_dirs(char **dirs, size_t n) {
+  for (size_t i = 0; i < n; i++) free(dirs[i]);
+  free(dirs);
+}
+
+/* import_dirs: colon-separated folders. Empty entries ("a::b", a trailing colon) are skipped
+ * rather than read as "the current folder", which would be a surprising thing to export.
+ * The folders need not exist yet (a share may be mounted after start-up). */
+static int set_import_dirs(conf_parse *st, const char *key, const char *v) {
+  char **dirs = NULL;
+  size_t n = 0;
+  const char *s = v;
+  while (*s) {
+    const char *colon = strchr(s, ':');
+    size_t len = colon ? (size_t)(colon - s) : strlen(s);
+    if (len > 0) {
+      char *part = strndup(s, len);
+      char *abs = part ? path_absolute(st->base_dir, part) : NULL;
+      free(part);
+      char **grown = abs ? realloc(dirs, (n + 1) * sizeof *dirs) : NULL;
+      if (!grown) {
+        free(abs);
+        free_dirs(dirs, n);
+        return fail_nomem(st);
+      }
+      dirs = grown;
+      dirs[n++] = abs;
+    }
+    s += len;
+    if (*s == ':') s++;
+  }
+  free_dirs(st->conf->import_dirs, st->conf->n_import_dirs);
+  st->conf->import_dirs = dirs;
+  st->conf->n_import_dirs = n;
+  return 1;
+}
+
+/* ---------------------------------------------------------------- listen and scene names */
+
+/* See conf.h. The port must be all digits: "7070x" or "+7070" are typos, not ports. */
+int fg_conf_parse_listen(const char *listen, char **host, int *port) {
+  if (!listen || !host || !port) return fg_fail(FG_EINVAL, "no listen address given");
+  *host = NULL;
+  const char *h, *colon;
+  size_t hlen;
+  if (listen[0] == '[') {
+    const char *close = strchr(listen, ']');
+    if (!close)
+      return fg_fail(FG_EINVAL, "listen address '%s' lacks the closing ']' of its IPv6 host; "
+                     "expected [ADDRESS]:PORT such as [::1]:7070", listen);
+    h = listen + 1;
+    hlen = (size_t)(close - h);
+    if (close[1] != ':')
+      return fg_fail(FG_EINVAL, "listen address '%s' needs ':PORT' after the ']'; expected "
+                     "[ADDRESS]:PORT such as [::1]:7070", listen);
+    colon = close + 1;
+  } else {
+    colon = strrchr(listen, ':');
+    if (!colon)
+      return fg_fail(FG_EINVAL, "listen address '%s' has no port; expected HOST:PORT such as "
+                     "127.0.0.1:7070", listen);
+    h = listen;
+    hlen = (size_t)(colon - h);
+    if (memchr(h, ':', hlen))
+      return fg_fail(FG_EINVAL, "listen address '%s' looks like a bare IPv6 address; put it in "
+                     "brackets, e.g. [::1]:7070", listen);
+  }
+  if (hlen == 0)
+    return fg_fail(FG_EINVAL, "listen address '%s' has no host; use 127.0.0.1:PORT for this "
+                   "machine only or 0.0.0.0:PORT for every interface", listen);
+  for (size_t i = 0; i < hlen; i++) {
+    if (isspace((unsigned char)h[i]) || h[i] == '[' || h[i] == ']')
+      return fg_fail(FG_EINVAL, "listen address '%s' has a malformed host; expected HOST:PORT "
+                     "or [IPv6]:PORT", listen);
+  }
+  const char *p = colon + 1;
+  long val = 0;
+  size_t nd = 0;
+  for (; p[nd]; nd++) {
+    if (!isdigit((unsigned char)p[nd]) || nd >= 5) break;
+    val = val * 10 + (p[nd] - '0');
+  }
+  if (nd == 0 || p[nd] != '\0' || val > 65535)
+    return fg_fail(FG_EINVAL, "listen address '%s' has a bad port; expected a number from 0 to "
+                   "65535 (0 picks any free port)", listen);
+  *host = strndup(h, hlen);
+  if (!*host) return fg_fail(FG_ENOMEM, "out of memory");
+  *port = (int)val;
+  return 0;
+}
+
+/* See conf.h. Scene names become folder names under the state dir and URL path segments,
+ * hence the small alphabet and no leading dot (no ".", "..", or hidden folders). */
+int fg_scene_name_validate(const char *name) {
+  if (!name || name[0] == '\0')
+    return fg_fail(FG_EINVAL, "scene name is empty; use 1 to %d characters of A-Z a-z 0-9 _ . -",
+                   FG_SCENE_NAME_MAX);
+  size_t n = strlen(name);
+  if (n > FG_SCENE_NAME_MAX)
+    return fg_fail(FG_EINVAL, "scene name is %zu characters long; the limit is %d", n,
+                   FG_SCENE_NAME_MAX);
+  if (name[0] == '.')
+    return fg_fail(FG_EINVAL, "scene name '%s' starts with '.'; start it with a letter, digit, "
+                   "'_' or '-'", name);
+  for (size_t i = 0; i < n; i++) {
+    unsigned char c = (unsigned char)name[i];
+    if (!isalnum(c) && c != '_' && c != '.' && c != '-')
+      return fg_fail(FG_EINVAL, "scene name '%.64s' contains '%c' (byte 0x%02x); use only A-Z "
+                     "a-z 0-9 _ . -", name, isprint(c) ? c : '?', c);
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- defaults */
+
+static void scene_defaults(fg_conf_scene *s) {
+  memset(s, 0, sizeof *s);
+  s->workspace_min[0] = 0.10;
+  s->workspace_min[1] = -0.45;
+  s->workspace_min[2] = 0.005;
+  s->workspace_max[0] = 0.80;
+  s->workspace_max[1] = 0.45;
+  s->workspace_max[2] = 0.35;
+  s->voxel_size = 0.01;
+  s->background[0] = s->background[1] = s->background[2] = 1.0;
+}
+
+/* Fills a Modbus peer's defaults; 0 on allocation failure. */
+static int modbus_defaults(fg_conf_modbus *m, int unit_id) {
+  memset(m, 0, sizeof *m);
+  m->transport = FG_TRANSPORT_NONE;
+  m->host = strdup("127.0.0.1");
+  m->port = 502;
+  m->device = strdup("/dev/ttyUSB0");
+  m->baud = 115200;
+  m->parity = 'N';
+  m->unit_id = unit_id;
+  m->timeout_ms = 500;
+  m->base = 128;
+  m->encoding = FG_ENCODING_INT16;
+  m->ack_timeout_ms = 2000;
+  return m->host && m->device;
+}
+
+fg_conf *fg_conf_defaults(void) {
+  fg_conf *c = calloc(1, sizeof *c);
+  if (!c) return NULL;
+  c->listen = strdup(FG_CONF_DEFAULT_LISTEN);
+  c->max_upload_bytes = (size_t)64 << 20;
+  c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
+  c->train_steps = 2000;
+  c->train_threads = 0;
+  c->max_image_side = 400;
+  c->gripper_model = FG_GRIPPER_PANDA;
+  int ok = modbus_defaults(&c->robot, 1);
+  ok &= modbus_defaults(&c->gripper_modbus, 9);
+  if (!ok || !c->listen || !c->state_dir) {
+    fg_conf_free(c);
+    return NULL;
+  }
+  return c;
+}
+
+/* ---------------------------------------------------------------- sections */
+
+static const char *skip_space(const char *s) {
+  while (*s && isspace((unsigned char)*s)) s++;
+  return s;
+}
+
+/* Handles a "[...]" line whose text between the brackets is text (untrimmed). */
+static int enter_section(conf_parse *st, const char *text, size_t len) {
+  while (len > 0 && isspace((unsigned char)*text)) text++, len--;
+  while (len > 0 && isspace((unsigned char)text[len - 1])) len--;
+  snprintf(st->sec_text, sizeof st->sec_text, "%.*s", (int)len, text);
+  if (len >= sizeof st->sec_text)
+    return fail_at(st, st->line, NULL, NULL, "section name '%.40s...' is too long", st->sec_text);
+
+  for (int s = SEC_HTTP; s < SEC_SCENE; s++) {
+    if (strcmp(st->sec_text, section_names[s]) != 0) continue;
+    if (st->sec_line[s])
+      return fail_at(st, st->line, st->sec_text, NULL,
+                     "duplicate section (first on line %d); merge the two", st->sec_line[s]);
+    st->sec = (conf_section)s;
+    st->sec_line[s] = st->line;
+    return 1;
+  }
+
+  if (strncmp(st->sec_text, "scene", 5) == 0 &&
+      (st->sec_text[5] == '\0' || isspace((unsigned char)st->sec_text[5]))) {
+    const char *name = skip_space(st->sec_text + 5);
+    if (*name == '\0')
+      return fail_at(st, st->line, st->sec_text, NULL,
+                     "a scene section needs a name, e.g. [scene tabletop]");
+    if (fg_scene_name_validate(name) < 0)
+      return fail_at(st, st->line, st->sec_text, NULL, "%s", fg_error_detail());
+    fg_conf *c = st->conf;
+    for (size_t i = 0; i < c->n_scenes; i++) {
+      if (strcmp(c->scenes[i].name, name) == 0)
+        return fail_at(st, st->line, st->sec_text, NULL,
+                       "duplicate scene section (first on line %d); merge the two",
+                       st->scene_meta[i].header_line);
+    }
+    fg_conf_scene *scenes = realloc(c->scenes, (c->n_scenes + 1) * sizeof *scenes);
+    if (!scenes) return fail_nomem(st);
+    c->scenes = scenes;
+    scene_meta *meta = realloc(st->scene_meta, (c->n_scenes + 1) * sizeof *meta);
+    if (!meta) return fail_nomem(st);
+    st->scene_meta = meta;
+    scene_defaults(&scenes[c->n_scenes]);
+    snprintf(scenes[c->n_scenes].name, sizeof scenes[c->n_scenes].name, "%s", name);
+    memset(&meta[c->n_scenes], 0, sizeof *meta);
+    meta[c->n_scenes].header_line = st->line;
+    st->scene = c->n_scenes++;
+    st->sec = SEC_SCENE;
+    return 1;
+  }
+
+  return fail_at(st, st->line, st->sec_text, NULL,
+                 "unknown section; expected http, state, clip, train, gripper, robot, "
+                 "gripper.modbus or scene NAME");
+}
+
+/* ---------------------------------------------------------------- the line reader */
+
+/* inih's inline-comment rule: a ';' counts only after whitespace. Returns the first of chars
+ * or of such a comment, or the end of s. */
+static const char *find_chars_or_comment(const char *s, const char *chars) {
+  int was_space = 0;
+  while (*s && !(chars && strchr(chars, *s)) &&
+         !(INI_ALLOW_INLINE_COMMENTS && was_space && strchr(INI_INLINE_COMMENT_PREFIXES, *s))) {
+    was_space = isspace((unsigned char)*s);
+    s++;
+  }
+  return s;
+}
+
+/* Classifies the line in st->raw as inih will and acts on section headers. Returns 1 to go on,
+ * 0 after recording an error. */
+static int classify_line(conf_parse *st) {
+  const char *line = st->raw;
+  if (INI_ALLOW_BOM && st->line == 1 && (unsigned char)line[0] == 0xEF &&
+      (unsigned char)line[1] == 0xBB && (unsigned char)line[2] == 0xBF)
+    line += 3;
+  const char *start = skip_space(line);
+
+  if (*start == '\0') {
+    st->kind = LINE_BLANK;
+    return 1;
+  }
+  if (strchr(INI_START_COMMENT_PREFIXES, *start)) {
+    st->kind = LINE_COMMENT;
+    return 1;
+  }
+  if (INI_ALLOW_MULTILINE && st->key_active && start > st->raw) {
+    st->kind = LINE_CONTINUATION;
+    return fail_at(st, st->line, st->sec_text, st->last_key,
+                   "this indented line would continue the value of '%s', and values cannot span "
+                   "lines; remove the leading whitespace", st->last_key);
+  }
+  if (*start == '[') {
+    const char *end = find_chars_or_comment(start + 1, "]");
+    if (*end != ']')
+      return fail_at(st, st->line, NULL, NULL,
+                     "section header lacks its closing ']'; expected [NAME]");
+    st->kind = LINE_HEADER;
+    st->key_active = 0;
+    return enter_section(st, start + 1, (size_t)(end - start - 1));
+  }
+  const char *end = find_chars_or_comment(start, "=:");
+  if (*end != '=' && *end != ':')
+    return fail_at(st, st->line, st->sec == SEC_NONE ? NULL : st->sec_text, NULL,
+                   "expected 'key = value', '[section]' or a comment, got '%.60s'", start);
+  size_t klen = (size_t)(end - start);
+  while (klen > 0 && isspace((unsigned char)start[klen - 1])) klen--;
+  snprintf(st->last_key, sizeof st->last_key, "%.*s", (int)klen, start);
+  st->kind = LINE_KEY;
+  st->key_active = 1;
+  return 1;
+}
+
+/* ini_reader: hands inih one physical line at a time so that st->line is the number of the
+ * line inih is about to parse. Lines longer than inih's buffer are refused here instead of
+ * being split (which would shift every later line number). Returns NULL at the end of the
+ * file and after the first error, which ends the parse. */
+static char *conf_reader(char *buf, int num, void *stream) {
+  conf_parse *st = stream;
+  if (st->failed) return NULL;
+  ssize_t n = getline(&st->raw, &st->raw_cap, st->fp);
+  if (n < 0) return NULL;
+  st->line++;
+  size_t len = (size_t)n;
+  if (len > 0 && st->raw[len - 1] == '\n') st->raw[--len] = '\0';
+  if (memchr(st->raw, '\0', len)) {
+    fail_at(st, st->line, NULL, NULL, "line holds a NUL byte; is this a text file?");
+    return NULL;
+  }
+  /* inih wants room for the text, a newline and the terminator */
+  if (num < 2 || len > (size_t)num - 2) {
+    fail_at(st, st->line, NULL, NULL, "line is %zu characters long; the parser takes at most %d",
+            len, num > 2 ? num - 2 : 0);
+    return NULL;
+  }
+  if (!classify_line(st)) return NULL;
+  memcpy(buf, st->raw, len);
+  buf[len] = '\n';
+  buf[len + 1] = '\0';
+  return buf;
+}
+
+/* ---------------------------------------------------------------- the key handler */
+
+static int find_key(const char *const *keys, const char *name) {
+  for (int i = 0; keys[i]; i++)
+    if (strcmp(keys[i], name) == 0) return i;
+  return -1;
+}
+
+static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name, const char *v) {
+  int x = 0;
+  switch (k) {
+  case K_TRANSPORT:
+    if (!parse_enum(st, name, v, transport_names, &x)) return 0;
+    m->transport = (fg_transport)x;
+    return 1;
+  case K_HOST: return set_string(st, &m->host, v);
+  case K_PORT: return parse_int(st, name, v, 1, 65535, &m->port);
+  case K_DEVICE: return set_string(st, &m->device, v);
+  case K_BAUD: return parse_int(st, name, v, 1, 4000000, &m->baud);
+  case K_PARITY: {
+    char c = (char)toupper((unsigned char)v[0]);
+    if (v[0] == '\0' || v[1] != '\0' || (c != 'N' && c != 'E' && c != 'O'))
+      return fail_at(st, st->line, st->sec_text, name, "expected N, E or O, got '%s'", v);
+    m->parity = c;
+    return 1;
+  }
+  case K_UNIT_ID: return parse_int(st, name, v, 0, 247, &m->unit_id);
+  case K_TIMEOUT_MS: return parse_int(st, name, v, 1, 60000, &m->timeout_ms);
+  case K_BASE: return parse_int(st, name, v, 0, 65535 - 20, &m->base);
+  case K_ENCODING:
+    if (!parse_enum(st, name, v, encoding_names, &x)) return 0;
+    m->encoding = (fg_encoding)x;
+    return 1;
+  case K_ACK_TIMEOUT_MS: return parse_int(st, name, v, 1, 600000, &m->ack_timeout_ms);
+  }
+  return 1;
+}
+
+static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, const char *v) {
+  switch (k) {
+  case K_WORKSPACE_MIN: return parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
+  case K_WORKSPACE_MAX: return parse_vec3(st, name, v, "x y z in metres", s->workspace_max);
+  case K_VOXEL_SIZE:
+    if (!parse_double(st, name, v, &s->voxel_size)) return 0;
+    if (s->voxel_size <= 0)
+      return fail_at(st, st->line, st->sec_text, name,
+                     "expected a positive size in metres (e.g. 0.01), got '%s'", v);
+    return 1;
+  case K_BACKGROUND:
+    if (!parse_vec3(st, name, v, "R G B from 0 to 1", s->background)) return 0;
+    for (int i = 0; i < 3; i++) {
+      if (s->background[i] < 0 || s->background[i] > 1)
+        return fail_at(st, st->line, st->sec_text, name,
+                       "expected 3 numbers from 0 to 1 (R G B), got '%s'", v);
+    }
+    return 1;
+  }
+  return 1;
+}
+
+/* Lists a section's keys for the "unknown key" message. */
+static void list_keys(const char *const *keys, char *buf, size_t size) {
+  buf[0] = '\0';
+  for (int i = 0; keys[i]; i++) {
+    size_t n = strlen(buf);
+    snprintf(buf + n, size - n, "%s%s", i ? ", " : "", keys[i]);
+  }
+}
+
+/* inih's handler: one "key = value" line, st->line being its number. Returns 1 to go on, 0 on
+ * error (inih then remembers the line; our reader ends the parse). */
+static int conf_handler(void *user, const char *section, const char *name, const char *v) {
+  conf_parse *st = user;
+  fg_conf *c = st->conf;
+  (void)section; /* inih truncates long section names; ours comes from the reader */
+  if (st->kind != LINE_KEY)
+    return fail_at(st, st->line, NULL, name, "the parser saw a value on a line that is not "
+                   "'key = value'; check the indentation");
+  if (st->sec == SEC_NONE)
+    return fail_at(st, st->line, NULL, name, "key outside any section; put it under its "
+                   "[section] header");
+
+  const char *const *keys = section_keys[st->sec];
+  int k = find_key(keys, name);
+  if (k < 0) {
+    char list[256];
+    list_keys(keys, list, sizeof list);
+    if (st->sec == SEC_GRIPPER_MODBUS && find_key(robot_keys, name) >= 0)
+      return fail_at(st, st->line, st->sec_text, name,
+                     "unknown key: this one belongs to [robot] only; [gripper.modbus] takes %s",
+                     list);
+    return fail_at(st, st->line, st->sec_text, name, "unknown key; [%s] takes %s",
+                   st->sec == SEC_SCENE ? "scene NAME" : st->sec_text, list);
+  }
+  int *seen = st->sec == SEC_SCENE ? &st->scene_meta[st->scene].key_line[k] : &st->key_line[st->sec][k];
+  if (*seen)
+    return fail_at(st, st->line, st->sec_text, name, "duplicate key (first set on line %d); keep "
+                   "one", *seen);
+  *seen = st->line;
+
+  int x = 0;
+  switch (st->sec) {
+  case SEC_HTTP:
+    if (k == K_LISTEN) {
+      char *host;
+      int port;
+      if (fg_conf_parse_listen(v, &host, &port) < 0)
+        return fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
+      free(host);
+      return set_string(st, &c->listen, v);
+    }
+    if (k == K_TOKEN) {
+      free(c->token);
+      c->token = NULL;
+      return v[0] ? set_string(st, &c->token, v) : 1;
+    }
+    if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
+    c->max_upload_bytes = (size_t)x << 20;
+    return 1;
+  case SEC_STATE:
+    if (k == K_DIR) return set_path(st, name, &c->state_dir, v);
+    return set_import_dirs(st, name, v);
+  case SEC_CLIP:
+    return set_path(st, name, k == K_WEIGHTS ? &c->clip_weights : &c->clip_vocab, v);
+  case SEC_TRAIN:
+    if (k == K_STEPS) return parse_int(st, name, v, 1, 10000000, &c->train_steps);
+    if (k == K_THREADS) return parse_int(st, name, v, 0, 1024, &c->train_threads);
+    return parse_int(st, name, v, 16, 16384, &c->max_image_side);
+  case SEC_GRIPPER:
+    if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;
+    c->gripper_model = (fg_gripper_model)x;
+    return 1;
+  case SEC_ROBOT: return set_modbus(st, &c->robot, k, name, v);
+  case SEC_GRIPPER_MODBUS: return set_modbus(st, &c->gripper_modbus, k, name, v);
+  case SEC_SCENE: return set_scene(st, &c->scenes[st->scene], k, name, v);
+  case SEC_NONE:
+  case SEC_COUNT: break;
+  }
+  return 1;
+}
+
+/* ---------------------------------------------------------------- checks at the end */
+
+/* A transport's needs, which depend on keys that may come in any order. */
+static void check_modbus(conf_parse *st, conf_section sec, const fg_conf_modbus *m) {
+  const int *lines = st->key_line[sec];
+  const char *name = section_names[sec];
+  int where = lines[K_TRANSPORT];
+  if (m->transport == FG_TRANSPORT_TCP && (!m->host || !m->host[0]))
+    fail_at(st, lines[K_HOST] ? lines[K_HOST] : where, name, "host",
+            "transport tcp needs a host; set host = ADDRESS (name or IP address)");
+  if (m->transport == FG_TRANSPORT_RTU && (!m->device || !m->device[0]))
+    fail_at(st, lines[K_DEVICE] ? lines[K_DEVICE] : where, name, "device",
+            "transport rtu needs a serial device; set device = /dev/ttyUSB0 or similar");
+}
+
+/* A scene's workspace must be a box, and a voxel must fit into it. Reported at the scene's
+ * header (the box is two keys; neither alone is wrong). */
+static void check_scene(conf_parse *st, const fg_conf_scene *s, const scene_meta *meta) {
+  char sec[96];
+  snprintf(sec, sizeof sec, "scene %s", s->name);
+  static const char axis[3] = {'x', 'y', 'z'};
+  double smallest = INFINITY;
+  for (int i = 0; i < 3; i++) {
+    double extent = s->workspace_max[i] - s->workspace_min[i];
+    if (!(extent > 0)) {
+      fail_at(st, meta->header_line, sec, "workspace_min",
+              "must be below workspace_max on every axis, but on %c it is %g and workspace_max "
+              "is %g", axis[i], s->workspace_min[i], s->workspace_max[i]);
+      return;
+    }
+    if (extent < smallest) smallest = extent;
+  }
+  if (s->voxel_size > smallest)
+    fail_at(st, meta->key_line[K_VOXEL_SIZE] ? meta->key_line[K_VOXEL_SIZE] : meta->header_line,
+            sec, "voxel_size",
+            "%g m is larger than the smallest workspace extent (%g m); expected at most that",
+            s->voxel_size, smallest);
+}
+
+static void check_final(conf_parse *st) {
+  fg_conf *c = st->conf;
+  if (st->sec_line[SEC_CLIP]) {
+    if (!c->clip_weights)
+      fail_at(st, st->sec_line[SEC_CLIP], "clip", "weights",
+              "missing; [clip] needs both weights and vocab (or remove the section)");
+    else if (!c->clip_vocab)
+      fail_at(st, st->sec_line[SEC_CLIP], "clip", "vocab",
+              "missing; [clip] needs both weights and vocab (or remove the section)");
+  }
+  check_modbus(st, SEC_ROBOT, &c->robot);
+  check_modbus(st, SEC_GRIPPER_MODBUS, &c->gripper_modbus);
+  for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);
+}
+
+/* ---------------------------------------------------------------- load and free */
+
+static void copy_err(char *err, size_t errlen, const char *msg) {
+  if (err && errlen) snprintf(err, errlen, "%s", msg);
+}
+
+int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen) {
+  if (out) *out = NULL;
+  copy_err(err, errlen, "");
+  if (!path || !out) {
+    copy_err(err, errlen, "fg_conf_load: no path or output given");
+    return fg_fail(FG_EINVAL, "fg_conf_load: no path or output given");
+  }
+
+  conf_parse st;
+  memset(&st, 0, sizeof st);
+  st.path = path;
+  st.fp = fopen(path, "r");
+  if (!st.fp) {
+    int e = errno;
+    int rc = fg_fail(e == ENOENT ? FG_ENOENT : FG_EIO, "%s: cannot open: %s", path, strerror(e));
+    copy_err(err, errlen, fg_error_detail());
+    return rc;
+  }
+  st.base_dir = folder_of(path);
+  if (!st.base_dir) {
+    st.failed = 1;
+    st.err_code = errno == ENOMEM ? FG_ENOMEM : FG_EIO;
+    snprintf(st.err, sizeof st.err, "%s: cannot resolve its folder: %s", path, strerror(errno));
+  } else {
+    const char *slash = strrchr(path, '/');
+    st.conf = fg_conf_defaults();
+    if (st.conf) st.conf->path = path_absolute(st.base_dir, slash ? slash + 1 : path);
+    if (!st.conf || !st.conf->path) {
+      st.failed = 1;
+      st.err_code = FG_ENOMEM;
+      snprintf(st.err, sizeof st.err, "%s: out of memory", path);
+    }
+  }
+  if (!st.failed) {
+    int rc = ini_parse_stream(conf_reader, &st, conf_handler, &st);
+    if (ferror(st.fp)) {
+      st.failed = 1;
+      st.err_code = FG_EIO;
+      snprintf(st.err, sizeof st.err, "%s: cannot read: %s", path, strerror(errno));
+    } else if (rc < 0 && !st.failed) {
+      st.failed = 1;
+      st.err_code = FG_ENOMEM;
+      snprintf(st.err, sizeof st.err, "%s: out of memory while parsing", path);
+    } else if (rc > 0 && !st.failed) {
+      /* inih saw something our classification let through; should not happen */
+      fail_at(&st, rc, NULL, NULL, "malformed line; expected 'key = value', '[section]' or a "
+              "comment");
+    }
+    if (!st.failed) check_final(&st);
+  }
+
+  fclose(st.fp);
+  free(st.raw);
+  free(st.base_dir);
+  free(st.scene_meta);
+  if (st.failed) {
+    fg_conf_free(st.conf);
+    copy_err(err, errlen, st.err);
+    return fg_fail(st.err_code, "%s", st.err);
+  }
+  *out = st.conf;
+  return 0;
+}
+
+const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name) {
+  if (!conf || !name) return NULL;
+  for (size_t i = 0; i < conf->n_scenes; i++)
+    if (strcmp(conf->scenes[i].name, name) == 0) return &conf->scenes[i];
+  return NULL;
+}
+
+static void modbus_free(fg_conf_modbus *m) {
+  free(m->host);
+  free(m->device);
+}
+
+void fg_conf_free(fg_conf *conf) {
+  if (!conf) return;
+  free(conf->path);
+  free(conf->listen);
+  free(conf->token);
+  free(conf->state_dir);
+  free_dirs(conf->import_dirs, conf->n_import_dirs);
+  free(conf->clip_weights);
+  free(conf->clip_vocab);
+  modbus_free(&conf->robot);
+  modbus_free(&conf->gripper_modbus);
+  free(conf->scenes);
+  free(conf);
+}

@@ -1,1 +1,531 @@
-/* placeholder: being written */
+#include "http.h"
+
+#include "conf.h"
+#include "metrics.h"
+
+#include "core/error.h"
+#include "core/log.h"
+
+#include <microhttpd.h>
+
+#include <netdb.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <time.h>
+
+/* ---------------------------------------------------------------- per-request state */
+
+enum { STAGE_RECEIVING, STAGE_OFFLOADED, STAGE_DONE };
+
+typedef struct conn_ctx {
+  struct fg_http *http;
+  struct MHD_Connection *conn;
+  fg_req req;
+  fg_resp resp;
+  const fg_route *route;
+  int route_idx;
+  int stage;
+  int ready;                  /* an offloaded handler finished; its response waits */
+  size_t limit, received;
+  int too_large;
+  int bad_multipart;          /* the multipart body could not be parsed */
+  char multipart_error[160];
+  struct MHD_PostProcessor *pp;
+  struct timespec start;
+  struct conn_ctx *next;      /* offload queue */
+} conn_ctx;
+
+struct fg_http {
+  struct MHD_Daemon *mhd;
+  fg_http_config cfg;
+  pthread_t *workers;
+  int n_workers;
+  pthread_mutex_t qlock;
+  pthread_cond_t qcond;
+  conn_ctx *qhead, *qtail;
+  int stopping;
+};
+
+/* ---------------------------------------------------------------- responses */
+
+void fg_resp_take(fg_resp *resp, int status, const char *content_type, char *body, size_t len) {
+  free(resp->body);
+  resp->status = status;
+  resp->content_type = content_type;
+  resp->body = body;
+  resp->len = len;
+}
+
+void fg_resp_json(fg_resp *resp, int status, json_t *obj) {
+  char *text = obj ? json_dumps(obj, JSON_COMPACT | JSON_REAL_PRECISION(17)) : NULL;
+  json_decref(obj);
+  if (!text) {
+    static const char oom[] =
+      "{\"error\":{\"code\":\"internal_error\",\"message\":\"out of memory building the reply\"}}";
+    fg_resp_take(resp, 500, "application/json", strdup(oom), sizeof oom - 1);
+    return;
+  }
+  fg_resp_take(resp, status, "application/json", text, strlen(text));
+}
+
+int fg_resp_error(fg_resp *resp, int status, const char *code, const char *fmt, ...) {
+  char msg[1024];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  va_end(ap);
+  fg_resp_json(resp, status, json_pack("{s:{s:s,s:s}}", "error", "code", code, "message", msg));
+  return 0;
+}
+
+const char *fg_req_header(const fg_req *req, const char *name) {
+  return MHD_lookup_connection_value((struct MHD_Connection *)req->mhd_conn, MHD_HEADER_KIND, name);
+}
+
+const fg_part *fg_req_part(const fg_req *req, const char *name) {
+  for (int i = 0; i < req->n_parts; i++)
+    if (strcmp(req->parts[i].name, name) == 0) return &req->parts[i];
+  return NULL;
+}
+
+/* ---------------------------------------------------------------- routing */
+
+/* Matches a path against a pattern whose "{}" segments capture one non-empty segment.
+ * Captured segments are copied into params (owned by the caller) only on a match. */
+static int match_path(const char *pattern, const char *path, char **params, int *n_params) {
+  const char *p = pattern, *s = path;
+  const char *caps[FG_HTTP_MAX_PARAMS];
+  size_t lens[FG_HTTP_MAX_PARAMS];
+  int n = 0;
+  while (*p && *s) {
+    if (p[0] == '{' && p[1] == '}') {
+      const char *end = strchr(s, '/');
+      size_t len = end ? (size_t)(end - s) : strlen(s);
+      if (len == 0 || n == FG_HTTP_MAX_PARAMS) return 0;
+      caps[n] = s;
+      lens[n++] = len;
+      s += len;
+      p += 2;
+    } else if (*p == *s) {
+      p++, s++;
+    } else {
+      return 0;
+    }
+  }
+  if (*s == '/' && s[1] == '\0') s++; /* tolerate one trailing slash */
+  if (*p || *s) return 0;
+  if (params) {
+    for (int i = 0; i < n; i++) params[i] = strndup(caps[i], lens[i]);
+    *n_params = n;
+  }
+  return 1;
+}
+
+/* Compares a presented secret with the configured one in time that depends only on the
+ * configured one's length. */
+static int token_equal(const char *given, size_t given_len, const char *secret) {
+  size_t n = strlen(secret);
+  unsigned diff = (unsigned)(given_len != n);
+  for (size_t i = 0; i < n; i++)
+    diff |= (unsigned char)(i < given_len ? given[i] : 0) ^ (unsigned char)secret[i];
+  return diff == 0;
+}
+
+static int authorized(const conn_ctx *c) {
+  const char *token = c->req.conf->token;
+  if (!token || !*token || (c->route && (c->route->flags & FG_ROUTE_PUBLIC))) return 1;
+  const char *h = fg_req_header(&c->req, MHD_HTTP_HEADER_AUTHORIZATION);
+  if (!h || strncasecmp(h, "Bearer ", 7) != 0) return 0;
+  h += 7;
+  while (*h == ' ') h++;
+  return token_equal(h, strlen(h), token);
+}
+
+/* ---------------------------------------------------------------- sending */
+
+static enum MHD_Result send_response(conn_ctx *c) {
+  fg_resp *r = &c->resp;
+  if (r->status == 0) fg_resp_error(r, 500, "internal_error", "the handler produced no response");
+  struct MHD_Response *mr =
+    r->body ? MHD_create_response_from_buffer(r->len, r->body, MHD_RESPMEM_MUST_FREE)
+            : MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+  if (!mr) return MHD_NO;
+  r->body = NULL; /* owned by libmicrohttpd now */
+  if (r->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, r->content_type);
+  if (r->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, r->allow);
+  if (r->status == 401)
+    MHD_add_response_header(mr, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"fieldgrip\"");
+  enum MHD_Result ok = MHD_queue_response(c->conn, (unsigned)r->status, mr);
+  MHD_destroy_response(mr);
+  c->stage = STAGE_DONE;
+  return ok;
+}
+
+/* ---------------------------------------------------------------- multipart */
+
+static enum MHD_Result on_part(void *cls, enum MHD_ValueKind kind, const char *key,
+                               const char *filename, const char *content_type,
+                               const char *transfer_encoding, const char *data, uint64_t off,
+                               size_t size) {
+  conn_ctx *c = cls;
+  fg_req *q = &c->req;
+  if (!key) return MHD_YES;
+  fg_part *part = NULL;
+  for (int i = 0; i < q->n_parts; i++)
+    if (strcmp(q->parts[i].name, key) == 0) part = &q->parts[i];
+  if (part && off == 0 && part->len > 0) {
+    snprintf(c->multipart_error, sizeof c->multipart_error, "part '%s' appears twice", key);
+    c->bad_multipart = 1;
+    return MHD_NO;
+  }
+  if (!part) {
+    if (q->n_parts == FG_HTTP_MAX_PARTS) {
+      snprintf(c->multipart_error, sizeof c->multipart_error, "more than %d parts",
+               FG_HTTP_MAX_PARTS);
+      c->bad_multipart = 1;
+      return MHD_NO;
+    }
+    part = &q->parts[q->n_parts++];
+    part->name = strdup(key);
+    part->filename = filename ? strdup(filename) : NULL;
+    part->content_type = content_type ? strdup(content_type) : NULL;
+    if (!part->name) return MHD_NO;
+  }
+  if (part->len + size + 1 > part->cap) {
+    size_t cap = part->cap ? part->cap : 4096;
+    while (cap < part->len + size + 1) cap *= 2;
+    uint8_t *p = realloc(part->data, cap);
+    if (!p) return MHD_NO;
+    part->data = p;
+    part->cap = cap;
+  }
+  memcpy(part->data + part->len, data, size);
+  part->len += size;
+  part->data[part->len] = 0;
+  return MHD_YES;
+}
+
+static int append_body(fg_req *q, const char *data, size_t size) {
+  uint8_t *p = realloc(q->body, q->body_len + size + 1);
+  if (!p) return -1;
+  memcpy(p + q->body_len, data, size);
+  q->body = p;
+  q->body_len += size;
+  q->body[q->body_len] = 0;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- offload pool */
+
+static void *offload_main(void *arg) {
+  fg_http *h = arg;
+  for (;;) {
+    pthread_mutex_lock(&h->qlock);
+    while (!h->qhead && !h->stopping) pthread_cond_wait(&h->qcond, &h->qlock);
+    conn_ctx *c = h->qhead;
+    if (!c) {
+      pthread_mutex_unlock(&h->qlock);
+      return NULL;
+    }
+    h->qhead = c->next;
+    if (!h->qhead) h->qtail = NULL;
+    pthread_mutex_unlock(&h->qlock);
+
+    fg_error_clear();
+    c->route->handler(&c->req, &c->resp);
+    c->ready = 1;
+    MHD_resume_connection(c->conn);
+  }
+}
+
+static void offload(fg_http *h, conn_ctx *c) {
+  c->stage = STAGE_OFFLOADED;
+  MHD_suspend_connection(c->conn);
+  pthread_mutex_lock(&h->qlock);
+  c->next = NULL;
+  if (h->qtail) h->qtail->next = c;
+  else h->qhead = c;
+  h->qtail = c;
+  pthread_cond_signal(&h->qcond);
+  pthread_mutex_unlock(&h->qlock);
+}
+
+/* ---------------------------------------------------------------- the access handler */
+
+static enum MHD_Result respond_now(conn_ctx *c, int status, const char *code, const char *msg) {
+  fg_resp_error(&c->resp, status, code, "%s", msg);
+  return send_response(c);
+}
+
+/* First call for a request: route it, check the token and the announced size, and get
+ * ready to receive the body. Answers at once (before any body byte is read) when the
+ * request cannot succeed. */
+static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, const char *method) {
+  c->req.conf = h->cfg.conf_acquire(h->cfg.app);
+  c->req.app = h->cfg.app;
+  c->req.method = method;
+  c->req.path = url;
+  c->req.mhd_conn = c->conn;
+  c->req.content_type = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_TYPE);
+  c->limit = c->req.conf->max_upload_bytes;
+
+  int path_known = 0;
+  for (size_t i = 0; i < h->cfg.n_routes; i++) {
+    const fg_route *r = &h->cfg.routes[i];
+    if (!match_path(r->pattern, url, NULL, NULL)) continue;
+    path_known = 1;
+    if (strcmp(r->method, method) == 0) {
+      c->route = r;
+      c->route_idx = (int)i;
+      match_path(r->pattern, url, c->req.params, &c->req.n_params);
+      break;
+    }
+    size_t al = strlen(c->resp.allow);
+    snprintf(c->resp.allow + al, sizeof c->resp.allow - al, "%s%s", al ? ", " : "", r->method);
+  }
+  if (!c->route) {
+    if (path_known) {
+      char msg[160];
+      snprintf(msg, sizeof msg, "%s is not allowed on %s; allowed: %s", method, url, c->resp.allow);
+      return respond_now(c, 405, "method_not_allowed", msg);
+    }
+    c->resp.allow[0] = 0;
+    char msg[300];
+    snprintf(msg, sizeof msg, "no endpoint at %.200s; see proto/openapi.yaml for the API", url);
+    return respond_now(c, 404, "not_found", msg);
+  }
+  c->resp.allow[0] = 0;
+  if (!authorized(c))
+    return respond_now(c, 401, "unauthorized",
+                       "this server needs \"Authorization: Bearer <token>\" with the token of its "
+                       "configuration file ([http] token)");
+
+  const char *cl = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_LENGTH);
+  if (cl) {
+    char *end;
+    unsigned long long n = strtoull(cl, &end, 10);
+    if (*end == '\0' && n > c->limit) {
+      char msg[200];
+      snprintf(msg, sizeof msg, "the body has %llu bytes, more than the limit of %zu MB "
+               "([http] max_upload_mb)", n, c->limit >> 20);
+      return respond_now(c, 413, "payload_too_large", msg);
+    }
+  }
+  if (c->route->flags & FG_ROUTE_MULTIPART) {
+    const char *ct = c->req.content_type;
+    if (!ct || strncasecmp(ct, "multipart/form-data", 19) != 0)
+      return respond_now(c, 415, "unsupported_media_type",
+                         "this endpoint takes multipart/form-data (curl -F image=@photo.png "
+                         "-F meta='{...}')");
+    c->pp = MHD_create_post_processor(c->conn, 64 * 1024, on_part, c);
+    if (!c->pp)
+      return respond_now(c, 400, "invalid_request",
+                         "the multipart/form-data body has no boundary parameter");
+  }
+  return MHD_YES;
+}
+
+static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const char *url,
+                                  const char *method, const char *version, const char *upload_data,
+                                  size_t *upload_data_size, void **con_cls) {
+  fg_http *h = cls;
+  conn_ctx *c = *con_cls;
+  if (!c) {
+    c = calloc(1, sizeof *c);
+    if (!c) return MHD_NO;
+    *con_cls = c;
+    c->http = h;
+    c->conn = conn;
+    c->route_idx = -1;
+    clock_gettime(CLOCK_MONOTONIC, &c->start);
+    return begin_request(h, c, url, method);
+  }
+  if (c->ready) { /* back from the offload pool */
+    c->ready = 0;
+    return send_response(c);
+  }
+  if (c->stage != STAGE_RECEIVING) {
+    *upload_data_size = 0; /* answered or in the pool: discard what is still arriving */
+    return MHD_YES;
+  }
+  if (*upload_data_size) {
+    size_t n = *upload_data_size;
+    *upload_data_size = 0;
+    c->received += n;
+    if (c->received > c->limit) {
+      c->too_large = 1;
+      /* Discard, so the client gets its 413; a body that goes on far past the limit is cut. */
+      return c->received > 2 * c->limit ? MHD_NO : MHD_YES;
+    }
+    if (c->pp) {
+      if (!c->bad_multipart && MHD_post_process(c->pp, upload_data, n) != MHD_YES &&
+          !c->bad_multipart) {
+        c->bad_multipart = 1;
+        snprintf(c->multipart_error, sizeof c->multipart_error, "malformed multipart body");
+      }
+    } else if (append_body(&c->req, upload_data, n) != 0) {
+      return MHD_NO;
+    }
+    return MHD_YES;
+  }
+  /* The whole body is in. */
+  if (c->too_large) {
+    char msg[160];
+    snprintf(msg, sizeof msg, "the body is larger than the limit of %zu MB ([http] max_upload_mb)",
+             c->limit >> 20);
+    return respond_now(c, 413, "payload_too_large", msg);
+  }
+  if (c->pp) {
+    if (MHD_destroy_post_processor(c->pp) != MHD_YES && !c->bad_multipart) {
+      c->bad_multipart = 1;
+      snprintf(c->multipart_error, sizeof c->multipart_error,
+               "the multipart body ends early or is malformed");
+    }
+    c->pp = NULL;
+  }
+  if (c->bad_multipart) {
+    char msg[240];
+    snprintf(msg, sizeof msg, "cannot read the multipart/form-data body: %s", c->multipart_error);
+    return respond_now(c, 400, "invalid_request", msg);
+  }
+  if (c->route->flags & FG_ROUTE_OFFLOAD) {
+    offload(h, c);
+    return MHD_YES;
+  }
+  fg_error_clear();
+  c->route->handler(&c->req, &c->resp);
+  return send_response(c);
+}
+
+static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
+                         enum MHD_RequestTerminationCode toe) {
+  fg_http *h = cls;
+  conn_ctx *c = *con_cls;
+  if (!c) return;
+  struct timespec now;
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  double secs = (double)(now.tv_sec - c->start.tv_sec) + (now.tv_nsec - c->start.tv_nsec) * 1e-9;
+  int status = c->resp.status ? c->resp.status : 499;
+  fg_metrics_observe_request(c->route_idx, status, secs);
+  fg_debug("%s %s -> %d in %.1f ms%s", c->req.method ? c->req.method : "?",
+           c->req.path ? c->req.path : "?", status, secs * 1e3,
+           toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (connection ended early)");
+  if (c->pp) MHD_destroy_post_processor(c->pp);
+  for (int i = 0; i < c->req.n_params; i++) free(c->req.params[i]);
+  for (int i = 0; i < c->req.n_parts; i++) {
+    free(c->req.parts[i].name);
+    free(c->req.parts[i].filename);
+    free(c->req.parts[i].content_type);
+    free(c->req.parts[i].data);
+  }
+  free(c->req.body);
+  free(c->resp.body);
+  if (c->req.conf) h->cfg.conf_release(h->cfg.app, c->req.conf);
+  free(c);
+  *con_cls = NULL;
+}
+
+static void on_mhd_log(void *cls, const char *fmt, va_list ap) {
+  char buf[512];
+  vsnprintf(buf, sizeof buf, fmt, ap);
+  size_t n = strlen(buf);
+  while (n && (buf[n - 1] == '\n' || buf[n - 1] == '\r')) buf[--n] = 0;
+  fg_debug("http: %s", buf);
+}
+
+/* ---------------------------------------------------------------- start and stop */
+
+int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t bound_len) {
+  *out = NULL;
+  char *host = NULL;
+  int port = 0;
+  FG_TRY(fg_conf_parse_listen(cfg->listen, &host, &port));
+  struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM,
+                           .ai_flags = AI_PASSIVE | AI_NUMERICSERV};
+  struct addrinfo *ai = NULL;
+  char portstr[16];
+  snprintf(portstr, sizeof portstr, "%d", port);
+  int gai = getaddrinfo(host, portstr, &hints, &ai);
+  if (gai != 0) {
+    int rc = fg_fail(FG_EINVAL, "cannot resolve listen address '%s': %s", cfg->listen,
+                     gai_strerror(gai));
+    free(host);
+    return rc;
+  }
+
+  fg_http *h = calloc(1, sizeof *h);
+  if (!h) {
+    freeaddrinfo(ai);
+    free(host);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  h->cfg = *cfg;
+  pthread_mutex_init(&h->qlock, NULL);
+  pthread_cond_init(&h->qcond, NULL);
+  for (size_t i = 0; i < cfg->n_routes && i < FG_METRICS_MAX_ROUTES; i++)
+    fg_metrics_set_route((int)i, cfg->routes[i].method, cfg->routes[i].metric);
+
+  unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL_LINUX_ONLY |
+                   MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG | MHD_USE_TURBO;
+  if (ai->ai_family == AF_INET6) flags |= MHD_USE_IPv6;
+  h->mhd = MHD_start_daemon(
+    flags, (uint16_t)port, NULL, NULL, on_request, h,
+    MHD_OPTION_SOCK_ADDR, ai->ai_addr,
+    MHD_OPTION_THREAD_POOL_SIZE, (unsigned)(cfg->poll_threads > 0 ? cfg->poll_threads : 1),
+    MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
+    MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)120,
+    MHD_OPTION_LISTENING_ADDRESS_REUSE, (unsigned)1,
+    MHD_OPTION_EXTERNAL_LOGGER, on_mhd_log, NULL,
+    MHD_OPTION_END);
+  freeaddrinfo(ai);
+  if (!h->mhd) {
+    int rc = fg_fail(FG_EIO, "cannot listen on %s (address in use, or not an address of this "
+                     "machine?)", cfg->listen);
+    pthread_mutex_destroy(&h->qlock);
+    pthread_cond_destroy(&h->qcond);
+    free(h);
+    free(host);
+    return rc;
+  }
+  const union MHD_DaemonInfo *info = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_BIND_PORT);
+  int bound_port = info ? info->port : port;
+  if (strchr(host, ':')) snprintf(bound, bound_len, "http://[%s]:%d", host, bound_port);
+  else snprintf(bound, bound_len, "http://%s:%d", host, bound_port);
+  free(host);
+
+  h->n_workers = cfg->offload_threads > 0 ? cfg->offload_threads : 1;
+  h->workers = calloc((size_t)h->n_workers, sizeof *h->workers);
+  for (int i = 0; h->workers && i < h->n_workers; i++)
+    if (pthread_create(&h->workers[i], NULL, offload_main, h) != 0) {
+      h->n_workers = i;
+      break;
+    }
+  if (!h->workers || h->n_workers == 0) {
+    free(h->workers);
+    h->workers = NULL;
+    h->n_workers = 0;
+    fg_http_stop(h);
+    return fg_fail(FG_ENOMEM, "cannot start the request worker threads");
+  }
+  *out = h;
+  return 0;
+}
+
+void fg_http_stop(fg_http *h) {
+  if (!h) return;
+  MHD_quiesce_daemon(h->mhd);
+  pthread_mutex_lock(&h->qlock);
+  h->stopping = 1;
+  pthread_cond_broadcast(&h->qcond);
+  pthread_mutex_unlock(&h->qlock);
+  for (int i = 0; i < h->n_workers; i++) pthread_join(h->workers[i], NULL);
+  MHD_stop_daemon(h->mhd);
+  pthread_mutex_destroy(&h->qlock);
+  pthread_cond_destroy(&h->qcond);
+  free(h->workers);
+  free(h);
+}

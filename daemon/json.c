@@ -1,1 +1,204 @@
-/* placeholder: being written */
+#include "json.h"
+
+#include "core/error.h"
+#include "core/pose.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+json_t *fg_json_parse(const void *body, size_t len, char *err, size_t errlen) {
+  if (!body || len == 0) {
+    snprintf(err, errlen, "the request body is empty; send a JSON object");
+    return NULL;
+  }
+  json_error_t e;
+  json_t *v = json_loadb(body, len, JSON_REJECT_DUPLICATES, &e);
+  if (!v) snprintf(err, errlen, "line %d, column %d: %s", e.line, e.column, e.text);
+  return v;
+}
+
+int fg_json_number(json_t *obj, const char *key, double *out) {
+  json_t *v = json_object_get(obj, key);
+  if (!v || json_is_null(v)) return 0;
+  if (!json_is_number(v)) return fg_fail(FG_EINVAL, "\"%s\" must be a number", key);
+  double d = json_number_value(v);
+  if (!isfinite(d)) return fg_fail(FG_EINVAL, "\"%s\" must be a finite number", key);
+  *out = d;
+  return 1;
+}
+
+int fg_json_string(json_t *obj, const char *key, const char **out) {
+  json_t *v = json_object_get(obj, key);
+  if (!v || json_is_null(v)) return 0;
+  if (!json_is_string(v)) return fg_fail(FG_EINVAL, "\"%s\" must be a string", key);
+  *out = json_string_value(v);
+  return 1;
+}
+
+int fg_json_vec(json_t *v, double *out, size_t n, const char *what) {
+  if (!json_is_array(v) || json_array_size(v) != n)
+    return fg_fail(FG_EINVAL, "%s must be an array of %zu numbers", what, n);
+  for (size_t i = 0; i < n; i++) {
+    json_t *x = json_array_get(v, i);
+    if (!json_is_number(x) || !isfinite(json_number_value(x)))
+      return fg_fail(FG_EINVAL, "%s[%zu] must be a finite number", what, i);
+    out[i] = json_number_value(x);
+  }
+  return 0;
+}
+
+int fg_json_matrix4(json_t *v, double T[16], const char *what) {
+  if (!json_is_array(v) || json_array_size(v) != 4)
+    return fg_fail(FG_EINVAL, "%s must be a 4x4 matrix: an array of 4 rows of 4 numbers", what);
+  for (size_t r = 0; r < 4; r++) {
+    json_t *row = json_array_get(v, r);
+    if (!json_is_array(row) || json_array_size(row) != 4)
+      return fg_fail(FG_EINVAL, "%s must be a 4x4 matrix; row %zu does not have 4 numbers", what,
+                     r);
+    for (size_t c = 0; c < 4; c++) {
+      json_t *x = json_array_get(row, c);
+      if (!json_is_number(x))
+        return fg_fail(FG_EINVAL, "%s[%zu][%zu] is not a number", what, r, c);
+      T[r * 4 + c] = json_number_value(x);
+    }
+  }
+  return 0;
+}
+
+int fg_json_pose(json_t *v, double T[16], const char *what) {
+  if (json_is_array(v)) {
+    FG_TRY(fg_json_matrix4(v, T, what));
+  } else if (json_is_object(v) && json_object_get(v, "matrix")) {
+    FG_TRY(fg_json_matrix4(json_object_get(v, "matrix"), T, what));
+  } else if (json_is_object(v)) {
+    double p[3], q[4];
+    char name[96];
+    snprintf(name, sizeof name, "%s.position", what);
+    FG_TRY(fg_json_vec(json_object_get(v, "position"), p, 3, name));
+    snprintf(name, sizeof name, "%s.quaternion", what);
+    FG_TRY(fg_json_vec(json_object_get(v, "quaternion"), q, 4, name));
+    FG_TRY(fg_pose_from_quat(p, q, T));
+  } else {
+    return fg_fail(FG_EINVAL, "%s must be a 4x4 matrix or {\"position\": [x, y, z], "
+                   "\"quaternion\": [w, x, y, z]}", what);
+  }
+  if (fg_pose_validate(T) != 0) {
+    char detail[512];
+    snprintf(detail, sizeof detail, "%s", fg_error_detail());
+    return fg_fail(FG_EINVAL, "%s: %s", what, detail);
+  }
+  return 0;
+}
+
+static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",
+                                          "k1", "k2", "k3", "p1", "p2", "camera_angle_x",
+                                          "camera_angle_y"};
+
+int fg_json_camera(json_t *obj, int strict, fg_transforms_frame *f) {
+  if (!json_is_object(obj)) return fg_fail(FG_EINVAL, "\"camera\" must be an object");
+  if (strict) {
+    const char *key;
+    json_t *val;
+    json_object_foreach(obj, key, val) {
+      int known = 0;
+      for (size_t i = 0; i < sizeof camera_keys / sizeof camera_keys[0]; i++)
+        known |= strcmp(key, camera_keys[i]) == 0;
+      if (!known)
+        return fg_fail(FG_EINVAL, "unknown camera key \"%s\" (known: fl_x fl_y cx cy w h "
+                       "camera_model k1 k2 k3 p1 p2 camera_angle_x camera_angle_y)", key);
+    }
+  }
+  fg_camera *cam = &f->cam;
+  struct { const char *key; double *dst; int *has; } nums[] = {
+    {"fl_x", &cam->fl_x, &f->has_fl_x}, {"fl_y", &cam->fl_y, &f->has_fl_y},
+    {"cx", &cam->cx, &f->has_cx},       {"cy", &cam->cy, &f->has_cy},
+    {"k1", &cam->k1, NULL},             {"k2", &cam->k2, NULL},
+    {"k3", &cam->k3, NULL},             {"p1", &cam->p1, NULL},
+    {"p2", &cam->p2, NULL},             {"camera_angle_x", &f->camera_angle_x, NULL},
+    {"camera_angle_y", &f->camera_angle_y, NULL},
+  };
+  for (size_t i = 0; i < sizeof nums / sizeof nums[0]; i++) {
+    int rc = fg_json_number(obj, nums[i].key, nums[i].dst);
+    FG_TRY(rc);
+    if (nums[i].has) *nums[i].has = rc;
+  }
+  double w = 0, h = 0;
+  int hw = fg_json_number(obj, "w", &w), hh = fg_json_number(obj, "h", &h);
+  FG_TRY(hw);
+  FG_TRY(hh);
+  if (hw != hh) return fg_fail(FG_EINVAL, "give both camera w and h, or neither");
+  if (hw && (w != floor(w) || w < 1 || w > 32768 || h != floor(h) || h < 1 || h > 32768))
+    return fg_fail(FG_EINVAL, "camera w and h must be whole numbers of pixels from 1 to 32768");
+  f->has_size = hw;
+  cam->w = (int)w;
+  cam->h = (int)h;
+  for (int i = 0; i < 2; i++) {
+    double a = i ? f->camera_angle_y : f->camera_angle_x;
+    if (a != 0 && !(a > 0 && a < M_PI))
+      return fg_fail(FG_EINVAL, "camera_angle_%c must be in (0, pi) radians", i ? 'y' : 'x');
+  }
+  if (!f->has_fl_x && !f->has_fl_y && !f->camera_angle_x && !f->camera_angle_y)
+    return fg_fail(FG_EINVAL, "the camera has no focal length: give fl_x (and fl_y) in pixels, "
+                   "or camera_angle_x in radians");
+  const char *model = NULL;
+  int hm = fg_json_string(obj, "camera_model", &model);
+  FG_TRY(hm);
+  int distorted = cam->k1 || cam->k2 || cam->k3 || cam->p1 || cam->p2;
+  if (hm) FG_TRY(fg_camera_model_parse(model, &cam->model));
+  else cam->model = distorted ? FG_CAMERA_OPENCV : FG_CAMERA_PINHOLE;
+  if (cam->model == FG_CAMERA_PINHOLE && distorted)
+    return fg_fail(FG_EINVAL, "a PINHOLE camera has no distortion; use camera_model \"OPENCV\" "
+                   "with k1 k2 p1 p2 [k3]");
+  return 0;
+}
+
+json_t *fg_json_from_vec(const double *v, size_t n) {
+  json_t *a = json_array();
+  for (size_t i = 0; a && i < n; i++) json_array_append_new(a, json_real(v[i]));
+  return a;
+}
+
+json_t *fg_json_from_matrix4(const double T[16]) {
+  json_t *m = json_array();
+  for (int r = 0; m && r < 4; r++) json_array_append_new(m, fg_json_from_vec(T + 4 * r, 4));
+  return m;
+}
+
+void fg_iso8601(int64_t ms, char out[32]) {
+  time_t t = (time_t)(ms / 1000);
+  struct tm tm;
+  gmtime_r(&t, &tm);
+  char date[24];
+  strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%S", &tm);
+  snprintf(out, 32, "%.19s.%03dZ", date, (int)(ms % 1000));
+}
+
+json_t *fg_json_scene(const fg_scene_info *info) {
+  char created[32];
+  fg_iso8601(info->created_ms, created);
+  return json_pack("{s:s,s:{s:o,s:o},s:f,s:o,s:I,s:o,s:b,s:n,s:s,s:b}", "name", info->name,
+                   "workspace", "min", fg_json_from_vec(info->params.workspace_min, 3), "max",
+                   fg_json_from_vec(info->params.workspace_max, 3), "voxel_size",
+                   info->params.voxel_size, "background", fg_json_from_vec(info->params.background, 3),
+                   "frames", (json_int_t)info->n_frames, "feature_dim",
+                   info->feature_dim ? json_integer(info->feature_dim) : json_null(), "trained", 0,
+                   "last_job", "created", created, "declared_in_config", info->declared_in_config);
+}
+
+json_t *fg_json_frame(const fg_frame *f, int index) {
+  char created[32];
+  fg_iso8601(f->created_ms, created);
+  json_t *features = f->feat_d
+    ? json_pack("{s:i,s:i,s:i,s:s}", "h", f->feat_h, "w", f->feat_w, "d", f->feat_d, "dtype",
+                f->feat_dtype == FG_DTYPE_F16 ? "float16" : "float32")
+    : json_null();
+  return json_pack("{s:i,s:s,s:o,s:s,s:{s:f,s:f,s:f,s:f,s:i,s:i,s:s},s:[i,i],s:b,s:o,s:s}",
+                   "frame", index, "source", f->source, "transform_matrix",
+                   fg_json_from_matrix4(f->T_world_cam), "convention", "opengl", "camera", "fl_x",
+                   f->cam.fl_x, "fl_y", f->cam.fl_y, "cx", f->cam.cx, "cy", f->cam.cy, "w",
+                   f->cam.w, "h", f->cam.h, "camera_model", fg_camera_model_name(f->cam.model),
+                   "source_size", f->src_w, f->src_h, "undistorted", f->undistorted, "features",
+                   features, "created", created);
+}

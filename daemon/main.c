@@ -1,1 +1,243 @@
-int main(void) { return 0; }
+/* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
+#include "api.h"
+#include "conf.h"
+#include "http.h"
+#include "metrics.h"
+#include "notify.h"
+#include "store.h"
+
+#include "config.h"
+#include "core/error.h"
+#include "core/log.h"
+
+#include <errno.h>
+#include <getopt.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+typedef struct options {
+  const char *config;    /* --config, or NULL */
+  const char *listen;    /* --listen override, or NULL */
+  const char *state_dir; /* --state-dir override, or NULL */
+} options;
+
+static void usage(FILE *out) {
+  fprintf(out,
+          "Usage: fieldgripd [OPTIONS]\n"
+          "Serves fieldgrip's HTTP API: scenes, scans, feature fields, heatmaps and grasps.\n\n"
+          "  -c, --config FILE      configuration file (default %s if it exists,\n"
+          "                         else built-in defaults)\n"
+          "  -l, --listen ADDR      listen on HOST:PORT or [V6]:PORT, overriding [http] listen;\n"
+          "                         port 0 picks a free port\n"
+          "  -s, --state-dir DIR    keep scenes and frames in DIR, overriding [state] dir\n"
+          "      --log-level LEVEL  error, warn, info (default) or debug\n"
+          "  -V, --version          print the version and exit\n"
+          "  -h, --help             print this help and exit\n\n"
+          "Signals: SIGHUP reloads the configuration file, SIGTERM and SIGINT stop.\n",
+          FG_CONF_DEFAULT_PATH);
+}
+
+static int parse_args(int argc, char **argv, options *o) {
+  static const struct option longopts[] = {
+    {"config", required_argument, NULL, 'c'},  {"listen", required_argument, NULL, 'l'},
+    {"state-dir", required_argument, NULL, 's'}, {"log-level", required_argument, NULL, 'L'},
+    {"version", no_argument, NULL, 'V'},       {"help", no_argument, NULL, 'h'},
+    {NULL, 0, NULL, 0},
+  };
+  int c;
+  while ((c = getopt_long(argc, argv, "c:l:s:Vh", longopts, NULL)) != -1) {
+    switch (c) {
+    case 'c': o->config = optarg; break;
+    case 'l': o->listen = optarg; break;
+    case 's': o->state_dir = optarg; break;
+    case 'L': {
+      enum fg_log_level level;
+      if (fg_log_level_parse(optarg, &level) != 0) {
+        fprintf(stderr, "fieldgripd: %s\n", fg_error_detail());
+        return 2;
+      }
+      fg_log_set_level(level);
+      break;
+    }
+    case 'V': printf("fieldgripd %s\n", FG_VERSION); return 0;
+    case 'h': usage(stdout); return 0;
+    default: usage(stderr); return 2;
+    }
+  }
+  if (optind < argc) {
+    fprintf(stderr, "fieldgripd: unexpected argument '%s'\n", argv[optind]);
+    usage(stderr);
+    return 2;
+  }
+  return -1; /* go on */
+}
+
+static int replace_str(char **dst, const char *src) {
+  char *p = strdup(src);
+  if (!p) return -1;
+  free(*dst);
+  *dst = p;
+  return 0;
+}
+
+/* Reads the configuration the flags name, with the flags' overrides applied. */
+static int load_conf(const options *o, fg_conf **out, char *err, size_t errlen) {
+  fg_conf *conf = NULL;
+  if (o->config) {
+    if (fg_conf_load(o->config, &conf, err, errlen) != 0) return -1;
+  } else if (access(FG_CONF_DEFAULT_PATH, F_OK) == 0) {
+    if (fg_conf_load(FG_CONF_DEFAULT_PATH, &conf, err, errlen) != 0) return -1;
+  } else {
+    conf = fg_conf_defaults();
+    if (!conf) {
+      snprintf(err, errlen, "out of memory");
+      return -1;
+    }
+  }
+  if ((o->listen && replace_str(&conf->listen, o->listen) != 0) ||
+      (o->state_dir && replace_str(&conf->state_dir, o->state_dir) != 0)) {
+    fg_conf_free(conf);
+    snprintf(err, errlen, "out of memory");
+    return -1;
+  }
+  if (o->listen) {
+    char *host;
+    int port;
+    if (fg_conf_parse_listen(o->listen, &host, &port) != 0) {
+      snprintf(err, errlen, "--listen: %s", fg_error_detail());
+      fg_conf_free(conf);
+      return -1;
+    }
+    free(host);
+  }
+  *out = conf;
+  return 0;
+}
+
+static int resolve_threads(const fg_conf *conf) {
+  if (conf->train_threads > 0) return conf->train_threads;
+  long n = sysconf(_SC_NPROCESSORS_ONLN);
+  return n > 0 ? (int)n : 1;
+}
+
+static void reload(fg_app *app, const options *o) {
+  fg_notify_reloading();
+  char err[1024];
+  fg_conf *conf;
+  if (load_conf(o, &conf, err, sizeof err) != 0) {
+    fg_error("reload failed, keeping the running configuration: %s", err);
+    fg_metrics_count_reload(0);
+    fg_notify_ready("running; the last reload failed, see the log");
+    return;
+  }
+  const fg_conf *cur = fg_app_conf_acquire(app);
+  if (strcmp(cur->listen, conf->listen) != 0)
+    fg_warn("reload: [http] listen changed to %s; it takes effect at the next restart",
+            conf->listen);
+  if (strcmp(cur->state_dir, conf->state_dir) != 0) {
+    fg_warn("reload: [state] dir changed to %s; it takes effect at the next restart",
+            conf->state_dir);
+    replace_str(&conf->state_dir, cur->state_dir);
+  }
+  fg_app_conf_release(app, cur);
+  fg_app_set_conf(app, conf);
+  const fg_conf *now = fg_app_conf_acquire(app);
+  fg_store_sync_declared(app->store, now);
+  fg_app_conf_release(app, now);
+  fg_metrics_count_reload(1);
+  fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
+  fg_notify_ready("running; configuration reloaded");
+}
+
+int main(int argc, char **argv) {
+  options o = {0};
+  int rc = parse_args(argc, argv, &o);
+  if (rc >= 0) return rc;
+
+  /* Signals are taken synchronously by the main thread; every thread started later inherits
+   * this mask, so none of them is interrupted. */
+  sigset_t sigs;
+  sigemptyset(&sigs);
+  sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGINT);
+  sigaddset(&sigs, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &sigs, NULL);
+  signal(SIGPIPE, SIG_IGN);
+
+  char err[1024];
+  fg_conf *conf;
+  if (load_conf(&o, &conf, err, sizeof err) != 0) {
+    fg_error("%s", err);
+    return 2;
+  }
+  fg_info("fieldgripd %s starting; configuration: %s", FG_VERSION,
+          conf->path ? conf->path : "built-in defaults");
+
+  fg_app app = {0};
+  pthread_mutex_init(&app.conf_lock, NULL);
+  app.threads = resolve_threads(conf);
+  if (fg_store_open(&app.store, conf->state_dir) != 0) {
+    fg_error("cannot open the state dir %s: %s", conf->state_dir, fg_error_detail());
+    fg_conf_free(conf);
+    return 1;
+  }
+  fg_app_set_conf(&app, conf);
+  fg_store_sync_declared(app.store, conf);
+
+  long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+  int poll_threads = ncpu > 2 ? (int)(ncpu < 8 ? ncpu : 8) : 2;
+  fg_http_config hc = {
+    .listen = conf->listen,
+    .poll_threads = poll_threads,
+    .offload_threads = poll_threads,
+    .routes = fg_api_routes,
+    .n_routes = fg_api_n_routes,
+    .app = &app,
+    .conf_acquire = fg_app_conf_acquire,
+    .conf_release = fg_app_conf_release,
+  };
+  fg_http *http;
+  char bound[128];
+  if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
+    fg_error("%s", fg_error_detail());
+    fg_store_close(app.store);
+    fg_app_clear_conf(&app);
+    return 1;
+  }
+  size_t n_scenes, n_frames;
+  fg_store_totals(app.store, &n_scenes, &n_frames);
+  fg_info("listening on %s (state dir %s, %zu scenes, %zu frames)", bound, conf->state_dir,
+          n_scenes, n_frames);
+  fg_notify_ready("serving");
+  fg_notify_status("serving on %s: %zu scenes, %zu frames", bound, n_scenes, n_frames);
+
+  uint64_t wd_usec = fg_notify_watchdog_usec();
+  struct timespec tick = {.tv_sec = 1};
+  if (wd_usec) { /* ping at a third of the interval */
+    tick.tv_sec = (time_t)(wd_usec / 3 / 1000000);
+    tick.tv_nsec = (long)(wd_usec / 3 % 1000000 * 1000);
+  }
+  for (;;) {
+    siginfo_t si;
+    int sig = sigtimedwait(&sigs, &si, &tick);
+    if (wd_usec) fg_notify_watchdog();
+    if (sig < 0) continue; /* timeout or EINTR */
+    if (sig == SIGHUP) {
+      reload(&app, &o);
+      continue;
+    }
+    fg_info("%s received, stopping", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+    break;
+  }
+  fg_notify_stopping();
+  fg_http_stop(http);
+  fg_store_close(app.store);
+  fg_app_clear_conf(&app);
+  pthread_mutex_destroy(&app.conf_lock);
+  fg_info("stopped");
+  return 0;
+}

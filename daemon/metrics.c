@@ -1,1 +1,157 @@
-/* placeholder: being written */
+#include "metrics.h"
+
+#include "config.h"
+
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Status codes the daemon answers with get their own counter; anything else lands in
+ * the last slot and is reported as "other". */
+static const int statuses[] = {200, 201, 202, 204, 400, 401, 403, 404, 405,
+                               409, 413, 415, 422, 500, 502, 503, 504};
+#define N_STATUS (sizeof statuses / sizeof statuses[0] + 1)
+
+static const double buckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
+                                 0.05,   0.1,   0.25,   0.5,   1,    2.5, 5, 10};
+#define N_BUCKETS (sizeof buckets / sizeof buckets[0])
+
+/* Slot FG_METRICS_MAX_ROUTES holds requests that matched no route. */
+#define N_SLOTS (FG_METRICS_MAX_ROUTES + 1)
+
+static struct {
+  const char *method, *route;
+  atomic_ullong by_status[N_STATUS];
+  atomic_ullong bucket[N_BUCKETS];
+  atomic_ullong count;
+  atomic_ullong sum_us;
+} slots[N_SLOTS];
+
+static atomic_ullong frames_ingested;
+static atomic_ullong reloads_ok, reloads_failed;
+
+void fg_metrics_set_route(int idx, const char *method, const char *route) {
+  if (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) return;
+  slots[idx].method = method;
+  slots[idx].route = route;
+}
+
+void fg_metrics_observe_request(int idx, int status, double seconds) {
+  int s = (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) ? FG_METRICS_MAX_ROUTES : idx;
+  size_t k = N_STATUS - 1;
+  for (size_t i = 0; i < N_STATUS - 1; i++)
+    if (statuses[i] == status) k = i;
+  atomic_fetch_add_explicit(&slots[s].by_status[k], 1, memory_order_relaxed);
+  for (size_t b = 0; b < N_BUCKETS; b++)
+    if (seconds <= buckets[b]) {
+      atomic_fetch_add_explicit(&slots[s].bucket[b], 1, memory_order_relaxed);
+      break;
+    }
+  atomic_fetch_add_explicit(&slots[s].count, 1, memory_order_relaxed);
+  atomic_fetch_add_explicit(&slots[s].sum_us, (unsigned long long)(seconds * 1e6),
+                            memory_order_relaxed);
+}
+
+void fg_metrics_add_frames_ingested(unsigned n) { atomic_fetch_add(&frames_ingested, n); }
+
+void fg_metrics_count_reload(int ok) { atomic_fetch_add(ok ? &reloads_ok : &reloads_failed, 1); }
+
+typedef struct {
+  char *buf;
+  size_t len, cap;
+  int failed;
+} sbuf;
+
+static void sb_printf(sbuf *sb, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void sb_printf(sbuf *sb, const char *fmt, ...) {
+  if (sb->failed) return;
+  for (;;) {
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(sb->buf + sb->len, sb->cap - sb->len, fmt, ap);
+    va_end(ap);
+    if (n < 0) {
+      sb->failed = 1;
+      return;
+    }
+    if ((size_t)n < sb->cap - sb->len) {
+      sb->len += (size_t)n;
+      return;
+    }
+    size_t cap = (sb->cap + (size_t)n + 1) * 2;
+    char *p = realloc(sb->buf, cap);
+    if (!p) {
+      sb->failed = 1;
+      return;
+    }
+    sb->buf = p;
+    sb->cap = cap;
+  }
+}
+
+char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
+  sbuf sb = {malloc(8192), 0, 8192, 0};
+  if (!sb.buf) return NULL;
+  sb_printf(&sb, "# HELP fieldgrip_build_info Version of the running daemon.\n"
+                 "# TYPE fieldgrip_build_info gauge\n"
+                 "fieldgrip_build_info{version=\"%s\"} 1\n", FG_VERSION);
+  sb_printf(&sb, "# HELP fieldgrip_http_requests_total HTTP requests answered, by route template, "
+                 "method and status code.\n# TYPE fieldgrip_http_requests_total counter\n");
+  for (int s = 0; s < N_SLOTS; s++) {
+    const char *route = s == FG_METRICS_MAX_ROUTES ? "unmatched" : slots[s].route;
+    const char *method = s == FG_METRICS_MAX_ROUTES ? "any" : slots[s].method;
+    if (!route) continue;
+    for (size_t k = 0; k < N_STATUS; k++) {
+      unsigned long long v = atomic_load(&slots[s].by_status[k]);
+      if (v == 0) continue;
+      char code[16];
+      if (k == N_STATUS - 1) snprintf(code, sizeof code, "other");
+      else snprintf(code, sizeof code, "%d", statuses[k]);
+      sb_printf(&sb, "fieldgrip_http_requests_total{route=\"%s\",method=\"%s\",code=\"%s\"} %llu\n",
+                route, method, code, v);
+    }
+  }
+  sb_printf(&sb, "# HELP fieldgrip_http_request_duration_seconds Time from the request's "
+                 "headers to the end of its response, by route template.\n"
+                 "# TYPE fieldgrip_http_request_duration_seconds histogram\n");
+  for (int s = 0; s < N_SLOTS; s++) {
+    const char *route = s == FG_METRICS_MAX_ROUTES ? "unmatched" : slots[s].route;
+    const char *method = s == FG_METRICS_MAX_ROUTES ? "any" : slots[s].method;
+    unsigned long long count = atomic_load(&slots[s].count);
+    if (!route || count == 0) continue;
+    unsigned long long cum = 0;
+    for (size_t b = 0; b < N_BUCKETS; b++) {
+      cum += atomic_load(&slots[s].bucket[b]);
+      sb_printf(&sb,
+                "fieldgrip_http_request_duration_seconds_bucket{route=\"%s\",method=\"%s\","
+                "le=\"%g\"} %llu\n", route, method, buckets[b], cum);
+    }
+    sb_printf(&sb,
+              "fieldgrip_http_request_duration_seconds_bucket{route=\"%s\",method=\"%s\","
+              "le=\"+Inf\"} %llu\n"
+              "fieldgrip_http_request_duration_seconds_sum{route=\"%s\",method=\"%s\"} %.6f\n"
+              "fieldgrip_http_request_duration_seconds_count{route=\"%s\",method=\"%s\"} %llu\n",
+              route, method, count, route, method, (double)atomic_load(&slots[s].sum_us) / 1e6,
+              route, method, count);
+  }
+  sb_printf(&sb, "# HELP fieldgrip_scenes Scenes in the state dir.\n# TYPE fieldgrip_scenes gauge\n"
+                 "fieldgrip_scenes %zu\n", g->scenes);
+  sb_printf(&sb, "# HELP fieldgrip_frames Frames stored, over all scenes.\n"
+                 "# TYPE fieldgrip_frames gauge\nfieldgrip_frames %zu\n", g->frames);
+  sb_printf(&sb, "# HELP fieldgrip_frames_ingested_total Frames accepted by upload or import "
+                 "since start.\n# TYPE fieldgrip_frames_ingested_total counter\n"
+                 "fieldgrip_frames_ingested_total %llu\n", atomic_load(&frames_ingested));
+  sb_printf(&sb, "# HELP fieldgrip_config_reloads_total Configuration reloads on SIGHUP, by "
+                 "result.\n# TYPE fieldgrip_config_reloads_total counter\n"
+                 "fieldgrip_config_reloads_total{result=\"ok\"} %llu\n"
+                 "fieldgrip_config_reloads_total{result=\"failed\"} %llu\n",
+            atomic_load(&reloads_ok), atomic_load(&reloads_failed));
+  if (sb.failed) {
+    free(sb.buf);
+    return NULL;
+  }
+  *len = sb.len;
+  return sb.buf;
+}

@@ -1,1 +1,612 @@
-/* placeholder: being written */
+#include "store.h"
+
+#include "conf.h"
+
+#include "core/error.h"
+#include "core/fsutil.h"
+#include "core/log.h"
+
+#include <jansson.h>
+
+#include <dirent.h>
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+struct fg_scene {
+  fg_store *store;
+  char name[FG_SCENE_NAME_MAX + 1];
+  char *dir;        /* <state>/scenes/<name> */
+  char *frames_dir; /* <dir>/frames */
+  atomic_int refs;
+  pthread_mutex_t lock; /* guards everything below */
+  fg_scene_params params;
+  int declared;
+  int64_t created_ms;
+  fg_frame *frames; /* headers only, sorted by number */
+  int *indices;
+  size_t n_frames, cap;
+  int next_index;
+  int feature_dim;
+  int deleted;
+};
+
+struct fg_store {
+  char *scenes_dir;
+  pthread_mutex_t lock; /* guards the scene array */
+  fg_scene **scenes;
+  size_t n, cap;
+};
+
+static atomic_uint name_counter;
+
+static int64_t now_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+/* ---------------------------------------------------------------- parameters */
+
+int fg_scene_params_validate(const fg_scene_params *p) {
+  static const char axis[] = "xyz";
+  for (int i = 0; i < 3; i++) {
+    if (!isfinite(p->workspace_min[i]) || !isfinite(p->workspace_max[i]))
+      return fg_fail(FG_EINVAL, "workspace %c bounds must be finite numbers (metres)", axis[i]);
+    if (!(p->workspace_min[i] < p->workspace_max[i]))
+      return fg_fail(FG_EINVAL, "workspace min %c (%g) must be less than max %c (%g)", axis[i],
+                     p->workspace_min[i], axis[i], p->workspace_max[i]);
+    if (!(p->background[i] >= 0 && p->background[i] <= 1))
+      return fg_fail(FG_EINVAL, "background must hold three numbers in [0, 1]");
+  }
+  double smallest = INFINITY;
+  for (int i = 0; i < 3; i++)
+    smallest = fmin(smallest, p->workspace_max[i] - p->workspace_min[i]);
+  if (!(p->voxel_size > 0) || !isfinite(p->voxel_size) || p->voxel_size > smallest)
+    return fg_fail(FG_EINVAL, "voxel_size must be a positive length in metres no larger than the "
+                   "workspace's smallest side (%g), got %g", smallest, p->voxel_size);
+  return 0;
+}
+
+static int params_equal(const fg_scene_params *a, const fg_scene_params *b) {
+  for (int i = 0; i < 3; i++)
+    if (a->workspace_min[i] != b->workspace_min[i] || a->workspace_max[i] != b->workspace_max[i] ||
+        a->background[i] != b->background[i])
+      return 0;
+  return a->voxel_size == b->voxel_size;
+}
+
+/* ---------------------------------------------------------------- scene.json */
+
+static int write_scene_json(const fg_scene *s) {
+  json_t *o = json_pack(
+    "{s:s,s:{s:[f,f,f],s:[f,f,f]},s:f,s:[f,f,f],s:I}", "name", s->name, "workspace", "min",
+    s->params.workspace_min[0], s->params.workspace_min[1], s->params.workspace_min[2], "max",
+    s->params.workspace_max[0], s->params.workspace_max[1], s->params.workspace_max[2],
+    "voxel_size", s->params.voxel_size, "background", s->params.background[0],
+    s->params.background[1], s->params.background[2], "created_ms", (json_int_t)s->created_ms);
+  char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) : NULL;
+  json_decref(o);
+  if (!text) return fg_fail(FG_ENOMEM, "out of memory");
+  char *path = fg_path_join(s->dir, "scene.json");
+  int rc = path ? fg_write_file_atomic(path, text, strlen(text)) : fg_fail(FG_ENOMEM, "oom");
+  free(path);
+  free(text);
+  return rc;
+}
+
+static int read_vec3(json_t *a, double out[3]) {
+  if (!json_is_array(a) || json_array_size(a) != 3) return -1;
+  for (int i = 0; i < 3; i++) {
+    json_t *v = json_array_get(a, (size_t)i);
+    if (!json_is_number(v)) return -1;
+    out[i] = json_number_value(v);
+  }
+  return 0;
+}
+
+static int read_scene_json(fg_scene *s) {
+  char *path = fg_path_join(s->dir, "scene.json");
+  if (!path) return fg_fail(FG_ENOMEM, "out of memory");
+  json_error_t jerr;
+  json_t *o = json_load_file(path, 0, &jerr);
+  int rc = 0;
+  json_t *ws = o ? json_object_get(o, "workspace") : NULL;
+  if (!o) {
+    rc = fg_fail(FG_EFORMAT, "%s: %s (line %d)", path, jerr.text, jerr.line);
+  } else if (read_vec3(json_object_get(ws, "min"), s->params.workspace_min) ||
+             read_vec3(json_object_get(ws, "max"), s->params.workspace_max) ||
+             read_vec3(json_object_get(o, "background"), s->params.background) ||
+             !json_is_number(json_object_get(o, "voxel_size"))) {
+    rc = fg_fail(FG_EFORMAT, "%s: missing or malformed workspace, voxel_size or background", path);
+  } else {
+    s->params.voxel_size = json_number_value(json_object_get(o, "voxel_size"));
+    s->created_ms = json_integer_value(json_object_get(o, "created_ms"));
+    if (fg_scene_params_validate(&s->params) != 0)
+      rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
+  }
+  json_decref(o);
+  free(path);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- scene objects */
+
+static void scene_free(fg_scene *s) {
+  if (!s) return;
+  pthread_mutex_destroy(&s->lock);
+  free(s->frames);
+  free(s->indices);
+  free(s->dir);
+  free(s->frames_dir);
+  free(s);
+}
+
+void fg_scene_unref(fg_scene *s) {
+  if (s && atomic_fetch_sub(&s->refs, 1) == 1) scene_free(s);
+}
+
+static fg_scene *scene_alloc(fg_store *store, const char *name) {
+  fg_scene *s = calloc(1, sizeof *s);
+  if (!s) return NULL;
+  s->store = store;
+  snprintf(s->name, sizeof s->name, "%s", name);
+  s->dir = fg_path_join(store->scenes_dir, name);
+  s->frames_dir = s->dir ? fg_path_join(s->dir, "frames") : NULL;
+  atomic_init(&s->refs, 1);
+  pthread_mutex_init(&s->lock, NULL);
+  if (!s->frames_dir) {
+    scene_free(s);
+    return NULL;
+  }
+  return s;
+}
+
+static int is_frame_name(const char *n, int *index) {
+  size_t len = strlen(n);
+  if (len < 10 || strcmp(n + len - 4, ".fgf") != 0) return 0;
+  long v = 0;
+  for (size_t i = 0; i < len - 4; i++) {
+    if (n[i] < '0' || n[i] > '9' || v > 100000000) return 0;
+    v = v * 10 + (n[i] - '0');
+  }
+  *index = (int)v;
+  return 1;
+}
+
+static int frame_cmp(const void *a, const void *b) {
+  const int *x = a, *y = b;
+  return (*x > *y) - (*x < *y);
+}
+
+static int scene_reserve(fg_scene *s, size_t extra) {
+  if (s->n_frames + extra <= s->cap) return 0;
+  size_t cap = s->cap ? s->cap : 64;
+  while (cap < s->n_frames + extra) cap *= 2;
+  fg_frame *f = realloc(s->frames, cap * sizeof *f);
+  if (!f) return fg_fail(FG_ENOMEM, "out of memory");
+  s->frames = f;
+  int *ix = realloc(s->indices, cap * sizeof *ix);
+  if (!ix) return fg_fail(FG_ENOMEM, "out of memory");
+  s->indices = ix;
+  s->cap = cap;
+  return 0;
+}
+
+/* Reads the headers of a scene's frames, removing what an interrupted write left behind. */
+static int scene_load_frames(fg_scene *s) {
+  DIR *d = opendir(s->frames_dir);
+  if (!d) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
+  struct { int index; char name[256]; } *found = NULL;
+  size_t n = 0, cap = 0;
+  struct dirent *e;
+  int rc = 0;
+  while ((e = readdir(d)) != NULL) {
+    int index;
+    if (strncmp(e->d_name, ".incoming-", 10) == 0 || strstr(e->d_name, ".tmp.")) {
+      char *p = fg_path_join(s->frames_dir, e->d_name);
+      if (p && unlink(p) == 0) fg_info("scene %s: removed unfinished write %s", s->name, e->d_name);
+      free(p);
+      continue;
+    }
+    if (!is_frame_name(e->d_name, &index)) continue;
+    if (n == cap) {
+      cap = cap ? cap * 2 : 64;
+      void *p = realloc(found, cap * sizeof *found);
+      if (!p) {
+        rc = fg_fail(FG_ENOMEM, "out of memory");
+        break;
+      }
+      found = p;
+    }
+    found[n].index = index;
+    snprintf(found[n].name, sizeof found[n].name, "%s", e->d_name);
+    n++;
+  }
+  closedir(d);
+  if (rc == 0 && n) {
+    qsort(found, n, sizeof *found, frame_cmp);
+    rc = scene_reserve(s, n);
+  }
+  for (size_t i = 0; rc == 0 && i < n; i++) {
+    char *p = fg_path_join(s->frames_dir, found[i].name);
+    fg_frame f;
+    int lrc = p ? fg_frame_load_header(p, &f) : FG_ENOMEM;
+    if (lrc != 0) {
+      fg_error("scene %s: frame file %s is unreadable and is left out: %s", s->name,
+               p ? p : found[i].name, fg_error_detail());
+    } else if (f.feat_d && s->feature_dim && f.feat_d != s->feature_dim) {
+      fg_error("scene %s: frame %s has %d-d features but the scene has %d; left out", s->name,
+               found[i].name, f.feat_d, s->feature_dim);
+      fg_frame_clear(&f);
+    } else {
+      if (f.feat_d) s->feature_dim = f.feat_d;
+      s->frames[s->n_frames] = f;
+      s->indices[s->n_frames++] = found[i].index;
+    }
+    if (found[i].index >= s->next_index) s->next_index = found[i].index + 1;
+    free(p);
+  }
+  free(found);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- the store */
+
+static int store_insert(fg_store *st, fg_scene *s) {
+  if (st->n == st->cap) {
+    size_t cap = st->cap ? st->cap * 2 : 16;
+    fg_scene **p = realloc(st->scenes, cap * sizeof *p);
+    if (!p) return fg_fail(FG_ENOMEM, "out of memory");
+    st->scenes = p;
+    st->cap = cap;
+  }
+  st->scenes[st->n++] = s;
+  return 0;
+}
+
+static fg_scene *store_find_locked(fg_store *st, const char *name, size_t *pos) {
+  for (size_t i = 0; i < st->n; i++)
+    if (strcmp(st->scenes[i]->name, name) == 0) {
+      if (pos) *pos = i;
+      return st->scenes[i];
+    }
+  return NULL;
+}
+
+int fg_store_open(fg_store **out, const char *state_dir) {
+  *out = NULL;
+  fg_store *st = calloc(1, sizeof *st);
+  if (!st) return fg_fail(FG_ENOMEM, "out of memory");
+  pthread_mutex_init(&st->lock, NULL);
+  st->scenes_dir = fg_path_join(state_dir, "scenes");
+  int rc = st->scenes_dir ? fg_mkdir_p(st->scenes_dir) : fg_fail(FG_ENOMEM, "out of memory");
+  if (rc == 0 && access(st->scenes_dir, W_OK) != 0)
+    rc = fg_fail(FG_EIO, "state dir %s is not writable by this user", st->scenes_dir);
+  DIR *d = rc == 0 ? opendir(st->scenes_dir) : NULL;
+  if (rc == 0 && !d) rc = fg_fail(FG_EIO, "cannot open %s: %s", st->scenes_dir, strerror(errno));
+  struct dirent *e;
+  while (d && rc == 0 && (e = readdir(d)) != NULL) {
+    if (e->d_name[0] == '.') {
+      if (strncmp(e->d_name, ".trash-", 7) == 0) {
+        char *p = fg_path_join(st->scenes_dir, e->d_name);
+        if (p && fg_rmtree(p) == 0) fg_info("removed the data of a deleted scene (%s)", e->d_name);
+        free(p);
+      }
+      continue;
+    }
+    if (fg_scene_name_validate(e->d_name) != 0) continue;
+    fg_scene *s = scene_alloc(st, e->d_name);
+    if (!s) {
+      rc = fg_fail(FG_ENOMEM, "out of memory");
+      break;
+    }
+    fg_fs_sweep_tmp(s->dir);
+    if (read_scene_json(s) != 0 || scene_load_frames(s) != 0) {
+      fg_error("scene %s is left out: %s", s->name, fg_error_detail());
+      scene_free(s);
+      continue;
+    }
+    rc = store_insert(st, s);
+    if (rc != 0) scene_free(s);
+    else fg_info("scene %s: %zu frames", s->name, s->n_frames);
+  }
+  if (d) closedir(d);
+  if (rc != 0) {
+    fg_store_close(st);
+    return rc;
+  }
+  *out = st;
+  return 0;
+}
+
+void fg_store_close(fg_store *st) {
+  if (!st) return;
+  for (size_t i = 0; i < st->n; i++) fg_scene_unref(st->scenes[i]);
+  free(st->scenes);
+  free(st->scenes_dir);
+  pthread_mutex_destroy(&st->lock);
+  free(st);
+}
+
+int fg_store_create(fg_store *st, const char *name, const fg_scene_params *params, int declared) {
+  FG_TRY(fg_scene_name_validate(name));
+  FG_TRY(fg_scene_params_validate(params));
+  pthread_mutex_lock(&st->lock);
+  int rc = 0;
+  fg_scene *s = NULL;
+  if (store_find_locked(st, name, NULL)) {
+    rc = fg_fail(FG_EEXIST, "a scene named '%s' exists already; delete it first or pick another "
+                 "name", name);
+    goto out;
+  }
+  s = scene_alloc(st, name);
+  if (!s) {
+    rc = fg_fail(FG_ENOMEM, "out of memory");
+    goto out;
+  }
+  s->params = *params;
+  s->declared = declared;
+  s->created_ms = now_ms();
+  /* A half-created folder from a crash has no scene.json and was skipped at start: reuse it. */
+  rc = fg_mkdir_p(s->frames_dir);
+  if (rc == 0) rc = write_scene_json(s);
+  if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
+  if (rc == 0) rc = store_insert(st, s);
+  if (rc == 0) s = NULL;
+out:
+  pthread_mutex_unlock(&st->lock);
+  scene_free(s);
+  return rc;
+}
+
+fg_scene *fg_store_get(fg_store *st, const char *name) {
+  pthread_mutex_lock(&st->lock);
+  fg_scene *s = store_find_locked(st, name, NULL);
+  if (s) atomic_fetch_add(&s->refs, 1);
+  pthread_mutex_unlock(&st->lock);
+  return s;
+}
+
+int fg_store_delete(fg_store *st, const char *name) {
+  pthread_mutex_lock(&st->lock);
+  size_t pos;
+  fg_scene *s = store_find_locked(st, name, &pos);
+  if (!s) {
+    pthread_mutex_unlock(&st->lock);
+    return fg_fail(FG_ENOENT, "no scene named '%s'", name);
+  }
+  char trash[128];
+  snprintf(trash, sizeof trash, ".trash-%s-%ld-%u", name, (long)getpid(),
+           atomic_fetch_add(&name_counter, 1));
+  char *trash_path = fg_path_join(st->scenes_dir, trash);
+  pthread_mutex_lock(&s->lock);
+  int rc = 0;
+  if (!trash_path) rc = fg_fail(FG_ENOMEM, "out of memory");
+  else if (rename(s->dir, trash_path) != 0)
+    rc = fg_fail(FG_EIO, "cannot remove scene %s: rename failed: %s", name, strerror(errno));
+  if (rc == 0) s->deleted = 1;
+  pthread_mutex_unlock(&s->lock);
+  if (rc == 0) {
+    st->scenes[pos] = st->scenes[--st->n];
+    fg_fsync_dir(st->scenes_dir);
+  }
+  pthread_mutex_unlock(&st->lock);
+  if (rc == 0) {
+    if (fg_rmtree(trash_path) != 0)
+      fg_warn("scene %s deleted, but its data stays in %s until the next start: %s", name,
+              trash_path, fg_error_detail());
+    fg_scene_unref(s);
+  }
+  free(trash_path);
+  return rc;
+}
+
+void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
+  pthread_mutex_lock(&s->lock);
+  snprintf(out->name, sizeof out->name, "%s", s->name);
+  out->params = s->params;
+  out->declared_in_config = s->declared;
+  out->created_ms = s->created_ms;
+  out->n_frames = s->n_frames;
+  out->feature_dim = s->feature_dim;
+  pthread_mutex_unlock(&s->lock);
+}
+
+static int info_cmp(const void *a, const void *b) {
+  return strcmp(((const fg_scene_info *)a)->name, ((const fg_scene_info *)b)->name);
+}
+
+int fg_store_list(fg_store *st, fg_scene_info **out, size_t *n) {
+  pthread_mutex_lock(&st->lock);
+  fg_scene_info *v = calloc(st->n ? st->n : 1, sizeof *v);
+  if (!v) {
+    pthread_mutex_unlock(&st->lock);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  for (size_t i = 0; i < st->n; i++) fg_scene_get_info(st->scenes[i], &v[i]);
+  *n = st->n;
+  pthread_mutex_unlock(&st->lock);
+  qsort(v, *n, sizeof *v, info_cmp);
+  *out = v;
+  return 0;
+}
+
+void fg_store_totals(fg_store *st, size_t *scenes, size_t *frames) {
+  pthread_mutex_lock(&st->lock);
+  *scenes = st->n;
+  *frames = 0;
+  for (size_t i = 0; i < st->n; i++) {
+    pthread_mutex_lock(&st->scenes[i]->lock);
+    *frames += st->scenes[i]->n_frames;
+    pthread_mutex_unlock(&st->scenes[i]->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+}
+
+int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
+  int first = 0;
+  for (size_t i = 0; i < conf->n_scenes; i++) {
+    const fg_conf_scene *cs = &conf->scenes[i];
+    fg_scene_params p;
+    memcpy(p.workspace_min, cs->workspace_min, sizeof p.workspace_min);
+    memcpy(p.workspace_max, cs->workspace_max, sizeof p.workspace_max);
+    memcpy(p.background, cs->background, sizeof p.background);
+    p.voxel_size = cs->voxel_size;
+    fg_scene *s = fg_store_get(st, cs->name);
+    int rc = 0;
+    if (!s) {
+      rc = fg_store_create(st, cs->name, &p, 1);
+      if (rc == 0) fg_info("scene %s created from the configuration file", cs->name);
+    } else {
+      pthread_mutex_lock(&s->lock);
+      s->declared = 1;
+      if (!params_equal(&s->params, &p)) {
+        fg_scene_params old = s->params;
+        s->params = p;
+        rc = write_scene_json(s);
+        if (rc != 0) s->params = old;
+        else fg_info("scene %s: workspace, voxel size and background updated from the "
+                     "configuration file", cs->name);
+      }
+      pthread_mutex_unlock(&s->lock);
+      fg_scene_unref(s);
+    }
+    if (rc != 0) {
+      fg_error("scene %s from the configuration file: %s", cs->name, fg_error_detail());
+      if (!first) first = rc;
+    }
+  }
+  pthread_mutex_lock(&st->lock);
+  for (size_t i = 0; i < st->n; i++) {
+    fg_scene *s = st->scenes[i];
+    pthread_mutex_lock(&s->lock);
+    s->declared = fg_conf_find_scene(conf, s->name) != NULL;
+    pthread_mutex_unlock(&s->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+  return first;
+}
+
+/* ---------------------------------------------------------------- frames */
+
+static int check_feature_dim(const fg_scene *s, const fg_frame *frames, size_t n) {
+  int d = s->feature_dim;
+  for (size_t i = 0; i < n; i++) {
+    if (!frames[i].feat_d) continue;
+    if (d && frames[i].feat_d != d)
+      return fg_fail(FG_EINVAL, "features have D = %d but %s %d-d features; every frame of a "
+                     "scene must have the same D", frames[i].feat_d,
+                     s->feature_dim ? "the scene's frames have" : "another frame has", d);
+    d = frames[i].feat_d;
+  }
+  return 0;
+}
+
+int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *first_index) {
+  if (n == 0) return fg_fail(FG_EINVAL, "no frames to add");
+  pthread_mutex_lock(&s->lock);
+  int rc = s->deleted ? fg_fail(FG_ENOENT, "scene %s was deleted", s->name)
+                      : check_feature_dim(s, frames, n);
+  pthread_mutex_unlock(&s->lock);
+  if (rc != 0) return rc;
+
+  char **incoming = calloc(n, sizeof *incoming);
+  if (!incoming) return fg_fail(FG_ENOMEM, "out of memory");
+  unsigned batch = atomic_fetch_add(&name_counter, 1);
+  for (size_t i = 0; i < n && rc == 0; i++) {
+    char name[96];
+    snprintf(name, sizeof name, ".incoming-%ld-%u-%zu.fgf", (long)getpid(), batch, i);
+    incoming[i] = fg_path_join(s->frames_dir, name);
+    if (!incoming[i]) rc = fg_fail(FG_ENOMEM, "out of memory");
+  }
+  /* Writing and fsyncing dominate an import: spread them over the cores, outside the lock. */
+  int write_rc = 0;
+  char write_err[512] = "";
+  if (rc == 0) {
+#pragma omp parallel for schedule(dynamic, 1) if (n > 1)
+    for (size_t i = 0; i < n; i++) {
+      int r = fg_frame_save(&frames[i], incoming[i]);
+      if (r != 0) {
+#pragma omp critical(fg_store_write_err)
+        {
+          if (write_rc == 0) {
+            write_rc = r;
+            snprintf(write_err, sizeof write_err, "%s", fg_error_detail());
+          }
+        }
+      }
+    }
+    if (write_rc != 0) rc = fg_fail(write_rc, "%s", write_err);
+  }
+
+  pthread_mutex_lock(&s->lock);
+  if (rc == 0 && s->deleted) rc = fg_fail(FG_ENOENT, "scene %s was deleted", s->name);
+  if (rc == 0) rc = check_feature_dim(s, frames, n); /* a concurrent upload may have set D */
+  if (rc == 0) rc = scene_reserve(s, n);
+  size_t renamed = 0;
+  for (; rc == 0 && renamed < n; renamed++) {
+    char name[32];
+    snprintf(name, sizeof name, "%06d.fgf", s->next_index + (int)renamed);
+    char *final = fg_path_join(s->frames_dir, name);
+    if (!final) rc = fg_fail(FG_ENOMEM, "out of memory");
+    else if (rename(incoming[renamed], final) != 0)
+      rc = fg_fail(s->deleted ? FG_ENOENT : FG_EIO, "cannot store frame %s: %s", name,
+                   strerror(errno));
+    if (rc == 0) {
+      free(incoming[renamed]);
+      incoming[renamed] = final; /* now names the final file, for the rollback below */
+    } else {
+      free(final);
+      break;
+    }
+  }
+  if (rc == 0) rc = fg_fsync_dir(s->frames_dir);
+  if (rc == 0) {
+    *first_index = s->next_index;
+    for (size_t i = 0; i < n; i++) {
+      fg_frame h = frames[i];
+      h.rgb = NULL;
+      h.feat = NULL;
+      s->frames[s->n_frames] = h;
+      s->indices[s->n_frames++] = s->next_index + (int)i;
+      if (h.feat_d) s->feature_dim = h.feat_d;
+    }
+    s->next_index += (int)n;
+  }
+  pthread_mutex_unlock(&s->lock);
+  for (size_t i = 0; i < n; i++) {
+    if (rc != 0 && incoming[i]) unlink(incoming[i]); /* all or none */
+    free(incoming[i]);
+  }
+  free(incoming);
+  return rc;
+}
+
+int fg_scene_list_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *n) {
+  pthread_mutex_lock(&s->lock);
+  size_t k = s->n_frames;
+  fg_frame *f = malloc((k ? k : 1) * sizeof *f);
+  int *ix = malloc((k ? k : 1) * sizeof *ix);
+  if (!f || !ix) {
+    pthread_mutex_unlock(&s->lock);
+    free(f);
+    free(ix);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  if (k) {
+    memcpy(f, s->frames, k * sizeof *f);
+    memcpy(ix, s->indices, k * sizeof *ix);
+  }
+  pthread_mutex_unlock(&s->lock);
+  *frames = f;
+  *indices = ix;
+  *n = k;
+  return 0;
+}

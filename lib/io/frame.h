@@ -16,6 +16,7 @@
 #include <stdint.h>
 
 #include "io/camera.h"
+#include "io/image.h"
 #include "io/npy.h"
 
 #define FG_FRAME_VERSION 1
@@ -56,6 +57,17 @@ typedef struct fg_ingest_opts {
 int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const fg_camera *cam,
                      const double T_world_cam[16], const fg_npy *features,
                      const fg_ingest_opts *opts);
+
+/* fg_frame_prepare for an image the caller has already decoded (with fg_image_decode, alpha
+ * composited), e.g. to learn its size before finishing the camera. img is only read; it stays
+ * the caller's. opts->background_rgb is unused here. Same checks, same ownership of *out. */
+int fg_frame_prepare_image(fg_frame *out, const fg_image *img, const fg_camera *cam,
+                           const double T_world_cam[16], const fg_npy *features,
+                           const fg_ingest_opts *opts);
+
+/* The feature checks of fg_frame_prepare alone: shape [h, w, D], f32 or f16, D in
+ * 1..FG_FRAME_MAX_FEAT_D, every value finite. 0 or FG_EINVAL with a detail. */
+int fg_frame_check_features(const fg_npy *features);
 
 /* Writes a frame atomically (fsutil) to path. */
 int fg_frame_save(const fg_frame *frame, const char *path);

@@ -20,6 +20,10 @@ void fg_image_release(fg_image *img);
 #define FG_IMAGE_MAX_SIDE 16384
 #define FG_IMAGE_MAX_PIXELS (64u * 1024u * 1024u)
 
+/* Recognises an encoded image by its magic bytes: returns "PNG", "JPEG", "OpenEXR" or
+ * "TIFF" (static strings), or NULL for anything fg_image_decode would refuse as unknown. */
+const char *fg_image_sniff(const void *bytes, size_t len);
+
 /* Decodes PNG (8 or 16 bit), JPEG, OpenEXR or TIFF from memory, recognised by their magic
  * bytes. Grey images are expanded to RGB; an alpha channel is composited over background_rgb
  * (floats in [0,1]); linear formats (EXR, float TIFF) are converted to sRGB encoding and

@@ -26,6 +26,9 @@ typedef struct fg_transforms_frame {
                           fill them from the decoded image (see fg_transforms_complete_camera) */
   int has_size;        /* 1 when w and h came from the JSON */
   double camera_angle_x, camera_angle_y; /* radians, 0 when absent; used to finish cam */
+  /* Private to transforms.c: which of cam's values the JSON gave in pixels, so that
+   * fg_transforms_complete_camera fills only the others. */
+  int has_fl_x, has_fl_y, has_cx, has_cy;
 } fg_transforms_frame;
 
 typedef struct fg_transforms {
@@ -36,15 +39,24 @@ typedef struct fg_transforms {
 
 /* Parses the transforms file at path. Paths are resolved against its folder. A frame whose
  * image is missing is kept with image_path NULL and counted in n_missing; a frame whose
- * features_path names a missing file is an error. Malformed JSON (with line and column),
- * a missing or non-4x4 transform_matrix, a non-finite number, focal length given neither as
- * fl_x nor camera_angle_x, an unknown camera_model: FG_EINVAL or FG_EFORMAT with a detail that
- * names the frame index. The caller owns *out (fg_transforms_free). */
+ * features_path names a missing file is an error (FG_ENOENT) unless its image is missing too
+ * (the frame will be skipped anyway). Malformed JSON (with line and column), a missing or
+ * non-4x4 transform_matrix, a value of the wrong type, a non-finite number, no focal length
+ * (none of fl_x, fl_y, camera_angle_x, camera_angle_y), an unsupported camera_model:
+ * FG_EFORMAT with a detail that names the file and the frame index. A missing transforms file
+ * is FG_ENOENT. On success the caller owns *out (fg_transforms_free); on failure *out is
+ * zeroed and owns nothing.
+ *
+ * Focal lengths resolve per axis, the frame's keys before the top level's, fl_* before
+ * camera_angle_*; an axis given neither way takes the other axis's focal length (square
+ * pixels). file_path and features_path may also be absolute or climb out with "..": a caller
+ * that must confine reads to a folder checks image_path / features_path itself. */
 int fg_transforms_load(const char *path, fg_transforms *out);
 
 /* Fills a frame's camera once the image's size is known: w/h if the JSON lacked them,
- * fl_x/fl_y from camera_angle_x/y, cx/cy at the centre when absent. FG_EINVAL if the JSON's
- * w/h disagree with the image's. */
+ * fl_x/fl_y from camera_angle_x/y, cx/cy at the centre when absent, then checks it with
+ * fg_camera_validate. FG_EINVAL if the JSON's w/h disagree with the image's. Calling it again
+ * (with the same size) is harmless. */
 int fg_transforms_complete_camera(fg_transforms_frame *f, int image_w, int image_h);
 
 void fg_transforms_free(fg_transforms *t);

@@ -1,1 +1,587 @@
-int main(void) { return 77; }
+/* Configuration file: defaults, the SPEC.md example verbatim, and every error class with the
+ * line number it must name. */
+#include "conf.h"
+
+#include "core/error.h"
+#include "test.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static char tmp_root[PATH_MAX]; /* realpath of the mkdtemp folder */
+
+/* Writes text to tmp_root/name and returns the malloc'd path. */
+static char *write_file(const char *name, const char *text) {
+  char *path = malloc(strlen(tmp_root) + strlen(name) + 2);
+  ASSERT(path != NULL);
+  sprintf(path, "%s/%s", tmp_root, name);
+  FILE *f = fopen(path, "w");
+  ASSERT(f != NULL);
+  ASSERT_EQ(fwrite(text, 1, strlen(text), f), strlen(text));
+  ASSERT_EQ(fclose(f), 0);
+  return path;
+}
+
+static fg_conf *load_ok(const char *text) {
+  char *path = write_file("ok.conf", text);
+  char err[1024] = "unset";
+  fg_conf *c = NULL;
+  int rc = fg_conf_load(path, &c, err, sizeof err);
+  if (rc != 0) FG_TEST_FAIL("fg_conf_load failed: %d: %s\n--- file ---\n%s", rc, err, text);
+  ASSERT_STREQ(err, "");
+  ASSERT(c != NULL);
+  free(path);
+  return c;
+}
+
+/* Loads text and expects FG_EINVAL with "FILE:LINE: " followed (somewhere) by each of the
+ * given substrings. */
+static void expect_error_at(int src_line, const char *text, int line, const char *want1,
+                            const char *want2) {
+  char *path = write_file("bad.conf", text);
+  char err[1024] = "";
+  fg_conf *c = (fg_conf *)(uintptr_t)1;
+  int rc = fg_conf_load(path, &c, err, sizeof err);
+  char prefix[PATH_MAX + 32];
+  snprintf(prefix, sizeof prefix, "%s:%d: ", path, line);
+  if (rc != FG_EINVAL || c != NULL || strncmp(err, prefix, strlen(prefix)) != 0 ||
+      (want1 && !strstr(err, want1)) || (want2 && !strstr(err, want2)))
+    FG_TEST_FAIL("(from test line %d) rc %d, err \"%s\"; expected prefix \"%s\" and \"%s\", "
+                 "\"%s\"\n--- file ---\n%s",
+                 src_line, rc, err, prefix, want1 ? want1 : "", want2 ? want2 : "", text);
+  if (getenv("FG_TEST_VERBOSE")) fprintf(stderr, "%s\n", err);
+  /* the detail is also recorded for fg_error_detail() */
+  ASSERT_STREQ(fg_error_detail(), err);
+  free(path);
+}
+#define EXPECT_ERROR(text, line, w1, w2) expect_error_at(__LINE__, text, line, w1, w2)
+
+/* ---------------------------------------------------------------- defaults */
+
+static void check_defaults(const fg_conf *c) {
+  ASSERT_STREQ(c->listen, "127.0.0.1:7070");
+  ASSERT(c->token == NULL || c->token[0] == '\0');
+  ASSERT_EQ(c->max_upload_bytes, 64u << 20);
+  ASSERT_STREQ(c->state_dir, "/var/lib/fieldgrip");
+  ASSERT_EQ(c->n_import_dirs, 0);
+  ASSERT(c->clip_weights == NULL);
+  ASSERT(c->clip_vocab == NULL);
+  ASSERT_EQ(c->train_steps, 2000);
+  ASSERT_EQ(c->train_threads, 0);
+  ASSERT_EQ(c->max_image_side, 400);
+  ASSERT_EQ(c->gripper_model, FG_GRIPPER_PANDA);
+
+  const fg_conf_modbus *r = &c->robot;
+  ASSERT_EQ(r->transport, FG_TRANSPORT_NONE);
+  ASSERT_STREQ(r->host, "127.0.0.1");
+  ASSERT_EQ(r->port, 502);
+  ASSERT_STREQ(r->device, "/dev/ttyUSB0");
+  ASSERT_EQ(r->baud, 115200);
+  ASSERT_EQ(r->parity, 'N');
+  ASSERT_EQ(r->unit_id, 1);
+  ASSERT_EQ(r->timeout_ms, 500);
+  ASSERT_EQ(r->base, 128);
+  ASSERT_EQ(r->encoding, FG_ENCODING_INT16);
+  ASSERT_EQ(r->ack_timeout_ms, 2000);
+
+  const fg_conf_modbus *g = &c->gripper_modbus;
+  ASSERT_EQ(g->transport, FG_TRANSPORT_NONE);
+  ASSERT_STREQ(g->host, "127.0.0.1");
+  ASSERT_EQ(g->port, 502);
+  ASSERT_STREQ(g->device, "/dev/ttyUSB0");
+  ASSERT_EQ(g->baud, 115200);
+  ASSERT_EQ(g->parity, 'N');
+  ASSERT_EQ(g->unit_id, 9);
+  ASSERT_EQ(g->timeout_ms, 500);
+}
+
+static void test_defaults(void) {
+  fg_conf *c = fg_conf_defaults();
+  ASSERT(c != NULL);
+  ASSERT(c->path == NULL);
+  check_defaults(c);
+  ASSERT_EQ(c->n_scenes, 0);
+  ASSERT(fg_conf_find_scene(c, "tabletop") == NULL);
+  fg_conf_free(c);
+  fg_conf_free(NULL);
+
+  /* an empty file, and one with only comments, change nothing */
+  c = load_ok("");
+  check_defaults(c);
+  ASSERT(c->path != NULL && c->path[0] == '/');
+  fg_conf_free(c);
+  c = load_ok("; nothing here\n# nor here\n\n   \n");
+  check_defaults(c);
+  fg_conf_free(c);
+}
+
+static void check_scene_defaults(const fg_conf_scene *s) {
+  ASSERT_NEAR(s->workspace_min[0], 0.10, 1e-12);
+  ASSERT_NEAR(s->workspace_min[1], -0.45, 1e-12);
+  ASSERT_NEAR(s->workspace_min[2], 0.005, 1e-12);
+  ASSERT_NEAR(s->workspace_max[0], 0.80, 1e-12);
+  ASSERT_NEAR(s->workspace_max[1], 0.45, 1e-12);
+  ASSERT_NEAR(s->workspace_max[2], 0.35, 1e-12);
+  ASSERT_NEAR(s->voxel_size, 0.01, 1e-12);
+  for (int i = 0; i < 3; i++) ASSERT_NEAR(s->background[i], 1.0, 0);
+}
+
+/* ---------------------------------------------------------------- the SPEC example */
+
+/* SPEC.md "Configuration file", copied verbatim. */
+static const char spec_example[] =
+    "[http]\n"
+    "listen = 127.0.0.1:7070        ; host:port; [::1]:7070 for IPv6\n"
+    "token =                        ; if set, every request but /v1/health needs \"Authorization: Bearer <token>\"\n"
+    "max_upload_mb = 64\n"
+    "\n"
+    "[state]\n"
+    "dir = /var/lib/fieldgrip\n"
+    "import_dirs = /srv/scans       ; server-side folders that POST .../import may read (colon-separated)\n"
+    "\n"
+    "[clip]                         ; optional; without it, frames need uploaded features and queries need embeddings\n"
+    "weights = /usr/share/fieldgrip/clip-vit-b-16.safetensors\n"
+    "vocab = /usr/share/fieldgrip/bpe_simple_vocab_16e6.txt.gz\n"
+    "\n"
+    "[train]\n"
+    "steps = 2000\n"
+    "threads = 0                    ; 0 = all cores\n"
+    "max_image_side = 400           ; frames are downscaled so that their long side is at most this\n"
+    "\n"
+    "[gripper]\n"
+    "model = panda                  ; panda | robotiq-2f85: geometry for collision checks and widths\n"
+    "\n"
+    "[robot]                        ; Modbus peer that receives poses (profile pose-registers)\n"
+    "transport = tcp                ; tcp | rtu | none\n"
+    "host = 127.0.0.1\n"
+    "port = 502\n"
+    "unit_id = 1\n"
+    "base = 128\n"
+    "encoding = int16               ; int16 | float32\n"
+    "ack_timeout_ms = 2000\n"
+    "\n"
+    "[gripper.modbus]               ; Modbus peer that actuates the gripper (profile robotiq-2f)\n"
+    "transport = rtu                ; tcp | rtu | none\n"
+    "device = /dev/ttyUSB0\n"
+    "baud = 115200\n"
+    "unit_id = 9\n"
+    "\n"
+    "[scene tabletop]               ; scenes named in the file exist at start-up\n"
+    "workspace_min = 0.10 -0.45 0.005\n"
+    "workspace_max = 0.80  0.45 0.35\n"
+    "voxel_size = 0.01\n";
+
+static void test_spec_example(void) {
+  fg_conf *c = load_ok(spec_example);
+  char expect_path[PATH_MAX + 16];
+  snprintf(expect_path, sizeof expect_path, "%s/ok.conf", tmp_root);
+  ASSERT_STREQ(c->path, expect_path);
+  ASSERT_STREQ(c->listen, "127.0.0.1:7070");
+  ASSERT(c->token == NULL || c->token[0] == '\0');
+  ASSERT_EQ(c->max_upload_bytes, (size_t)64 * 1024 * 1024);
+  ASSERT_STREQ(c->state_dir, "/var/lib/fieldgrip");
+  ASSERT_EQ(c->n_import_dirs, 1);
+  ASSERT_STREQ(c->import_dirs[0], "/srv/scans");
+  ASSERT_STREQ(c->clip_weights, "/usr/share/fieldgrip/clip-vit-b-16.safetensors");
+  ASSERT_STREQ(c->clip_vocab, "/usr/share/fieldgrip/bpe_simple_vocab_16e6.txt.gz");
+  ASSERT_EQ(c->train_steps, 2000);
+  ASSERT_EQ(c->train_threads, 0);
+  ASSERT_EQ(c->max_image_side, 400);
+  ASSERT_EQ(c->gripper_model, FG_GRIPPER_PANDA);
+
+  ASSERT_EQ(c->robot.transport, FG_TRANSPORT_TCP);
+  ASSERT_STREQ(c->robot.host, "127.0.0.1");
+  ASSERT_EQ(c->robot.port, 502);
+  ASSERT_EQ(c->robot.unit_id, 1);
+  ASSERT_EQ(c->robot.base, 128);
+  ASSERT_EQ(c->robot.encoding, FG_ENCODING_INT16);
+  ASSERT_EQ(c->robot.ack_timeout_ms, 2000);
+  ASSERT_EQ(c->robot.timeout_ms, 500);
+
+  ASSERT_EQ(c->gripper_modbus.transport, FG_TRANSPORT_RTU);
+  ASSERT_STREQ(c->gripper_modbus.device, "/dev/ttyUSB0");
+  ASSERT_EQ(c->gripper_modbus.baud, 115200);
+  ASSERT_EQ(c->gripper_modbus.unit_id, 9);
+  ASSERT_EQ(c->gripper_modbus.parity, 'N');
+
+  ASSERT_EQ(c->n_scenes, 1);
+  const fg_conf_scene *s = fg_conf_find_scene(c, "tabletop");
+  ASSERT(s != NULL);
+  ASSERT_STREQ(s->name, "tabletop");
+  check_scene_defaults(s); /* the example's values are the defaults */
+  ASSERT(fg_conf_find_scene(c, "kitchen") == NULL);
+  fg_conf_free(c);
+}
+
+/* ---------------------------------------------------------------- values */
+
+static void test_values(void) {
+  fg_conf *c = load_ok(
+      "; a full-line comment\n"
+      "# and another\n"
+      "[http]\n"
+      "listen = [::1]:0\n"
+      "token = s3cret;not-a-comment   ; but this is one\n"
+      "max_upload_mb: 4096\n"
+      "[train]\n"
+      "steps=10000000\n"
+      "threads = 1024\n"
+      "max_image_side = 16\n"
+      "[gripper]\n"
+      "model = robotiq-2f85\n"
+      "[robot]\n"
+      "transport = rtu\n"
+      "device = /dev/ttyS3\n"
+      "baud = 9600\n"
+      "parity = e\n"
+      "unit_id = 247\n"
+      "timeout_ms = 60000\n"
+      "base = 65515\n"
+      "encoding = float32\n"
+      "ack_timeout_ms = 600000\n"
+      "[gripper.modbus]\n"
+      "transport = tcp\n"
+      "host = ::1\n"
+      "port = 1502\n"
+      "unit_id = 0\n"
+      "[scene a]\n"
+      "[scene b-2.x_Y]\n"
+      "workspace_min = -1 -2 -3\n"
+      "workspace_max = 1e0 2.5 +3\n"
+      "voxel_size = 2\n"
+      "background = 0 0.5 1\n");
+  ASSERT_STREQ(c->listen, "[::1]:0");
+  ASSERT_STREQ(c->token, "s3cret;not-a-comment");
+  ASSERT_EQ(c->max_upload_bytes, (size_t)4096 << 20);
+  ASSERT_EQ(c->train_steps, 10000000);
+  ASSERT_EQ(c->train_threads, 1024);
+  ASSERT_EQ(c->max_image_side, 16);
+  ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F85);
+  ASSERT_EQ(c->robot.transport, FG_TRANSPORT_RTU);
+  ASSERT_STREQ(c->robot.device, "/dev/ttyS3");
+  ASSERT_EQ(c->robot.baud, 9600);
+  ASSERT_EQ(c->robot.parity, 'E');
+  ASSERT_EQ(c->robot.unit_id, 247);
+  ASSERT_EQ(c->robot.timeout_ms, 60000);
+  ASSERT_EQ(c->robot.base, 65515);
+  ASSERT_EQ(c->robot.encoding, FG_ENCODING_FLOAT32);
+  ASSERT_EQ(c->robot.ack_timeout_ms, 600000);
+  ASSERT_EQ(c->gripper_modbus.transport, FG_TRANSPORT_TCP);
+  ASSERT_STREQ(c->gripper_modbus.host, "::1");
+  ASSERT_EQ(c->gripper_modbus.port, 1502);
+  ASSERT_EQ(c->gripper_modbus.unit_id, 0);
+  ASSERT_EQ(c->n_scenes, 2);
+  check_scene_defaults(fg_conf_find_scene(c, "a"));
+  const fg_conf_scene *s = fg_conf_find_scene(c, "b-2.x_Y");
+  ASSERT(s != NULL);
+  ASSERT_NEAR(s->workspace_min[2], -3, 0);
+  ASSERT_NEAR(s->workspace_max[1], 2.5, 0);
+  ASSERT_NEAR(s->workspace_max[2], 3, 0);
+  ASSERT_NEAR(s->voxel_size, 2, 0);
+  ASSERT_NEAR(s->background[0], 0, 0);
+  ASSERT_NEAR(s->background[1], 0.5, 0);
+  ASSERT_NEAR(s->background[2], 1, 0);
+  fg_conf_free(c);
+
+  /* an empty token means no authentication */
+  c = load_ok("[http]\ntoken =\n");
+  ASSERT(c->token == NULL || c->token[0] == '\0');
+  fg_conf_free(c);
+
+  /* a UTF-8 byte order mark is not part of the first header */
+  c = load_ok("\xEF\xBB\xBF[train]\nsteps = 5\n");
+  ASSERT_EQ(c->train_steps, 5);
+  fg_conf_free(c);
+
+  /* CRLF line ends, and indentation right after a header (no value to continue yet) */
+  c = load_ok("[train]\r\n  steps = 7\r\n");
+  ASSERT_EQ(c->train_steps, 7);
+  fg_conf_free(c);
+}
+
+/* Relative paths are taken from the configuration file's folder, not the working directory. */
+static void test_paths(void) {
+  char sub[PATH_MAX + 8];
+  snprintf(sub, sizeof sub, "%s/etc", tmp_root);
+  ASSERT_EQ(mkdir(sub, 0700), 0);
+  char *path = write_file("etc/x.conf",
+                          "[state]\n"
+                          "dir = state/./here/\n"
+                          "import_dirs = scans:/srv//abs/:../other::/missing/later/../mnt:\n"
+                          "[clip]\n"
+                          "weights = w.safetensors\n"
+                          "vocab = ../share/vocab.txt.gz\n");
+  /* load through a relative path from another working directory */
+  char cwd[PATH_MAX];
+  ASSERT(getcwd(cwd, sizeof cwd) != NULL);
+  ASSERT_EQ(chdir(tmp_root), 0);
+  fg_conf *c = NULL;
+  char err[1024];
+  int rc = fg_conf_load("etc/x.conf", &c, err, sizeof err);
+  ASSERT_EQ(chdir(cwd), 0);
+  if (rc) FG_TEST_FAIL("load failed: %s", err);
+
+  char want[PATH_MAX + 64];
+  snprintf(want, sizeof want, "%s/etc/x.conf", tmp_root);
+  ASSERT_STREQ(c->path, want);
+  snprintf(want, sizeof want, "%s/etc/state/here", tmp_root);
+  ASSERT_STREQ(c->state_dir, want);
+  ASSERT_EQ(c->n_import_dirs, 4);
+  snprintf(want, sizeof want, "%s/etc/scans", tmp_root);
+  ASSERT_STREQ(c->import_dirs[0], want);
+  ASSERT_STREQ(c->import_dirs[1], "/srv/abs");
+  snprintf(want, sizeof want, "%s/other", tmp_root);
+  ASSERT_STREQ(c->import_dirs[2], want);
+  ASSERT_STREQ(c->import_dirs[3], "/missing/mnt"); /* need not exist */
+  snprintf(want, sizeof want, "%s/etc/w.safetensors", tmp_root);
+  ASSERT_STREQ(c->clip_weights, want); /* existence is checked when CLIP loads, not here */
+  snprintf(want, sizeof want, "%s/share/vocab.txt.gz", tmp_root);
+  ASSERT_STREQ(c->clip_vocab, want);
+  fg_conf_free(c);
+  free(path);
+
+  /* a later import_dirs line would be a duplicate; an empty one means none */
+  c = load_ok("[state]\nimport_dirs =\n");
+  ASSERT_EQ(c->n_import_dirs, 0);
+  fg_conf_free(c);
+}
+
+/* ---------------------------------------------------------------- listen and scene names */
+
+static void test_listen(void) {
+  char *host = NULL;
+  int port = -1;
+  ASSERT_OK(fg_conf_parse_listen("127.0.0.1:7070", &host, &port));
+  ASSERT_STREQ(host, "127.0.0.1");
+  ASSERT_EQ(port, 7070);
+  free(host);
+  ASSERT_OK(fg_conf_parse_listen("[::1]:7070", &host, &port));
+  ASSERT_STREQ(host, "::1");
+  ASSERT_EQ(port, 7070);
+  free(host);
+  ASSERT_OK(fg_conf_parse_listen("[fe80::1%lo]:65535", &host, &port));
+  ASSERT_STREQ(host, "fe80::1%lo");
+  ASSERT_EQ(port, 65535);
+  free(host);
+  ASSERT_OK(fg_conf_parse_listen("localhost:0", &host, &port)); /* 0 = any free port */
+  ASSERT_STREQ(host, "localhost");
+  ASSERT_EQ(port, 0);
+  free(host);
+
+  ASSERT_ERR(fg_conf_parse_listen("::1:7070", &host, &port), FG_EINVAL, "brackets");
+  ASSERT_ERR(fg_conf_parse_listen("[::1]7070", &host, &port), FG_EINVAL, "':PORT'");
+  ASSERT_ERR(fg_conf_parse_listen("[::1:7070", &host, &port), FG_EINVAL, "']'");
+  ASSERT_ERR(fg_conf_parse_listen("[]:7070", &host, &port), FG_EINVAL, "no host");
+  ASSERT_ERR(fg_conf_parse_listen(":7070", &host, &port), FG_EINVAL, "no host");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1", &host, &port), FG_EINVAL, "no port");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1:", &host, &port), FG_EINVAL, "0 to 65535");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1:65536", &host, &port), FG_EINVAL, "0 to 65535");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1:7070x", &host, &port), FG_EINVAL, "bad port");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1:-1", &host, &port), FG_EINVAL, "bad port");
+  ASSERT_ERR(fg_conf_parse_listen("127.0.0.1:0000070", &host, &port), FG_EINVAL, "bad port");
+  ASSERT(host == NULL);
+
+  /* IPv6 and port 0 through the file */
+  fg_conf *c = load_ok("[http]\nlisten = [::1]:7070\n");
+  ASSERT_STREQ(c->listen, "[::1]:7070");
+  fg_conf_free(c);
+  c = load_ok("[http]\nlisten = 127.0.0.1:0\n");
+  ASSERT_STREQ(c->listen, "127.0.0.1:0");
+  fg_conf_free(c);
+}
+
+static void test_scene_names(void) {
+  ASSERT_OK(fg_scene_name_validate("tabletop"));
+  ASSERT_OK(fg_scene_name_validate("A-b_c.9"));
+  ASSERT_OK(fg_scene_name_validate("-x"));
+  char name[FG_SCENE_NAME_MAX + 2];
+  memset(name, 'a', FG_SCENE_NAME_MAX);
+  name[FG_SCENE_NAME_MAX] = '\0';
+  ASSERT_OK(fg_scene_name_validate(name));
+  name[FG_SCENE_NAME_MAX] = 'a';
+  name[FG_SCENE_NAME_MAX + 1] = '\0';
+  ASSERT_ERR(fg_scene_name_validate(name), FG_EINVAL, "65 characters");
+  ASSERT_ERR(fg_scene_name_validate(""), FG_EINVAL, "empty");
+  ASSERT_ERR(fg_scene_name_validate(NULL), FG_EINVAL, "empty");
+  ASSERT_ERR(fg_scene_name_validate(".hidden"), FG_EINVAL, "starts with '.'");
+  ASSERT_ERR(fg_scene_name_validate(".."), FG_EINVAL, "starts with '.'");
+  ASSERT_ERR(fg_scene_name_validate("a/b"), FG_EINVAL, "'/'");
+  ASSERT_ERR(fg_scene_name_validate("a b"), FG_EINVAL, "' '");
+  ASSERT_ERR(fg_scene_name_validate("caf\xc3\xa9"), FG_EINVAL, "0xc3");
+}
+
+/* ---------------------------------------------------------------- errors */
+
+static void test_errors(void) {
+  /* unknown section, also when empty; unknown key; a key before any section */
+  EXPECT_ERROR("[http]\n\n[htp]\n", 3, "[htp]: unknown section", "gripper.modbus");
+  EXPECT_ERROR("[http]\nlisten = 127.0.0.1:1\nport = 80\n", 3, "[http] port: unknown key",
+               "listen, token, max_upload_mb");
+  EXPECT_ERROR("; top\nsteps = 3\n[train]\n", 2, "steps: key outside any section", NULL);
+  EXPECT_ERROR("[Train]\nsteps = 3\n", 1, "[Train]: unknown section", NULL);
+
+  /* integers: junk, range, empty, floats */
+  EXPECT_ERROR("[train]\nsteps = many\n", 2,
+               "[train] steps: expected an integer from 1 to 10000000, got 'many'", NULL);
+  EXPECT_ERROR("[train]\n\nsteps = 12abc\n", 3, "[train] steps:", "got '12abc'");
+  EXPECT_ERROR("[train]\nsteps = 0\n", 2, "[train] steps:", "from 1 to 10000000");
+  EXPECT_ERROR("[train]\nsteps = 10000001\n", 2, "[train] steps:", "from 1 to 10000000");
+  EXPECT_ERROR("[train]\nsteps = 99999999999999999999999\n", 2, "[train] steps:", NULL);
+  EXPECT_ERROR("[train]\nsteps =\n", 2, "[train] steps:", "got ''");
+  EXPECT_ERROR("[train]\nthreads = 1.5\n", 2, "[train] threads:", "from 0 to 1024");
+  EXPECT_ERROR("[train]\nthreads = -1\n", 2, "[train] threads:", NULL);
+  EXPECT_ERROR("[train]\nmax_image_side = 15\n", 2, "[train] max_image_side:", "16 to 16384");
+  EXPECT_ERROR("[http]\nmax_upload_mb = 0\n", 2, "[http] max_upload_mb:", "1 to 4096");
+  EXPECT_ERROR("[http]\nmax_upload_mb = 4097\n", 2, "[http] max_upload_mb:", "1 to 4096");
+  EXPECT_ERROR("[robot]\nport = 0\n", 2, "[robot] port:", "1 to 65535");
+  EXPECT_ERROR("[robot]\nunit_id = 248\n", 2, "[robot] unit_id:", "0 to 247");
+  EXPECT_ERROR("[robot]\nbase = 65516\n", 2, "[robot] base:", "0 to 65515");
+  EXPECT_ERROR("[robot]\ntimeout_ms = 0\n", 2, "[robot] timeout_ms:", NULL);
+  EXPECT_ERROR("[robot]\nack_timeout_ms = 600001\n", 2, "[robot] ack_timeout_ms:", NULL);
+  EXPECT_ERROR("[gripper.modbus]\nbaud = fast\n", 2, "[gripper.modbus] baud:", NULL);
+
+  /* enumerations */
+  EXPECT_ERROR("[robot]\ntransport = udp\n", 2, "[robot] transport:",
+               "expected none, tcp or rtu, got 'udp'");
+  EXPECT_ERROR("[robot]\nencoding = int32\n", 2, "[robot] encoding:", "int16 or float32");
+  EXPECT_ERROR("[robot]\nparity = X\n", 2, "[robot] parity:", "N, E or O");
+  EXPECT_ERROR("[gripper]\nmodel = ur5\n", 2, "[gripper] model:", "panda or robotiq-2f85");
+
+  /* robot-only keys in [gripper.modbus] */
+  EXPECT_ERROR("[gripper.modbus]\ntransport = none\nbase = 128\n", 3,
+               "[gripper.modbus] base: unknown key", "[robot] only");
+  EXPECT_ERROR("[gripper.modbus]\nencoding = int16\n", 2, "[gripper.modbus] encoding:", NULL);
+  EXPECT_ERROR("[gripper.modbus]\nack_timeout_ms = 5\n", 2, "[gripper.modbus] ack_timeout_ms:",
+               NULL);
+
+  /* floats and vectors */
+  EXPECT_ERROR("[scene t]\nvoxel_size = nan\n", 2, "[scene t] voxel_size:", "finite number");
+  EXPECT_ERROR("[scene t]\nvoxel_size = inf\n", 2, "[scene t] voxel_size:", "finite number");
+  EXPECT_ERROR("[scene t]\nvoxel_size = 1e999\n", 2, "[scene t] voxel_size:", "finite number");
+  EXPECT_ERROR("[scene t]\nvoxel_size = 0.01m\n", 2, "[scene t] voxel_size:", "got '0.01m'");
+  EXPECT_ERROR("[scene t]\nvoxel_size = 0\n", 2, "[scene t] voxel_size:", "positive");
+  EXPECT_ERROR("[scene t]\nvoxel_size = -0.01\n", 2, "[scene t] voxel_size:", "positive");
+  EXPECT_ERROR("[scene t]\nworkspace_min = 0 0\n", 2, "[scene t] workspace_min:", "3");
+  EXPECT_ERROR("[scene t]\nworkspace_max = 1 1 1 1\n", 2, "[scene t] workspace_max:",
+               "exactly 3 numbers");
+  EXPECT_ERROR("[scene t]\nworkspace_max = 1,1,1\n", 2, "[scene t] workspace_max:", NULL);
+  EXPECT_ERROR("[scene t]\nworkspace_min = 0 nan 0\n", 2, "[scene t] workspace_min:", "finite");
+  EXPECT_ERROR("[scene t]\nworkspace_min = 0 inf 0\n", 2, "[scene t] workspace_min:", NULL);
+  EXPECT_ERROR("[scene t]\nbackground = 1 1\n", 2, "[scene t] background:", NULL);
+  EXPECT_ERROR("[scene t]\nbackground = 1 1.5 1\n", 2, "[scene t] background:", "0 to 1");
+  EXPECT_ERROR("[scene t]\nbackground = 0 0 -0.1\n", 2, "[scene t] background:", "0 to 1");
+
+  /* workspace and voxel checks made at the end: the scene's header line */
+  EXPECT_ERROR("[train]\n\n[scene box]\nworkspace_min = 0 0 1\nworkspace_max = 1 1 1\n"
+               "[http]\n", 3, "[scene box] workspace_min:", "on z");
+  EXPECT_ERROR("[scene box]\nworkspace_max = 0.1 0.1 0.1\n", 1, "[scene box] workspace_min:",
+               "on x");
+  EXPECT_ERROR("[scene ok]\n[scene box]\nworkspace_min = 0 0 0\nworkspace_max = 1 1 0.005\n", 2,
+               "[scene box] voxel_size:", "smallest workspace extent");
+  EXPECT_ERROR("[scene box]\nvoxel_size = 0.5\nworkspace_min = 0 0 0\nworkspace_max = 1 1 0.4\n",
+               2, "[scene box] voxel_size:", "0.4 m");
+
+  /* scene names and duplicates */
+  EXPECT_ERROR("[scene]\n", 1, "[scene]:", "needs a name");
+  EXPECT_ERROR("[scene .hidden]\n", 1, "[scene .hidden]:", "starts with '.'");
+  EXPECT_ERROR("[scene a/b]\n", 1, "[scene a/b]:", "'/'");
+  EXPECT_ERROR("[scene my table]\n", 1, "[scene my table]:", "' '");
+  EXPECT_ERROR("[scene x]\nvoxel_size = 0.02\n[scene y]\n[scene x]\n", 4, "[scene x]:",
+               "duplicate scene section (first on line 1)");
+  EXPECT_ERROR("[http]\n[train]\n[http]\n", 3, "[http]:", "duplicate section (first on line 1)");
+
+  /* duplicate keys and continuation lines */
+  EXPECT_ERROR("[train]\nsteps = 1\nthreads = 2\nsteps = 3\n", 4, "[train] steps:",
+               "duplicate key (first set on line 2)");
+  EXPECT_ERROR("[scene a]\nvoxel_size = 0.02\n[scene b]\nvoxel_size = 0.02\nvoxel_size = 0.03\n",
+               5, "[scene b] voxel_size:", "duplicate key (first set on line 4)");
+  EXPECT_ERROR("[state]\nimport_dirs = /a\n   /b\n", 3, "[state] import_dirs:",
+               "values cannot span lines");
+  EXPECT_ERROR("[robot]\ntransport = tcp\n\n  host = 10.0.0.2\n", 4, "[robot] transport:",
+               "remove the leading whitespace");
+
+  /* listen */
+  EXPECT_ERROR("[http]\nlisten = ::1:7070\n", 2, "[http] listen:", "brackets");
+  EXPECT_ERROR("[http]\nlisten = 127.0.0.1:70000\n", 2, "[http] listen:", "0 to 65535");
+  EXPECT_ERROR("[http]\nlisten = localhost\n", 2, "[http] listen:", "no port");
+
+  /* [clip] needs both files: reported at its header */
+  EXPECT_ERROR("[train]\n[clip]\nweights = /w\n[http]\n", 2, "[clip] vocab:", "both");
+  EXPECT_ERROR("[clip] ; empty\n", 1, "[clip] weights:", "both");
+  EXPECT_ERROR("[clip]\nweights =\n", 2, "[clip] weights:", "expected a path");
+
+  /* transport needs */
+  EXPECT_ERROR("[robot]\ntransport = tcp\nport = 502\nhost =\n", 4, "[robot] host:",
+               "transport tcp needs a host");
+  EXPECT_ERROR("[robot]\nhost =\n[gripper.modbus]\ndevice =\ntransport = rtu\n", 4,
+               "[gripper.modbus] device:", "transport rtu needs");
+  EXPECT_ERROR("[state]\ndir =\n", 2, "[state] dir:", "expected a path");
+
+  /* syntax */
+  EXPECT_ERROR("[train]\nsteps 5\n", 2, "expected 'key = value'", NULL);
+  EXPECT_ERROR("[train\nsteps = 5\n", 1, "closing ']'", NULL);
+  EXPECT_ERROR("[train ; comment]\n", 1, "closing ']'", NULL);
+
+  /* a line longer than inih's buffer: refused, later line numbers stay right */
+  char longtext[1024];
+  char padding[400];
+  memset(padding, 'x', sizeof padding - 1);
+  padding[sizeof padding - 1] = '\0';
+  snprintf(longtext, sizeof longtext, "[http]\n; %s\n", padding);
+  EXPECT_ERROR(longtext, 2, "characters long", NULL);
+
+  /* the first error wins, and nothing after it is parsed */
+  EXPECT_ERROR("[train]\nsteps = x\n[nope]\n", 2, "[train] steps:", NULL);
+}
+
+static void test_missing_file(void) {
+  char path[PATH_MAX + 32];
+  snprintf(path, sizeof path, "%s/no-such.conf", tmp_root);
+  char err[1024] = "";
+  fg_conf *c = (fg_conf *)(uintptr_t)1;
+  int rc = fg_conf_load(path, &c, err, sizeof err);
+  ASSERT_EQ(rc, FG_ENOENT);
+  ASSERT(c == NULL);
+  char want[PATH_MAX + 64];
+  snprintf(want, sizeof want, "%s: cannot open: %s", path, strerror(ENOENT));
+  ASSERT_STREQ(err, want);
+  ASSERT_STREQ(fg_error_detail(), want);
+
+  /* a folder is not a configuration file */
+  rc = fg_conf_load(tmp_root, &c, err, sizeof err);
+  ASSERT(rc < 0);
+  ASSERT(c == NULL);
+  ASSERT_STRCONTAINS(err, tmp_root);
+
+  /* a tiny error buffer is truncated, not overrun */
+  char small[8];
+  rc = fg_conf_load(path, &c, small, sizeof small);
+  ASSERT_EQ(rc, FG_ENOENT);
+  ASSERT_EQ(strlen(small), sizeof small - 1);
+}
+
+int main(void) {
+  char tmpl[] = "/tmp/fg_test_conf.XXXXXX";
+  ASSERT(mkdtemp(tmpl) != NULL);
+  ASSERT(realpath(tmpl, tmp_root) != NULL);
+
+  test_defaults();
+  test_spec_example();
+  test_values();
+  test_paths();
+  test_listen();
+  test_scene_names();
+  test_errors();
+  test_missing_file();
+
+  char cmd[PATH_MAX + 16];
+  snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmp_root);
+  ASSERT_EQ(system(cmd), 0);
+  printf("conf: ok\n");
+  return 0;
+}

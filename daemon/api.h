@@ -1,0 +1,53 @@
+/* The daemon's application state and the HTTP API's route table and handlers. */
+#ifndef FG_DAEMON_API_H
+#define FG_DAEMON_API_H
+
+#include <pthread.h>
+#include <stddef.h>
+
+#include "conf.h"
+#include "http.h"
+#include "store.h"
+
+typedef struct fg_conf_ref fg_conf_ref;
+
+typedef struct fg_app {
+  fg_store *store;
+  pthread_mutex_t conf_lock;
+  fg_conf_ref *conf; /* current configuration; requests hold references */
+  int threads;       /* worker threads for ingest ([train] threads resolved; >= 1) */
+} fg_app;
+
+/* Installs conf as the current configuration (taking ownership); requests already running
+ * keep the one they started with. */
+void fg_app_set_conf(fg_app *app, fg_conf *conf);
+
+/* Reference-counted access for the HTTP layer (fg_http_config callbacks). */
+const fg_conf *fg_app_conf_acquire(fg_app *app);
+void fg_app_conf_release(fg_app *app, const fg_conf *conf);
+
+/* Drops the current configuration at shutdown. */
+void fg_app_clear_conf(fg_app *app);
+
+/* The route table. */
+extern const fg_route fg_api_routes[];
+extern const size_t fg_api_n_routes;
+
+/* Handlers, by file. */
+int fg_api_health(fg_req *req, fg_resp *resp);
+int fg_api_metrics(fg_req *req, fg_resp *resp);
+int fg_api_scenes_list(fg_req *req, fg_resp *resp);
+int fg_api_scenes_create(fg_req *req, fg_resp *resp);
+int fg_api_scene_get(fg_req *req, fg_resp *resp);
+int fg_api_scene_delete(fg_req *req, fg_resp *resp);
+int fg_api_frames_upload(fg_req *req, fg_resp *resp);
+int fg_api_frames_list(fg_req *req, fg_resp *resp);
+int fg_api_scene_import(fg_req *req, fg_resp *resp);
+
+/* Shared by handlers: the JSON body as an object, or NULL after answering 400. */
+json_t *fg_api_body_object(fg_req *req, fg_resp *resp);
+
+/* The scene named by the first path parameter with a reference, or NULL after answering 404. */
+fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
+
+#endif

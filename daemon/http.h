@@ -1,0 +1,108 @@
+/* The HTTP layer: a libmicrohttpd server with a pool of polling threads, a route table,
+ * bearer-token checks, body limits, multipart parsing and an offload pool for handlers that
+ * take long (decoding images, importing data sets), so that they never hold a polling
+ * thread while other connections wait.
+ *
+ * Handlers see a complete request (fg_req) and fill a response (fg_resp); they never touch
+ * libmicrohttpd. */
+#ifndef FG_DAEMON_HTTP_H
+#define FG_DAEMON_HTTP_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <jansson.h>
+
+#define FG_HTTP_MAX_PARAMS 4
+#define FG_HTTP_MAX_PARTS 8
+
+struct fg_app;
+struct fg_conf;
+
+/* One part of a multipart/form-data body. */
+typedef struct fg_part {
+  char *name;         /* owned */
+  char *filename;     /* owned; NULL for plain fields */
+  char *content_type; /* owned; NULL when not given */
+  uint8_t *data;      /* owned; NUL-terminated (not counted in len) */
+  size_t len, cap;
+} fg_part;
+
+typedef struct fg_req {
+  struct fg_app *app;
+  const struct fg_conf *conf; /* the configuration this request runs under */
+  const char *method;
+  const char *path;
+  char *params[FG_HTTP_MAX_PARAMS]; /* path segments captured by "{}" in the route */
+  int n_params;
+  const char *content_type;         /* may be NULL */
+  uint8_t *body;                    /* raw body (not for multipart routes), NUL-terminated */
+  size_t body_len;
+  fg_part parts[FG_HTTP_MAX_PARTS]; /* multipart routes */
+  int n_parts;
+  void *mhd_conn;                   /* for header lookups via fg_req_header */
+} fg_req;
+
+typedef struct fg_resp {
+  int status;
+  char *body;               /* owned (malloc) */
+  size_t len;
+  const char *content_type; /* static string */
+  char allow[64];           /* for 405 */
+} fg_resp;
+
+typedef int (*fg_handler)(fg_req *req, fg_resp *resp);
+
+enum {
+  FG_ROUTE_PUBLIC = 1,    /* no token needed */
+  FG_ROUTE_OFFLOAD = 2,   /* run on the offload pool */
+  FG_ROUTE_MULTIPART = 4, /* body is multipart/form-data */
+};
+
+typedef struct fg_route {
+  const char *method;
+  const char *pattern; /* "/v1/scenes/{}/frames"; "{}" captures one segment */
+  const char *metric;  /* route label for metrics: "/v1/scenes/{s}/frames" */
+  fg_handler handler;
+  int flags;
+} fg_route;
+
+/* Looks up a request header (case-insensitive); NULL if absent. */
+const char *fg_req_header(const fg_req *req, const char *name);
+
+/* Finds a multipart part by name; NULL if absent. */
+const fg_part *fg_req_part(const fg_req *req, const char *name);
+
+/* Sets a JSON response; steals the reference to obj. */
+void fg_resp_json(fg_resp *resp, int status, json_t *obj);
+
+/* Sets the error response {"error":{"code","message"}}. Returns 0 for handler chaining. */
+int fg_resp_error(fg_resp *resp, int status, const char *code, const char *fmt, ...)
+  __attribute__((format(printf, 4, 5)));
+
+/* Sets a body with a content type; takes ownership of body (malloc'd). */
+void fg_resp_take(fg_resp *resp, int status, const char *content_type, char *body, size_t len);
+
+typedef struct fg_http fg_http;
+
+typedef struct fg_http_config {
+  const char *listen;          /* "host:port" or "[v6]:port"; port 0 picks a free one */
+  int poll_threads;            /* libmicrohttpd polling threads, >= 1 */
+  int offload_threads;         /* threads running FG_ROUTE_OFFLOAD handlers, >= 1 */
+  const fg_route *routes;
+  size_t n_routes;
+  struct fg_app *app;
+  /* Returns the current configuration with a reference held, and drops it. The server asks
+   * once per request, so a reload never changes the settings under a running request. */
+  const struct fg_conf *(*conf_acquire)(struct fg_app *app);
+  void (*conf_release)(struct fg_app *app, const struct fg_conf *conf);
+} fg_http_config;
+
+/* Starts listening. On success *out is owned by the caller (fg_http_stop). The bound address
+ * is written to bound ("http://127.0.0.1:7070"). */
+int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t bound_len);
+
+/* Stops accepting, lets offloaded handlers finish, closes every connection and frees. */
+void fg_http_stop(fg_http *http);
+
+#endif

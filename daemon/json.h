@@ -1,0 +1,56 @@
+/* Request parsing and reply views: the translation between JSON and library structs.
+ * Parsers return 0 or FG_EINVAL with a detail naming the field, so a handler can pass the
+ * sentence to the client unchanged. */
+#ifndef FG_DAEMON_JSON_H
+#define FG_DAEMON_JSON_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <jansson.h>
+
+#include "io/camera.h"
+#include "io/frame.h"
+#include "io/transforms.h"
+#include "store.h"
+
+/* Parses a request body. On failure returns NULL and writes "line L, column C: what" into
+ * err. An empty body is an error too. */
+json_t *fg_json_parse(const void *body, size_t len, char *err, size_t errlen);
+
+/* Reads key of obj as a finite number. Returns 1 if present, 0 if absent, FG_EINVAL if
+ * present but not a number. */
+int fg_json_number(json_t *obj, const char *key, double *out);
+
+/* Reads key of obj as a string; 1 present, 0 absent, FG_EINVAL if not a string. */
+int fg_json_string(json_t *obj, const char *key, const char **out);
+
+/* Reads an array of exactly n finite numbers; what names it in the error. */
+int fg_json_vec(json_t *v, double *out, size_t n, const char *what);
+
+/* A 4x4 row-major nested array of numbers (not validated as rigid). */
+int fg_json_matrix4(json_t *v, double T[16], const char *what);
+
+/* A pose: either a 4x4 matrix, or {"matrix": 4x4} or {"position":[3], "quaternion":[w,x,y,z]}.
+ * Checked with fg_pose_validate. */
+int fg_json_pose(json_t *v, double T[16], const char *what);
+
+/* Intrinsics of SPEC.md "Frames and units" from obj (a "camera" object, or a frame object
+ * whose camera keys stand at the top level, as in a transforms.json frame; strict says
+ * unknown keys are errors) into the camera fields of *f (cam, camera angles and the has_*
+ * flags), ready for fg_transforms_complete_camera once the image's size is known. */
+int fg_json_camera(json_t *obj, int strict, fg_transforms_frame *f);
+
+json_t *fg_json_from_matrix4(const double T[16]);
+json_t *fg_json_from_vec(const double *v, size_t n);
+
+/* "2026-11-22T00:00:00.123Z" for a Unix time in milliseconds. */
+void fg_iso8601(int64_t ms, char out[32]);
+
+/* The scene object of the API. */
+json_t *fg_json_scene(const fg_scene_info *info);
+
+/* The frame object of the API. */
+json_t *fg_json_frame(const fg_frame *frame, int index);
+
+#endif

@@ -1,0 +1,31 @@
+/* Prometheus counters and histograms of the daemon, updated lock-free from HTTP threads.
+ *
+ * Requests are counted per route template (the route table's index), method and status
+ * code; latencies go into one histogram per route. */
+#ifndef FG_DAEMON_METRICS_H
+#define FG_DAEMON_METRICS_H
+
+#include <stddef.h>
+
+#define FG_METRICS_MAX_ROUTES 64
+
+/* Names a route slot before the server starts; route is the path template. */
+void fg_metrics_set_route(int idx, const char *method, const char *route);
+
+/* Records one finished request. idx < 0 stands for "no route matched". */
+void fg_metrics_observe_request(int idx, int status, double seconds);
+
+void fg_metrics_add_frames_ingested(unsigned n);
+void fg_metrics_count_reload(int ok);
+
+/* Gauges the renderer asks for at scrape time. */
+typedef struct fg_metrics_gauges {
+  size_t scenes;
+  size_t frames;
+} fg_metrics_gauges;
+
+/* Renders the text exposition format into a malloc'd NUL-terminated buffer the caller owns;
+ * NULL on allocation failure. */
+char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len);
+
+#endif

@@ -1,0 +1,183 @@
+#!/usr/bin/env bash
+# fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
+#
+# Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory]
+#   (no names: all three)
+#   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
+#           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
+#           (target <= 3 s)
+#   health  GET /v1/health under wrk -t2 -c32 -d10s on loopback: requests/s and p99 latency
+#           (targets >= 20000 req/s, p99 <= 5 ms). Needs wrk: apt-get install wrk
+#   memory  VmRSS / VmHWM of an idle daemon after start and a few requests (target <= 30 MB)
+#
+# Output: one line per benchmark of space-separated key=value pairs, e.g.
+#   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
+# The exit status is 1 if a benchmark missed its target or could not run, 0 otherwise.
+# The data set is read from $FG_SHARED_DATA/lego (default: ../shared/data beside the
+# repository). Set BENCH_WRK_DURATION (default 10s) to shorten the wrk run.
+set -euo pipefail
+
+if [ $# -lt 1 ]; then
+  sed -n '2,19p' "$0" >&2
+  exit 2
+fi
+build=$(realpath "$1")
+shift
+benches=("$@")
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory)
+
+src=$(cd "$(dirname "$0")/../.." && pwd)
+daemon=$build/daemon/fieldgripd
+data=${FG_SHARED_DATA:-$src/../shared/data}
+wrk_duration=${BENCH_WRK_DURATION:-10s}
+
+if [ ! -x "$daemon" ]; then
+  echo "error: no daemon at $daemon; build first (meson compile -C $1)" >&2
+  exit 2
+fi
+command -v curl >/dev/null || { echo "error: curl is needed (apt-get install curl)" >&2; exit 2; }
+
+tmp=$(mktemp -d)
+pids=()
+cleanup() {
+  local pid
+  for pid in "${pids[@]}"; do
+    kill "$pid" 2>/dev/null || true
+    wait "$pid" 2>/dev/null || true
+  done
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+# start_daemon NAME: starts fieldgripd with a fresh state dir under $tmp/NAME and sets
+# $pid and $base (http://127.0.0.1:PORT) once it logs its listening line.
+start_daemon() {
+  local dir=$tmp/$1 port= i
+  mkdir -p "$dir/state"
+  {
+    echo "[state]"
+    if [ -d "$data" ]; then echo "import_dirs = $(realpath "$data")"; fi
+  } > "$dir/bench.conf"
+  # The listening line is logged at level info, the default.
+  "$daemon" --config "$dir/bench.conf" --listen 127.0.0.1:0 --state-dir "$dir/state" \
+    2> "$dir/stderr" &
+  pid=$!
+  pids+=("$pid")
+  for i in $(seq 1 200); do
+    port=$(sed -n 's|.*listening on http://127\.0\.0\.1:\([0-9][0-9]*\).*|\1|p' "$dir/stderr" | head -n 1)
+    [ -z "$port" ] || break
+    if ! kill -0 "$pid" 2>/dev/null; then
+      cat "$dir/stderr" >&2
+      echo "error: fieldgripd exited at start-up" >&2
+      return 1
+    fi
+    sleep 0.05
+  done
+  if [ -z "$port" ]; then
+    cat "$dir/stderr" >&2
+    echo "error: fieldgripd did not log its listening line within 10 s" >&2
+    return 1
+  fi
+  base=http://127.0.0.1:$port
+}
+
+stop_daemon() {
+  kill "$pid" 2>/dev/null || true
+  wait "$pid" 2>/dev/null || true
+}
+
+now() { date +%s.%N; }
+
+# json_int KEY < JSON: the first integer value of "KEY" (enough for the flat answers used here).
+json_int() { sed -n "s/.*\"$1\"[[:space:]]*:[[:space:]]*\([0-9][0-9]*\).*/\1/p" | head -n 1; }
+
+failed=0
+
+bench_import() {
+  local lego=$data/lego out t0 t1 seconds imported skipped pass code
+  if [ ! -f "$lego/transforms_train.json" ]; then
+    echo "bench=import error=no_data_set path=$lego pass=no"
+    failed=1; return
+  fi
+  start_daemon import
+  curl -sf -X POST "$base/v1/scenes" -H 'Content-Type: application/json' \
+    -d '{"name":"lego","workspace":{"min":[-1.5,-1.5,-1.5],"max":[1.5,1.5,1.5]}}' >/dev/null
+  out=$tmp/import.json
+  t0=$(now)
+  code=$(curl -s -o "$out" -w '%{http_code}' -X POST "$base/v1/scenes/lego/import" \
+    -H 'Content-Type: application/json' \
+    -d "{\"path\":\"$(realpath "$lego")\",\"transforms\":\"transforms_train.json\"}")
+  t1=$(now)
+  stop_daemon
+  if [ "$code" != 200 ]; then
+    echo "bench=import error=http_$code pass=no"
+    cat "$out" >&2; echo >&2
+    failed=1; return
+  fi
+  imported=$(json_int imported < "$out")
+  skipped=$(json_int skipped < "$out")
+  seconds=$(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.3f", b - a }')
+  pass=$(awk -v s="$seconds" -v n="$imported" 'BEGIN { print (s <= 3 && n == 100) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=import frames=$imported skipped=$skipped seconds=$seconds target_max_seconds=3 pass=$pass"
+}
+
+# to_ms VALUE: wrk's latency ("812.00us", "1.23ms", "1.01s") in milliseconds.
+to_ms() {
+  awk -v v="$1" 'BEGIN {
+    n = v + 0
+    if (v ~ /us$/) n /= 1000; else if (v ~ /ms$/) n = n; else if (v ~ /m$/) n *= 60000; else if (v ~ /s$/) n *= 1000
+    printf "%.3f", n }'
+}
+
+bench_health() {
+  local out rps p99 p50 p99_ms p50_ms errors pass
+  if ! command -v wrk >/dev/null 2>&1; then
+    echo "bench=health error=wrk_not_installed hint=apt-get_install_wrk pass=no"
+    failed=1; return
+  fi
+  start_daemon health
+  out=$(wrk -t2 -c32 -d"$wrk_duration" --latency "$base/v1/health")
+  stop_daemon
+  rps=$(printf '%s\n' "$out" | awk '/^Requests\/sec:/ { printf "%.0f", $2 }')
+  p50=$(printf '%s\n' "$out" | awk '$1 == "50%" { print $2 }')
+  p99=$(printf '%s\n' "$out" | awk '$1 == "99%" { print $2 }')
+  # wrk prints "Non-2xx or 3xx responses" and "Socket errors" only when there are some.
+  errors=$(printf '%s\n' "$out" | awk '/Non-2xx/ { n += $NF } /Socket errors/ { gsub(",", ""); n += $4 + $6 + $8 + $10 } END { print n + 0 }')
+  if [ -z "$rps" ] || [ -z "$p99" ]; then
+    printf '%s\n' "$out" >&2
+    echo "bench=health error=unparsed_wrk_output pass=no"
+    failed=1; return
+  fi
+  p50_ms=$(to_ms "$p50"); p99_ms=$(to_ms "$p99")
+  pass=$(awk -v r="$rps" -v p="$p99_ms" -v e="$errors" 'BEGIN { print (r >= 20000 && p <= 5 && e == 0) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=health threads=2 connections=32 duration=$wrk_duration requests_per_s=$rps p50_ms=$p50_ms p99_ms=$p99_ms errors=$errors target_min_requests_per_s=20000 target_max_p99_ms=5 pass=$pass"
+}
+
+bench_memory() {
+  local i rss hwm pass
+  start_daemon memory
+  for i in 1 2 3 4 5; do
+    curl -sf "$base/v1/health" >/dev/null
+    curl -sf "$base/v1/scenes" >/dev/null
+    curl -sf "$base/metrics" >/dev/null
+  done
+  sleep 0.2
+  rss=$(awk '/^VmRSS:/ { print $2 }' "/proc/$pid/status")
+  hwm=$(awk '/^VmHWM:/ { print $2 }' "/proc/$pid/status")
+  stop_daemon
+  pass=$(awk -v h="$hwm" 'BEGIN { print (h <= 30 * 1024) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=memory vmrss_kb=$rss vmhwm_kb=$hwm target_max_kb=$((30 * 1024)) pass=$pass"
+}
+
+for b in "${benches[@]}"; do
+  case $b in
+    import) bench_import ;;
+    health) bench_health ;;
+    memory) bench_memory ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory)" >&2; exit 2 ;;
+  esac
+done
+exit "$failed"

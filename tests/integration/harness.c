@@ -1,0 +1,979 @@
+/* Integration harness: the daemon as a child process, HTTP over libcurl, JSON with jansson.
+ * See harness.h for the contract of each helper. */
+#include "harness.h"
+
+#include <curl/curl.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <ftw.h>
+#include <limits.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <strings.h>
+#include <sys/prctl.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+#include <zlib.h>
+
+/* ---------------------------------------------------------------------------------------- */
+/* State of the one daemon a test process drives                                             */
+
+static char g_daemon[PATH_MAX];
+static char g_tmp[PATH_MAX];
+static char g_state[PATH_MAX + 16];
+static char g_conf[PATH_MAX + 32];
+static char g_logpath[PATH_MAX + 16];
+static volatile pid_t g_pid = -1;
+static int g_port = 0;
+static int g_ok = 0;
+static char g_token[512];
+static int g_has_token = 0;
+static pthread_mutex_t g_token_lock = PTHREAD_MUTEX_INITIALIZER;
+static volatile sig_atomic_t g_cleaned = 0;
+
+char *h_fmt(const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  char *s = NULL;
+  int n = vasprintf(&s, fmt, ap);
+  va_end(ap);
+  if (n < 0) FG_TEST_FAIL("out of memory");
+  return s;
+}
+
+void h_sleep_ms(int ms) {
+  struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
+  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {
+  }
+}
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static int rm_cb(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
+  (void)sb;
+  (void)flag;
+  (void)ftw;
+  remove(path);
+  return 0;
+}
+
+static void dump_log_tail(void) {
+  size_t len = 0;
+  char *log = h_read_file(g_logpath, &len);
+  if (!log) return;
+  size_t from = len > 6000 ? len - 6000 : 0;
+  fprintf(stderr, "---- daemon log (last %zu bytes of %s) ----\n%s\n---- end of daemon log ----\n",
+          len - from, g_logpath, log + from);
+  free(log);
+}
+
+/* Kills the daemon and removes the temp dir. Runs at exit (also after a failed ASSERT, which
+ * calls exit) and from the fatal-signal handler. */
+static void cleanup(void) {
+  if (g_cleaned) return;
+  g_cleaned = 1;
+  pid_t pid = g_pid;
+  if (pid > 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, NULL, 0);
+    g_pid = -1;
+  }
+  if (!g_ok && g_logpath[0]) dump_log_tail();
+  if (g_tmp[0]) {
+    if (getenv("FG_KEEP_TMP"))
+      fprintf(stderr, "keeping %s\n", g_tmp);
+    else
+      nftw(g_tmp, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
+  }
+}
+
+static void on_fatal_signal(int sig) {
+  cleanup();
+  signal(sig, SIG_DFL);
+  raise(sig);
+}
+
+void h_done(void) { g_ok = 1; }
+const char *h_tmpdir(void) { return g_tmp; }
+const char *h_state_dir(void) { return g_state; }
+const char *h_config_path(void) { return g_conf; }
+const char *h_daemon_path(void) { return g_daemon; }
+int h_port(void) { return g_port; }
+pid_t h_pid(void) { return g_pid; }
+
+void h_init(int argc, char **argv) {
+  const char *d = argc > 1 ? argv[1] : getenv("FG_DAEMON");
+  if (!d || !*d) FG_TEST_FAIL("usage: %s PATH-TO-fieldgripd (or set FG_DAEMON)", argv[0]);
+  if (!realpath(d, g_daemon)) FG_TEST_FAIL("daemon %s: %s", d, strerror(errno));
+  if (access(g_daemon, X_OK) != 0) FG_TEST_FAIL("daemon %s is not executable", g_daemon);
+
+  snprintf(g_tmp, sizeof g_tmp, "/tmp/fg-it-XXXXXX");
+  if (!mkdtemp(g_tmp)) FG_TEST_FAIL("mkdtemp: %s", strerror(errno));
+  atexit(cleanup);
+  signal(SIGTERM, on_fatal_signal);
+  signal(SIGINT, on_fatal_signal);
+  signal(SIGABRT, on_fatal_signal);
+  signal(SIGSEGV, on_fatal_signal);
+  signal(SIGPIPE, SIG_IGN);
+
+  snprintf(g_state, sizeof g_state, "%s/state", g_tmp);
+  snprintf(g_conf, sizeof g_conf, "%s/fieldgripd.conf", g_tmp);
+  snprintf(g_logpath, sizeof g_logpath, "%s/daemon.log", g_tmp);
+  h_write_config("; written by the fieldgrip integration harness\n");
+  if (curl_global_init(CURL_GLOBAL_ALL) != 0) FG_TEST_FAIL("curl_global_init failed");
+  setvbuf(stdout, NULL, _IOLBF, 0);
+}
+
+void h_write_file(const char *path, const void *data, size_t len) {
+  FILE *f = fopen(path, "wb");
+  if (!f) FG_TEST_FAIL("open %s: %s", path, strerror(errno));
+  if (len && fwrite(data, 1, len, f) != len) FG_TEST_FAIL("write %s: %s", path, strerror(errno));
+  if (fclose(f) != 0) FG_TEST_FAIL("close %s: %s", path, strerror(errno));
+}
+
+char *h_read_file(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  size_t cap = 4096, n = 0;
+  char *buf = malloc(cap + 1);
+  if (!buf) FG_TEST_FAIL("out of memory");
+  for (;;) {
+    if (n == cap) {
+      cap *= 2;
+      buf = realloc(buf, cap + 1);
+      if (!buf) FG_TEST_FAIL("out of memory");
+    }
+    size_t got = fread(buf + n, 1, cap - n, f);
+    n += got;
+    if (got == 0) break;
+  }
+  fclose(f);
+  buf[n] = '\0';
+  if (len) *len = n;
+  return buf;
+}
+
+void h_mkdirs(const char *path) {
+  char buf[PATH_MAX];
+  snprintf(buf, sizeof buf, "%s", path);
+  for (char *p = buf + 1; *p; p++) {
+    if (*p != '/') continue;
+    *p = '\0';
+    if (mkdir(buf, 0755) != 0 && errno != EEXIST) FG_TEST_FAIL("mkdir %s: %s", buf, strerror(errno));
+    *p = '/';
+  }
+  if (mkdir(buf, 0755) != 0 && errno != EEXIST) FG_TEST_FAIL("mkdir %s: %s", buf, strerror(errno));
+}
+
+void h_write_config(const char *text) { h_write_file(g_conf, text, strlen(text)); }
+
+static off_t log_size(void) {
+  struct stat st;
+  return stat(g_logpath, &st) == 0 ? st.st_size : 0;
+}
+
+/* Reaps the child if it has exited; returns 1 and fills *status then. */
+static int child_exited(int *status) {
+  if (g_pid <= 0) return 1;
+  pid_t r = waitpid(g_pid, status, WNOHANG);
+  if (r == g_pid) {
+    g_pid = -1;
+    return 1;
+  }
+  return 0;
+}
+
+static void describe_status(int status, char *buf, size_t n) {
+  if (WIFEXITED(status))
+    snprintf(buf, n, "exit status %d", WEXITSTATUS(status));
+  else if (WIFSIGNALED(status))
+    snprintf(buf, n, "killed by signal %d (%s)", WTERMSIG(status), strsignal(WTERMSIG(status)));
+  else
+    snprintf(buf, n, "status 0x%x", status);
+}
+
+void h_start(void) {
+  if (g_pid > 0) FG_TEST_FAIL("h_start: the daemon is already running (pid %d)", (int)g_pid);
+  h_mkdirs(g_state);
+  off_t from = log_size();
+  char marker[128];
+  int mlen = snprintf(marker, sizeof marker, "\n==== harness: starting %s ====\n", g_daemon);
+  int lfd = open(g_logpath, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (lfd < 0) FG_TEST_FAIL("open %s: %s", g_logpath, strerror(errno));
+  if (write(lfd, marker, (size_t)mlen) < 0) FG_TEST_FAIL("write log: %s", strerror(errno));
+  from += mlen;
+
+  const char *argv[] = {g_daemon,    "--config", g_conf,  "--state-dir", g_state, "--listen",
+                        "127.0.0.1:0", "--log-level", "debug", NULL};
+  pid_t parent = getpid();
+  pid_t pid = fork();
+  if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));
+  if (pid == 0) {
+    /* Only async-signal-safe calls between fork and exec. The daemon dies with us. */
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(127);
+    int nul = open("/dev/null", O_RDONLY);
+    if (nul >= 0) dup2(nul, 0);
+    dup2(lfd, 1);
+    dup2(lfd, 2);
+    sigset_t none;
+    sigemptyset(&none);
+    sigprocmask(SIG_SETMASK, &none, NULL);
+    signal(SIGPIPE, SIG_DFL);
+    execv(g_daemon, (char *const *)argv);
+    _exit(127);
+  }
+  close(lfd);
+  g_pid = pid;
+  g_port = 0;
+
+  const char *needle = "listening on http://127.0.0.1:";
+  double deadline = now_s() + 10.0;
+  for (;;) {
+    size_t len = 0;
+    char *log = h_read_file(g_logpath, &len);
+    if (log && (size_t)from <= len) {
+      const char *p = strstr(log + from, needle);
+      if (p) {
+        p += strlen(needle);
+        char *end = NULL;
+        long port = strtol(p, &end, 10);
+        if (end != p && *end != '\0' && port > 0 && port < 65536) {
+          g_port = (int)port;
+          free(log);
+          return;
+        }
+      }
+    }
+    free(log);
+    int status = 0;
+    if (child_exited(&status)) {
+      char why[128];
+      describe_status(status, why, sizeof why);
+      FG_TEST_FAIL("the daemon exited before it listened (%s)", why);
+    }
+    if (now_s() > deadline)
+      FG_TEST_FAIL("no \"%s<port>\" line in %s within 10 s", needle, g_logpath);
+    h_sleep_ms(20);
+  }
+}
+
+static int wait_exit(double timeout_s, int *status) {
+  double deadline = now_s() + timeout_s;
+  while (!child_exited(status)) {
+    if (now_s() > deadline) return 0;
+    h_sleep_ms(10);
+  }
+  return 1;
+}
+
+void h_stop(void) {
+  if (g_pid <= 0) FG_TEST_FAIL("h_stop: no daemon running");
+  if (kill(g_pid, SIGTERM) != 0) FG_TEST_FAIL("kill SIGTERM: %s", strerror(errno));
+  int status = 0;
+  /* A hang guard, not a timing assertion: a clean shutdown must end at all. */
+  if (!wait_exit(60.0, &status)) {
+    kill(g_pid, SIGKILL);
+    FG_TEST_FAIL("the daemon did not exit within 60 s of SIGTERM");
+  }
+  char why[128];
+  describe_status(status, why, sizeof why);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    FG_TEST_FAIL("the daemon's SIGTERM shutdown ended with %s, expected exit status 0", why);
+  g_port = 0;
+}
+
+void h_kill(void) {
+  if (g_pid <= 0) FG_TEST_FAIL("h_kill: no daemon running");
+  kill(g_pid, SIGKILL);
+  int status = 0;
+  waitpid(g_pid, &status, 0);
+  g_pid = -1;
+  g_port = 0;
+}
+
+void h_signal(int sig) {
+  if (g_pid <= 0) FG_TEST_FAIL("h_signal: no daemon running");
+  if (kill(g_pid, sig) != 0) FG_TEST_FAIL("kill %d: %s", sig, strerror(errno));
+}
+
+int h_alive(void) {
+  int status = 0;
+  if (child_exited(&status)) return 0;
+  return kill(g_pid, 0) == 0;
+}
+
+char *h_log(void) {
+  char *s = h_read_file(g_logpath, NULL);
+  if (!s) FG_TEST_FAIL("cannot read %s", g_logpath);
+  return s;
+}
+
+int h_log_count(const char *needle) {
+  char *log = h_log();
+  int n = 0;
+  for (const char *p = strstr(log, needle); p; p = strstr(p + 1, needle)) n++;
+  free(log);
+  return n;
+}
+
+int h_wait_log(const char *needle, int min_count, double timeout_s) {
+  double deadline = now_s() + timeout_s;
+  for (;;) {
+    if (h_log_count(needle) >= min_count) return 1;
+    if (now_s() > deadline) return 0;
+    h_sleep_ms(20);
+  }
+}
+
+int h_run_daemon_capture(const char *const *args, char **out) {
+  char path[PATH_MAX + 32];
+  snprintf(path, sizeof path, "%s/capture.txt", g_tmp);
+  int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) FG_TEST_FAIL("open %s: %s", path, strerror(errno));
+  const char *argv[32];
+  int n = 0;
+  argv[n++] = g_daemon;
+  for (int i = 0; args[i] && n < 31; i++) argv[n++] = args[i];
+  argv[n] = NULL;
+  pid_t parent = getpid();
+  pid_t pid = fork();
+  if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));
+  if (pid == 0) {
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != parent) _exit(127);
+    int nul = open("/dev/null", O_RDONLY);
+    if (nul >= 0) dup2(nul, 0);
+    dup2(fd, 1);
+    dup2(fd, 2);
+    signal(SIGPIPE, SIG_DFL);
+    execv(g_daemon, (char *const *)argv);
+    _exit(127);
+  }
+  close(fd);
+  int status = 0;
+  double deadline = now_s() + 60.0;
+  for (;;) {
+    pid_t r = waitpid(pid, &status, WNOHANG);
+    if (r == pid) break;
+    if (now_s() > deadline) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      FG_TEST_FAIL("%s did not exit within 60 s", g_daemon);
+    }
+    h_sleep_ms(10);
+  }
+  *out = h_read_file(path, NULL);
+  if (!*out) FG_TEST_FAIL("cannot read %s", path);
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Files                                                                                      */
+
+static const char *g_count_needle;
+static int g_count;
+static pthread_mutex_t g_count_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static int count_cb(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
+  (void)sb;
+  if (flag == FTW_F || flag == FTW_SL) {
+    const char *name = path + ftw->base;
+    if (strstr(name, g_count_needle)) {
+      fprintf(stderr, "found %s\n", path);
+      g_count++;
+    }
+  }
+  return 0;
+}
+
+int h_count_files(const char *dir, const char *needle) {
+  pthread_mutex_lock(&g_count_lock);
+  g_count_needle = needle;
+  g_count = 0;
+  nftw(dir, count_cb, 16, FTW_PHYS);
+  int n = g_count;
+  pthread_mutex_unlock(&g_count_lock);
+  return n;
+}
+
+char *h_shared_data(void) {
+  const char *d = getenv("FG_SHARED_DATA");
+  if (!d || !*d) FG_TEST_FAIL("FG_SHARED_DATA is not set (run through meson test)");
+  char *r = realpath(d, NULL);
+  if (!r) FG_TEST_FAIL("FG_SHARED_DATA=%s: %s", d, strerror(errno));
+  return r;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* HTTP                                                                                       */
+
+void h_set_token(const char *token) {
+  pthread_mutex_lock(&g_token_lock);
+  g_has_token = token != NULL;
+  snprintf(g_token, sizeof g_token, "%s", token ? token : "");
+  pthread_mutex_unlock(&g_token_lock);
+}
+
+typedef struct buf {
+  char *p;
+  size_t n, cap;
+} buf;
+
+static void buf_add(buf *b, const void *data, size_t n) {
+  if (b->n + n + 1 > b->cap) {
+    size_t cap = b->cap ? b->cap : 256;
+    while (cap < b->n + n + 1) cap *= 2;
+    b->p = realloc(b->p, cap);
+    if (!b->p) FG_TEST_FAIL("out of memory");
+    b->cap = cap;
+  }
+  memcpy(b->p + b->n, data, n);
+  b->n += n;
+  b->p[b->n] = '\0';
+}
+
+static size_t on_body(char *ptr, size_t size, size_t nmemb, void *ud) {
+  buf_add(ud, ptr, size * nmemb);
+  return size * nmemb;
+}
+
+static size_t on_header(char *ptr, size_t size, size_t nmemb, void *ud) {
+  h_resp *r = ud;
+  size_t n = size * nmemb;
+  if (n >= 5 && memcmp(ptr, "HTTP/", 5) == 0) {
+    /* A new status line (after a 100 Continue): forget the earlier headers. */
+    for (int i = 0; i < r->n_headers; i++) {
+      free(r->headers[i].name);
+      free(r->headers[i].value);
+    }
+    r->n_headers = 0;
+    return n;
+  }
+  const char *colon = memchr(ptr, ':', n);
+  if (!colon) return n;
+  size_t nl = (size_t)(colon - ptr);
+  const char *v = colon + 1;
+  const char *end = ptr + n;
+  while (v < end && (*v == ' ' || *v == '\t')) v++;
+  while (end > v && (end[-1] == '\r' || end[-1] == '\n' || end[-1] == ' ')) end--;
+  r->headers = realloc(r->headers, sizeof(h_header) * (size_t)(r->n_headers + 1));
+  if (!r->headers) FG_TEST_FAIL("out of memory");
+  r->headers[r->n_headers].name = strndup(ptr, nl);
+  r->headers[r->n_headers].value = strndup(v, (size_t)(end - v));
+  r->n_headers++;
+  return n;
+}
+
+const char *h_resp_header(const h_resp *r, const char *name) {
+  for (int i = 0; i < r->n_headers; i++)
+    if (strcasecmp(r->headers[i].name, name) == 0) return r->headers[i].value;
+  return NULL;
+}
+
+void h_resp_free(h_resp *r) {
+  if (!r) return;
+  for (int i = 0; i < r->n_headers; i++) {
+    free(r->headers[i].name);
+    free(r->headers[i].value);
+  }
+  free(r->headers);
+  free(r->body);
+  json_decref(r->json);
+  free(r);
+}
+
+h_resp *h_request(const h_req *req) {
+  if (g_port <= 0) FG_TEST_FAIL("h_request %s: the daemon is not running", req->path);
+  h_resp *r = calloc(1, sizeof *r);
+  if (!r) FG_TEST_FAIL("out of memory");
+  CURL *c = curl_easy_init();
+  if (!c) FG_TEST_FAIL("curl_easy_init failed");
+  char url[1200];
+  snprintf(url, sizeof url, "http://127.0.0.1:%d%s", g_port, req->path);
+  const char *method = req->method ? req->method : "GET";
+  curl_easy_setopt(c, CURLOPT_URL, url);
+  curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+  curl_easy_setopt(c, CURLOPT_NOPROXY, "*");
+  /* A hang guard for a wedged daemon; meson's timeout is the real limit. */
+  curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
+  curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT, 30L);
+  buf body = {0};
+  curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);
+  curl_easy_setopt(c, CURLOPT_WRITEDATA, &body);
+  curl_easy_setopt(c, CURLOPT_HEADERFUNCTION, on_header);
+  curl_easy_setopt(c, CURLOPT_HEADERDATA, r);
+
+  struct curl_slist *hdrs = NULL;
+  char line[700];
+  if (req->auth == H_AUTH_TOKEN) {
+    snprintf(line, sizeof line, "Authorization: Bearer %s", req->token ? req->token : "");
+    hdrs = curl_slist_append(hdrs, line);
+  } else if (req->auth == H_AUTH_DEFAULT) {
+    pthread_mutex_lock(&g_token_lock);
+    if (g_has_token) {
+      snprintf(line, sizeof line, "Authorization: Bearer %s", g_token);
+      hdrs = curl_slist_append(hdrs, line);
+    }
+    pthread_mutex_unlock(&g_token_lock);
+  }
+  for (int i = 0; req->headers && req->headers[i]; i++) hdrs = curl_slist_append(hdrs, req->headers[i]);
+
+  curl_mime *mime = NULL;
+  if (req->n_parts > 0) {
+    mime = curl_mime_init(c);
+    for (int i = 0; i < req->n_parts; i++) {
+      const h_part *p = &req->parts[i];
+      curl_mimepart *mp = curl_mime_addpart(mime);
+      curl_mime_name(mp, p->name);
+      curl_mime_data(mp, p->data ? p->data : "", p->len);
+      if (p->filename) curl_mime_filename(mp, p->filename);
+      if (p->type) curl_mime_type(mp, p->type);
+    }
+    curl_easy_setopt(c, CURLOPT_MIMEPOST, mime);
+    if (strcmp(method, "POST") != 0) curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
+  } else if (req->read_cb) {
+    curl_easy_setopt(c, CURLOPT_POST, 1L);
+    curl_easy_setopt(c, CURLOPT_READFUNCTION, req->read_cb);
+    curl_easy_setopt(c, CURLOPT_READDATA, req->read_ud);
+    if (req->read_len >= 0)
+      curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, (curl_off_t)req->read_len);
+    else
+      hdrs = curl_slist_append(hdrs, "Transfer-Encoding: chunked");
+    if (strcmp(method, "POST") != 0) curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
+  } else if (req->body) {
+    snprintf(line, sizeof line, "Content-Type: %s",
+             req->content_type ? req->content_type : "application/json");
+    hdrs = curl_slist_append(hdrs, line);
+    curl_easy_setopt(c, CURLOPT_POSTFIELDS, req->body);
+    curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE_LARGE, (curl_off_t)req->body_len);
+    if (strcmp(method, "POST") != 0) curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
+  } else if (strcmp(method, "GET") == 0) {
+    curl_easy_setopt(c, CURLOPT_HTTPGET, 1L);
+  } else if (strcmp(method, "HEAD") == 0) {
+    curl_easy_setopt(c, CURLOPT_NOBODY, 1L);
+  } else if (strcmp(method, "POST") == 0) {
+    curl_easy_setopt(c, CURLOPT_POSTFIELDS, "");
+    curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE, 0L);
+  } else {
+    curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
+  }
+  curl_easy_setopt(c, CURLOPT_HTTPHEADER, hdrs);
+
+  r->curl_rc = (int)curl_easy_perform(c);
+  curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &r->status);
+  if (r->curl_rc != CURLE_OK && r->status == 0)
+    fprintf(stderr, "note: %s %s: %s\n", method, req->path, curl_easy_strerror((CURLcode)r->curl_rc));
+  curl_easy_cleanup(c);
+  curl_mime_free(mime);
+  curl_slist_free_all(hdrs);
+  if (!body.p) buf_add(&body, "", 0);
+  r->body = body.p;
+  r->len = body.n;
+  r->json = json_loadb(r->body, r->len, JSON_DECODE_ANY, NULL);
+  return r;
+}
+
+h_resp *h_get(const char *path) {
+  h_req q = {.method = "GET", .path = path};
+  return h_request(&q);
+}
+
+h_resp *h_delete(const char *path) {
+  h_req q = {.method = "DELETE", .path = path};
+  return h_request(&q);
+}
+
+h_resp *h_post_json(const char *path, const char *json_text) {
+  h_req q = {.method = "POST", .path = path, .body = json_text, .body_len = strlen(json_text)};
+  return h_request(&q);
+}
+
+h_resp *h_upload_parts(const char *path, const h_part *parts, int n_parts) {
+  h_req q = {.method = "POST", .path = path, .parts = parts, .n_parts = n_parts};
+  return h_request(&q);
+}
+
+h_resp *h_upload(const char *path, const void *image, size_t image_len, const char *meta,
+                 const void *features, size_t features_len) {
+  h_part parts[3];
+  int n = 0;
+  if (image) parts[n++] = (h_part){"image", image, image_len, "image.png", "image/png"};
+  if (meta) parts[n++] = (h_part){"meta", meta, strlen(meta), NULL, "application/json"};
+  if (features)
+    parts[n++] = (h_part){"features", features, features_len, "features.npy",
+                          "application/octet-stream"};
+  return h_upload_parts(path, parts, n);
+}
+
+void h_multipart_build(const h_part *parts, int n_parts, const char *boundary, uint8_t **out,
+                       size_t *out_len) {
+  buf b = {0};
+  for (int i = 0; i < n_parts; i++) {
+    const h_part *p = &parts[i];
+    char *head;
+    if (p->filename)
+      head = h_fmt("--%s\r\nContent-Disposition: form-data; name=\"%s\"; filename=\"%s\"\r\n"
+                   "Content-Type: %s\r\n\r\n",
+                   boundary, p->name, p->filename, p->type ? p->type : "application/octet-stream");
+    else if (p->type)
+      head = h_fmt("--%s\r\nContent-Disposition: form-data; name=\"%s\"\r\nContent-Type: %s\r\n\r\n",
+                   boundary, p->name, p->type);
+    else
+      head = h_fmt("--%s\r\nContent-Disposition: form-data; name=\"%s\"\r\n\r\n", boundary, p->name);
+    buf_add(&b, head, strlen(head));
+    free(head);
+    buf_add(&b, p->data, p->len);
+    buf_add(&b, "\r\n", 2);
+  }
+  char *tail = h_fmt("--%s--\r\n", boundary);
+  buf_add(&b, tail, strlen(tail));
+  free(tail);
+  *out = (uint8_t *)b.p;
+  *out_len = b.n;
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Assertions                                                                                 */
+
+static const char *preview(const h_resp *r) { return r->body ? r->body : "(none)"; }
+
+void h_assert_status_at(const char *file, int line, const h_resp *r, long status) {
+  if (r->status != status) {
+    fprintf(stderr, "%s:%d: HTTP status %ld, expected %ld (curl: %s); body: %.2000s\n", file, line,
+            r->status, status, curl_easy_strerror((CURLcode)r->curl_rc), preview(r));
+    exit(1);
+  }
+}
+
+void h_assert_error_at(const char *file, int line, const h_resp *r, long status,
+                       const char *code) {
+  h_assert_status_at(file, line, r, status);
+  json_t *err = r->json ? json_object_get(r->json, "error") : NULL;
+  json_t *c = err ? json_object_get(err, "code") : NULL;
+  json_t *m = err ? json_object_get(err, "message") : NULL;
+  if (!json_is_object(err) || !json_is_string(c) || !json_is_string(m)) {
+    fprintf(stderr, "%s:%d: error reply is not {\"error\":{\"code\":str,\"message\":str}}: %.2000s\n",
+            file, line, preview(r));
+    exit(1);
+  }
+  if (strcmp(json_string_value(c), code) != 0) {
+    fprintf(stderr, "%s:%d: error code \"%s\", expected \"%s\"; body: %.2000s\n", file, line,
+            json_string_value(c), code, preview(r));
+    exit(1);
+  }
+  if (json_string_length(m) == 0) {
+    fprintf(stderr, "%s:%d: empty error message; body: %.2000s\n", file, line, preview(r));
+    exit(1);
+  }
+  const char *ct = h_resp_header(r, "Content-Type");
+  if (!ct || strncasecmp(ct, "application/json", 16) != 0) {
+    fprintf(stderr, "%s:%d: error reply Content-Type \"%s\", expected application/json\n", file,
+            line, ct ? ct : "(none)");
+    exit(1);
+  }
+}
+
+json_t *h_jfind(json_t *root, const char *path) {
+  json_t *cur = root;
+  const char *p = path;
+  while (cur && *p) {
+    const char *dot = strchr(p, '.');
+    size_t n = dot ? (size_t)(dot - p) : strlen(p);
+    char key[256];
+    if (n >= sizeof key) return NULL;
+    memcpy(key, p, n);
+    key[n] = '\0';
+    if (json_is_object(cur)) {
+      cur = json_object_get(cur, key);
+    } else if (json_is_array(cur)) {
+      char *end = NULL;
+      long i = strtol(key, &end, 10);
+      if (end == key || *end || i < 0) return NULL;
+      cur = json_array_get(cur, (size_t)i);
+    } else {
+      return NULL;
+    }
+    p += n;
+    if (*p == '.') p++;
+  }
+  return cur;
+}
+
+json_t *h_jget_at(const char *file, int line, json_t *root, const char *path) {
+  if (!root) {
+    fprintf(stderr, "%s:%d: no JSON (looking up \"%s\")\n", file, line, path);
+    exit(1);
+  }
+  json_t *v = h_jfind(root, path);
+  if (!v) {
+    char *s = json_dumps(root, JSON_ENCODE_ANY | JSON_COMPACT);
+    fprintf(stderr, "%s:%d: no \"%s\" in %.2000s\n", file, line, path, s ? s : "?");
+    free(s);
+    exit(1);
+  }
+  return v;
+}
+
+double h_jnum_at(const char *file, int line, json_t *root, const char *path) {
+  json_t *v = h_jget_at(file, line, root, path);
+  if (!json_is_number(v)) {
+    fprintf(stderr, "%s:%d: \"%s\" is not a number\n", file, line, path);
+    exit(1);
+  }
+  return json_number_value(v);
+}
+
+long long h_jint_at(const char *file, int line, json_t *root, const char *path) {
+  json_t *v = h_jget_at(file, line, root, path);
+  if (!json_is_integer(v)) {
+    char *s = json_dumps(v, JSON_ENCODE_ANY);
+    fprintf(stderr, "%s:%d: \"%s\" is not an integer: %s\n", file, line, path, s ? s : "?");
+    free(s);
+    exit(1);
+  }
+  return json_integer_value(v);
+}
+
+const char *h_jstr_at(const char *file, int line, json_t *root, const char *path) {
+  json_t *v = h_jget_at(file, line, root, path);
+  if (!json_is_string(v)) {
+    char *s = json_dumps(v, JSON_ENCODE_ANY);
+    fprintf(stderr, "%s:%d: \"%s\" is not a string: %s\n", file, line, path, s ? s : "?");
+    free(s);
+    exit(1);
+  }
+  return json_string_value(v);
+}
+
+void h_assert_vec_at(const char *file, int line, json_t *v, const double *x, int n, double tol) {
+  if (!json_is_array(v) || (int)json_array_size(v) != n) {
+    char *s = json_dumps(v, JSON_ENCODE_ANY);
+    fprintf(stderr, "%s:%d: expected an array of %d numbers, got %s\n", file, line, n, s ? s : "?");
+    free(s);
+    exit(1);
+  }
+  for (int i = 0; i < n; i++) {
+    json_t *e = json_array_get(v, (size_t)i);
+    if (!json_is_number(e) || !(fabs(json_number_value(e) - x[i]) <= tol)) {
+      char *s = json_dumps(v, JSON_ENCODE_ANY);
+      fprintf(stderr, "%s:%d: element %d is %s, expected %.9g (tol %g)\n", file, line, i,
+              s ? s : "?", x[i], tol);
+      free(s);
+      exit(1);
+    }
+  }
+}
+
+void h_assert_matrix_at(const char *file, int line, json_t *m, const double T[16], double tol) {
+  if (!json_is_array(m) || json_array_size(m) != 4) {
+    fprintf(stderr, "%s:%d: matrix is not an array of 4 rows\n", file, line);
+    exit(1);
+  }
+  for (int r = 0; r < 4; r++) h_assert_vec_at(file, line, json_array_get(m, (size_t)r), T + 4 * r, 4, tol);
+}
+
+void h_assert_json_equal_at(const char *file, int line, json_t *a, json_t *b) {
+  if (!a || !b || !json_equal(a, b)) {
+    char *sa = a ? json_dumps(a, JSON_ENCODE_ANY | JSON_SORT_KEYS | JSON_COMPACT) : NULL;
+    char *sb = b ? json_dumps(b, JSON_ENCODE_ANY | JSON_SORT_KEYS | JSON_COMPACT) : NULL;
+    fprintf(stderr, "%s:%d: JSON differs:\n  %.3000s\nvs\n  %.3000s\n", file, line,
+            sa ? sa : "(null)", sb ? sb : "(null)");
+    free(sa);
+    free(sb);
+    exit(1);
+  }
+}
+
+/* ---------------------------------------------------------------------------------------- */
+/* Test data                                                                                  */
+
+static void put_be32(uint8_t *p, uint32_t v) {
+  p[0] = (uint8_t)(v >> 24);
+  p[1] = (uint8_t)(v >> 16);
+  p[2] = (uint8_t)(v >> 8);
+  p[3] = (uint8_t)v;
+}
+
+static void png_chunk(buf *b, const char *type, const uint8_t *data, size_t n) {
+  uint8_t hdr[8];
+  put_be32(hdr, (uint32_t)n);
+  memcpy(hdr + 4, type, 4);
+  buf_add(b, hdr, 8);
+  if (n) buf_add(b, data, n);
+  uLong crc = crc32(0L, (const Bytef *)type, 4);
+  if (n) crc = crc32(crc, data, (uInt)n);
+  uint8_t c[4];
+  put_be32(c, (uint32_t)crc);
+  buf_add(b, c, 4);
+}
+
+static uint32_t xorshift(uint32_t *s) {
+  uint32_t x = *s;
+  x ^= x << 13;
+  x ^= x >> 17;
+  x ^= x << 5;
+  return *s = x;
+}
+
+void h_png(int w, int h, int channels, int bits, unsigned seed, int noise, uint8_t **out,
+           size_t *out_len) {
+  ASSERT(channels == 1 || channels == 3 || channels == 4);
+  ASSERT(bits == 8 || bits == 16);
+  size_t bps = (size_t)bits / 8;
+  size_t row = 1 + (size_t)w * (size_t)channels * bps;
+  size_t raw_n = row * (size_t)h;
+  uint8_t *raw = malloc(raw_n);
+  if (!raw) FG_TEST_FAIL("out of memory");
+  uint32_t rng = seed * 2654435761u + 1u;
+  for (int y = 0; y < h; y++) {
+    uint8_t *p = raw + row * (size_t)y;
+    *p++ = 0; /* filter: none */
+    for (int x = 0; x < w; x++) {
+      for (int c = 0; c < channels; c++) {
+        unsigned v;
+        if (noise)
+          v = xorshift(&rng);
+        else if (c == 3)
+          v = (unsigned)(x < w / 2 ? 255 : 128) * 257u; /* half opaque, half translucent */
+        else
+          v = ((unsigned)(x * 5 + y * 3 + c * 40) + seed * 17u) % 256u * 257u;
+        if (bits == 8) {
+          *p++ = (uint8_t)(noise ? v : v >> 8);
+        } else {
+          *p++ = (uint8_t)(v >> 8);
+          *p++ = (uint8_t)v;
+        }
+      }
+    }
+  }
+  uLongf zn = compressBound((uLong)raw_n);
+  uint8_t *z = malloc(zn);
+  if (!z) FG_TEST_FAIL("out of memory");
+  if (compress2(z, &zn, raw, (uLong)raw_n, noise ? 0 : 6) != Z_OK) FG_TEST_FAIL("compress2 failed");
+  free(raw);
+
+  buf b = {0};
+  static const uint8_t sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  buf_add(&b, sig, 8);
+  uint8_t ihdr[13];
+  put_be32(ihdr, (uint32_t)w);
+  put_be32(ihdr + 4, (uint32_t)h);
+  ihdr[8] = (uint8_t)bits;
+  ihdr[9] = channels == 1 ? 0 : channels == 3 ? 2 : 6;
+  ihdr[10] = ihdr[11] = ihdr[12] = 0;
+  png_chunk(&b, "IHDR", ihdr, 13);
+  png_chunk(&b, "IDAT", z, zn);
+  png_chunk(&b, "IEND", NULL, 0);
+  free(z);
+  *out = (uint8_t *)b.p;
+  *out_len = b.n;
+}
+
+/* float -> IEEE binary16 for the small exact values h_npy writes (normal range only). */
+static uint16_t to_half(float f) {
+  uint32_t u;
+  memcpy(&u, &f, 4);
+  uint16_t sign = (uint16_t)((u >> 16) & 0x8000u);
+  if ((u & 0x7fffffffu) == 0) return sign;
+  int e = (int)((u >> 23) & 0xff) - 127 + 15;
+  uint32_t mant = u & 0x7fffffu;
+  if (e <= 0 || e >= 31) FG_TEST_FAIL("to_half: %g out of the normal half range", (double)f);
+  uint32_t m = mant >> 13;
+  if ((mant & 0x1fffu) > 0x1000u || ((mant & 0x1fffu) == 0x1000u && (m & 1u))) m++;
+  return (uint16_t)(sign | (uint16_t)(((uint32_t)e << 10) + m));
+}
+
+void h_npy(const char *descr, const int *shape, int ndim, unsigned seed, uint8_t **out,
+           size_t *out_len) {
+  char sh[128] = "";
+  size_t count = 1;
+  for (int i = 0; i < ndim; i++) {
+    char part[32];
+    snprintf(part, sizeof part, ndim == 1 ? "%d," : (i ? ", %d" : "%d"), shape[i]);
+    strncat(sh, part, sizeof sh - strlen(sh) - 1);
+    count *= (size_t)shape[i];
+  }
+  char dict[256];
+  int dn = snprintf(dict, sizeof dict, "{'descr': '%s', 'fortran_order': False, 'shape': (%s), }",
+                    descr, sh);
+  size_t total = 10 + (size_t)dn + 1;
+  size_t pad = (64 - total % 64) % 64;
+  size_t hlen = (size_t)dn + pad + 1;
+  size_t esize = strcmp(descr, "<f2") == 0 ? 2 : strcmp(descr, "<f8") == 0 ? 8 : 4;
+  size_t n = 10 + hlen + count * esize;
+  uint8_t *p = malloc(n);
+  if (!p) FG_TEST_FAIL("out of memory");
+  memcpy(p, "\x93NUMPY\x01\x00", 8);
+  p[8] = (uint8_t)(hlen & 0xff);
+  p[9] = (uint8_t)(hlen >> 8);
+  memcpy(p + 10, dict, (size_t)dn);
+  memset(p + 10 + dn, ' ', pad);
+  p[10 + hlen - 1] = '\n';
+  uint8_t *d = p + 10 + hlen;
+  for (size_t i = 0; i < count; i++) {
+    float v = (float)((i * 7 + seed) % 97) / 97.0f - 0.5f;
+    if (esize == 2) {
+      uint16_t hv = to_half(v);
+      d[2 * i] = (uint8_t)hv;
+      d[2 * i + 1] = (uint8_t)(hv >> 8);
+    } else if (esize == 8) {
+      double dv = v;
+      memcpy(d + 8 * i, &dv, 8);
+    } else {
+      memcpy(d + 4 * i, &v, 4);
+    }
+  }
+  *out = p;
+  *out_len = n;
+}
+
+void h_pose(double T[16], double rx, double ry, double rz, double tx, double ty, double tz) {
+  double th = sqrt(rx * rx + ry * ry + rz * rz);
+  double R[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  if (th > 0) {
+    double kx = rx / th, ky = ry / th, kz = rz / th, c = cos(th), s = sin(th), v = 1 - c;
+    R[0] = kx * kx * v + c;
+    R[1] = kx * ky * v - kz * s;
+    R[2] = kx * kz * v + ky * s;
+    R[3] = ky * kx * v + kz * s;
+    R[4] = ky * ky * v + c;
+    R[5] = ky * kz * v - kx * s;
+    R[6] = kz * kx * v - ky * s;
+    R[7] = kz * ky * v + kx * s;
+    R[8] = kz * kz * v + c;
+  }
+  double t[3] = {tx, ty, tz};
+  for (int r = 0; r < 3; r++) {
+    for (int c = 0; c < 3; c++) T[4 * r + c] = R[3 * r + c];
+    T[4 * r + 3] = t[r];
+  }
+  T[12] = T[13] = T[14] = 0;
+  T[15] = 1;
+}
+
+char *h_matrix_json(const double T[16]) {
+  return h_fmt("[[%.17g,%.17g,%.17g,%.17g],[%.17g,%.17g,%.17g,%.17g],"
+               "[%.17g,%.17g,%.17g,%.17g],[%.17g,%.17g,%.17g,%.17g]]",
+               T[0], T[1], T[2], T[3], T[4], T[5], T[6], T[7], T[8], T[9], T[10], T[11], T[12],
+               T[13], T[14], T[15]);
+}
+
+char *h_meta(const double T[16], const char *convention, double fl, double cx, double cy, int w,
+             int h) {
+  char *m = h_matrix_json(T);
+  char *s = h_fmt("{\"transform_matrix\": %s, \"convention\": \"%s\", \"camera\": {\"fl_x\": %.17g, "
+                  "\"fl_y\": %.17g, \"cx\": %.17g, \"cy\": %.17g, \"w\": %d, \"h\": %d, "
+                  "\"camera_model\": \"PINHOLE\"}}",
+                  m, convention, fl, fl, cx, cy, w, h);
+  free(m);
+  return s;
+}

@@ -1,0 +1,153 @@
+/* /metrics in the Prometheus text format: request counters by method, route template and
+ * code, the duration histogram, scene/frame gauges and the ingested-frames counter, checked
+ * against the exact requests this test made. */
+#include <strings.h>
+
+#include "config.h"
+#include "harness.h"
+
+/* Sum of the values of every series of family `name` whose labels include all of `want`
+ * ("key", "value", ..., NULL). -1 when no series matches. Label order is free. */
+static double metric(const char *text, const char *name, const char *const *want) {
+  double sum = -1;
+  size_t nl = strlen(name);
+  for (const char *line = text; line && *line; line = strchr(line, '\n') ? strchr(line, '\n') + 1 : NULL) {
+    if (*line == '#' || strncmp(line, name, nl) != 0) continue;
+    const char *p = line + nl;
+    char labels[1024] = "";
+    if (*p == '{') {
+      /* the closing brace outside quoted values: routes such as "/v1/scenes/{s}" hold braces */
+      const char *end = p + 1;
+      for (int quoted = 0; *end && (quoted || *end != '}'); end++) {
+        if (*end == '\\' && end[1]) end++;
+        else if (*end == '"') quoted = !quoted;
+      }
+      if (*end != '}') continue;
+      if ((size_t)(end - p) >= sizeof labels) continue;
+      memcpy(labels, p + 1, (size_t)(end - p - 1));
+      labels[end - p - 1] = '\0';
+      p = end + 1;
+    }
+    if (*p != ' ') continue; /* a longer name with the same prefix */
+    int match = 1;
+    for (int i = 0; want && want[i]; i += 2) {
+      char kv[512];
+      snprintf(kv, sizeof kv, "%s=\"%s\"", want[i], want[i + 1]);
+      /* the pair must start a label: at the beginning or after a comma */
+      const char *q = labels;
+      int found = 0;
+      while ((q = strstr(q, kv)) != NULL) {
+        if ((q == labels || q[-1] == ',') && (q[strlen(kv)] == ',' || q[strlen(kv)] == '\0')) {
+          found = 1;
+          break;
+        }
+        q++;
+      }
+      if (!found) match = 0;
+    }
+    if (!match) continue;
+    double v = strtod(p + 1, NULL);
+    sum = sum < 0 ? v : sum + v;
+  }
+  return sum;
+}
+
+static void expect_requests(const char *text, const char *method, const char *route,
+                            const char *code, double n) {
+  const char *want[] = {"method", method, "route", route, "code", code, NULL};
+  double v = metric(text, "fieldgrip_http_requests_total", want);
+  if (v != n)
+    FG_TEST_FAIL("fieldgrip_http_requests_total{method=\"%s\",route=\"%s\",code=\"%s\"} is %g, "
+                 "expected %g; /metrics:\n%s",
+                 method, route, code, v, n, text);
+}
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+  h_start();
+
+  for (int i = 0; i < 3; i++) {
+    h_resp *r = h_get("/v1/health");
+    ASSERT_STATUS(r, 200);
+    h_resp_free(r);
+  }
+  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"m\"}");
+  ASSERT_STATUS(r, 201);
+  h_resp_free(r);
+  r = h_post_json("/v1/scenes", "{\"name\": \"m\"}");
+  ASSERT_HTTP_ERROR(r, 409, "scene_exists");
+  h_resp_free(r);
+  r = h_get("/v1/scenes/nope");
+  ASSERT_HTTP_ERROR(r, 404, "scene_not_found");
+  h_resp_free(r);
+  r = h_get("/v1/scenes/m");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+
+  uint8_t *png, *npy;
+  size_t png_len, npy_len;
+  h_png(32, 24, 3, 8, 1, 0, &png, &png_len);
+  static const int shape[3] = {3, 4, 8};
+  h_npy("<f4", shape, 3, 0, &npy, &npy_len);
+  const char *meta = "{\"transform_matrix\": [[1,0,0,0],[0,1,0,0],[0,0,1,0.5],[0,0,0,1]], "
+                     "\"fl_x\": 30, \"fl_y\": 30, \"cx\": 16, \"cy\": 12}";
+  for (int i = 0; i < 2; i++) {
+    r = h_upload("/v1/scenes/m/frames", png, png_len, meta, npy, npy_len);
+    ASSERT_STATUS(r, 201);
+    h_resp_free(r);
+  }
+  r = h_upload("/v1/scenes/m/frames", png, png_len, NULL, npy, npy_len);
+  ASSERT_HTTP_ERROR(r, 400, "missing_part");
+  h_resp_free(r);
+  free(png);
+  free(npy);
+
+  r = h_get("/metrics");
+  ASSERT_STATUS(r, 200);
+  const char *ct = h_resp_header(r, "Content-Type");
+  ASSERT(ct && strncasecmp(ct, "text/plain", 10) == 0);
+  ASSERT_STRCONTAINS(ct, "version=0.0.4");
+  const char *text = r->body;
+  ASSERT_STRCONTAINS(text, "fieldgrip_http_requests_total{");
+  ASSERT_STRCONTAINS(text, "# TYPE fieldgrip_http_requests_total counter");
+  ASSERT_STRCONTAINS(text, "# TYPE fieldgrip_http_request_duration_seconds histogram");
+  ASSERT_STRCONTAINS(text, "fieldgrip_frames_ingested_total");
+
+  const char *bi[] = {"version", FG_VERSION, NULL};
+  ASSERT_EQ(metric(text, "fieldgrip_build_info", bi), 1);
+  expect_requests(text, "GET", "/v1/health", "200", 3);
+  expect_requests(text, "POST", "/v1/scenes", "201", 1);
+  expect_requests(text, "POST", "/v1/scenes", "409", 1);
+  expect_requests(text, "GET", "/v1/scenes/{s}", "404", 1);
+  expect_requests(text, "GET", "/v1/scenes/{s}", "200", 1);
+  expect_requests(text, "POST", "/v1/scenes/{s}/frames", "201", 2);
+  expect_requests(text, "POST", "/v1/scenes/{s}/frames", "400", 1);
+  ASSERT_EQ(metric(text, "fieldgrip_frames_ingested_total", NULL), 2);
+  ASSERT_EQ(metric(text, "fieldgrip_frames", NULL), 2);
+  ASSERT_EQ(metric(text, "fieldgrip_scenes", NULL), 1);
+
+  /* The histogram: +Inf bucket = count, per route. */
+  const char *hinf[] = {"route", "/v1/health", "le", "+Inf", NULL};
+  const char *hroute[] = {"route", "/v1/health", NULL};
+  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_bucket", hinf), 3);
+  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_count", hroute), 3);
+  double sum = metric(text, "fieldgrip_http_request_duration_seconds_sum", hroute);
+  ASSERT(sum >= 0);
+  const char *finf[] = {"route", "/v1/scenes/{s}/frames", "le", "+Inf", NULL};
+  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_bucket", finf), 3);
+  h_resp_free(r);
+
+  /* A second scrape sees the first one. */
+  r = h_get("/metrics");
+  ASSERT_STATUS(r, 200);
+  const char *mw[] = {"method", "GET", "route", "/metrics", "code", "200", NULL};
+  double scrapes = metric(r->body, "fieldgrip_http_requests_total", mw);
+  ASSERT(scrapes >= 1 && scrapes <= 2);
+  expect_requests(r->body, "GET", "/v1/health", "200", 3);
+  h_resp_free(r);
+
+  h_stop();
+  h_done();
+  printf("ok\n");
+  return 0;
+}

@@ -1,0 +1,136 @@
+/* Configuration: start-up errors name file, line and key; SIGHUP with a bad file keeps the old
+ * settings (and logs "reload failed"); SIGHUP with a good file brings a new token, a new
+ * upload limit and new declared scenes. */
+#include <signal.h>
+
+#include "harness.h"
+
+static long status_with(const char *token, const char *path) {
+  h_req q = {.method = "GET", .path = path, .auth = token ? H_AUTH_TOKEN : H_AUTH_NONE, .token = token};
+  h_resp *r = h_request(&q);
+  long st = r->status;
+  if (st == 401) ASSERT_HTTP_ERROR(r, 401, "unauthorized");
+  h_resp_free(r);
+  return st;
+}
+
+static void expect_startup_error(const char *conf_text, const char *key, int line) {
+  char *path = h_fmt("%s/bad.conf", h_tmpdir());
+  h_write_file(path, conf_text, strlen(conf_text));
+  char *state = h_fmt("%s/state-bad", h_tmpdir());
+  const char *args[] = {"--config", path, "--state-dir", state, "--listen", "127.0.0.1:0", NULL};
+  char *out = NULL;
+  int rc = h_run_daemon_capture(args, &out);
+  if (rc == 0 || rc >= 128) FG_TEST_FAIL("bad config: exit %d, expected a failure exit; output: %s", rc, out);
+  char *where = h_fmt("%s:%d", path, line);
+  ASSERT_STRCONTAINS(out, where);
+  ASSERT_STRCONTAINS(out, key);
+  ASSERT_EQ(strstr(out, "listening on") == NULL, 1);
+  free(where);
+  free(out);
+  free(state);
+  free(path);
+}
+
+static long long metric_value(const char *text, const char *series) {
+  const char *p = strstr(text, series);
+  while (p && p != text && p[-1] != '\n') p = strstr(p + 1, series);
+  if (!p) FG_TEST_FAIL("no series %s in /metrics:\n%s", series, text);
+  return strtoll(p + strlen(series), NULL, 10);
+}
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+
+  /* Start-up errors name the file, the line and the key. */
+  expect_startup_error("[http]\nlisten = 127.0.0.1:0\nbogus_key = 1\n", "bogus_key", 3);
+  expect_startup_error("[http]\nmax_upload_mb = lots\n", "max_upload_mb", 2);
+  expect_startup_error("[scene s]\nworkspace_min = 0 0\n", "workspace_min", 2);
+
+  h_write_config("[http]\ntoken = tokenA\n");
+  h_start();
+  h_set_token("tokenA");
+  ASSERT_EQ(status_with("tokenA", "/v1/scenes"), 200);
+  ASSERT_EQ(status_with("tokenB", "/v1/scenes"), 401);
+
+  /* A bad file: logged, old settings stay. */
+  h_write_config("[http]\ntoken = tokenB\nno_such_key = 1\n");
+  h_signal(SIGHUP);
+  if (!h_wait_log("reload failed", 1, 10.0)) FG_TEST_FAIL("no \"reload failed\" in the log after SIGHUP");
+  ASSERT(h_alive());
+  char *log = h_log();
+  /* The message names the file and line ("reload failed ... FILE:3: ..."). */
+  char *where = h_fmt("%s:3:", h_config_path());
+  const char *failed = strstr(log, "reload failed");
+  ASSERT(failed != NULL);
+  ASSERT_STRCONTAINS(failed, where);
+  ASSERT_STRCONTAINS(failed, "no_such_key");
+  free(where);
+  free(log);
+  h_resp *r = h_get("/v1/health");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  ASSERT_EQ(status_with("tokenA", "/v1/scenes"), 200);
+  ASSERT_EQ(status_with("tokenB", "/v1/scenes"), 401);
+  ASSERT_EQ(status_with(NULL, "/v1/scenes"), 401);
+  r = h_get("/v1/scenes");
+  ASSERT_EQ(json_array_size(JGET(r->json, "scenes")), 0);
+  h_resp_free(r);
+
+  /* A good file: new token, new limit, a declared scene. */
+  h_write_config("[http]\ntoken = tokenB\nmax_upload_mb = 1\n\n"
+                 "[scene shelf]\nworkspace_min = -0.2 -0.3 0.0\nworkspace_max = 0.2 0.3 0.5\n"
+                 "voxel_size = 0.005\n");
+  h_signal(SIGHUP);
+  /* Wait for the reload to take effect (an event, not a deadline on its speed). */
+  int ok = 0;
+  for (int i = 0; i < 500 && !ok; i++) {
+    ok = status_with("tokenB", "/v1/scenes") == 200;
+    if (!ok) h_sleep_ms(20);
+  }
+  if (!ok) FG_TEST_FAIL("tokenB not accepted within 10 s of SIGHUP with a good config");
+  ASSERT(h_alive());
+  ASSERT_EQ(status_with("tokenA", "/v1/scenes"), 401);
+  ASSERT_EQ(status_with(NULL, "/v1/scenes"), 401);
+  ASSERT_EQ(status_with(NULL, "/v1/health"), 200);
+  h_set_token("tokenB");
+
+  r = h_get("/v1/scenes");
+  ASSERT_STATUS(r, 200);
+  ASSERT_EQ(json_array_size(JGET(r->json, "scenes")), 1);
+  json_t *shelf = JGET(r->json, "scenes.0");
+  ASSERT_STREQ(JSTR(shelf, "name"), "shelf");
+  ASSERT(json_is_true(JGET(shelf, "declared_in_config")));
+  static const double mn[3] = {-0.2, -0.3, 0.0}, mx[3] = {0.2, 0.3, 0.5};
+  ASSERT_VEC(JGET(shelf, "workspace.min"), mn, 3, 1e-12);
+  ASSERT_VEC(JGET(shelf, "workspace.max"), mx, 3, 1e-12);
+  ASSERT_NEAR(JNUM(shelf, "voxel_size"), 0.005, 1e-12);
+  ASSERT_EQ(JINT(shelf, "frames"), 0);
+  h_resp_free(r);
+
+  /* The new upload limit holds. */
+  {
+    size_t n = 2 * 1024 * 1024;
+    char *json = malloc(n + 64);
+    ASSERT(json);
+    int k = snprintf(json, 64, "{\"name\": \"big\", \"pad\": \"");
+    memset(json + k, 'a', n);
+    strcpy(json + k + n, "\"}");
+    r = h_post_json("/v1/scenes", json);
+    ASSERT_HTTP_ERROR(r, 413, "payload_too_large");
+    h_resp_free(r);
+    free(json);
+  }
+
+  /* Both reloads were counted. */
+  r = h_get("/metrics");
+  ASSERT_STATUS(r, 200);
+  ASSERT_EQ(metric_value(r->body, "fieldgrip_config_reloads_total{result=\"failed\"} "), 1);
+  ASSERT_EQ(metric_value(r->body, "fieldgrip_config_reloads_total{result=\"ok\"} "), 1);
+  h_resp_free(r);
+
+  h_stop();
+  h_done();
+  printf("ok\n");
+  return 0;
+}
