@@ -16,6 +16,7 @@ typedef struct fg_app {
   pthread_mutex_t conf_lock;
   fg_conf_ref *conf; /* current configuration; requests hold references */
   int threads;       /* worker threads for ingest ([train] threads resolved; >= 1) */
+  struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
 } fg_app;
 
 /* Installs conf as the current configuration (taking ownership); requests already running

@@ -1,5 +1,6 @@
 /* Frames: upload one (multipart), import a data set folder, list. */
 #include "api.h"
+#include "decoder.h"
 #include "json.h"
 #include "metrics.h"
 
@@ -34,11 +35,12 @@ static int ingest_fail(ingest_error *e, int status, const char *code, const char
 }
 
 /* Turns one encoded image plus its camera, pose and optional features into a frame ready
- * to store. The camera may still lack what only the image's size gives. */
-static int ingest_one(const void *image, size_t image_len, fg_transforms_frame camera,
-                      const double T_world_cam[16], const fg_npy *features,
-                      const fg_scene_params *params, int max_side, const char *source,
-                      fg_frame *out, ingest_error *err) {
+ * to store. The camera may still lack what only the image's size gives. The image is decoded
+ * by app's decoder, in a child process. */
+static int ingest_one(fg_app *app, const void *image, size_t image_len,
+                      fg_transforms_frame camera, const double T_world_cam[16],
+                      const fg_npy *features, const fg_scene_params *params, int max_side,
+                      const char *source, fg_frame *out, ingest_error *err) {
   if (!fg_image_sniff(image, image_len))
     return ingest_fail(err, 415, "unsupported_media_type",
                        "the image is not PNG, JPEG, OpenEXR or TIFF data");
@@ -47,9 +49,13 @@ static int ingest_one(const void *image, size_t image_len, fg_transforms_frame c
   float bg[3] = {(float)params->background[0], (float)params->background[1],
                  (float)params->background[2]};
   fg_image img = {0};
-  if (fg_image_decode(image, image_len, bg, &img) != 0)
-    return ingest_fail(err, 400, "invalid_image", "");
-  int rc = fg_transforms_complete_camera(&camera, img.w, img.h);
+  int rc = fg_decoder_decode(app->decoder, image, image_len, bg, &img);
+  /* The image's fault (corrupt, too large, or it crashed the decoder) or the server's (the
+   * decoder program is missing or cannot be started). */
+  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM)
+    return ingest_fail(err, 500, "internal_error", "cannot decode the image: ");
+  if (rc != 0) return ingest_fail(err, 400, "invalid_image", "");
+  rc = fg_transforms_complete_camera(&camera, img.w, img.h);
   if (rc != 0) {
     fg_image_release(&img);
     return ingest_fail(err, 400, "invalid_camera", "");
@@ -155,7 +161,7 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   fg_scene_get_info(s, &info);
   fg_frame frame;
   ingest_error ie;
-  if (ingest_one(image->data, image->len, camera, T, featp, &info.params,
+  if (ingest_one(req->app, image->data, image->len, camera, T, featp, &info.params,
                  req->conf->max_image_side, image->filename ? image->filename : "upload", &frame,
                  &ie) != 0) {
     fg_resp_error(resp, ie.status, ie.code, "%s", ie.message);
@@ -243,7 +249,7 @@ static int resolve_import_dir(const fg_conf *conf, const char *path, char real[P
 }
 
 /* Reads and prepares frame i of a data set; the result goes to frames[i] or err. */
-static int import_one(const fg_conf *conf, const fg_transforms_frame *tf,
+static int import_one(fg_app *app, const fg_conf *conf, const fg_transforms_frame *tf,
                       const fg_scene_params *params, fg_frame *out, ingest_error *err) {
   char real[PATH_MAX];
   if (!realpath(tf->image_path, real) || !inside_import_dirs(conf, real)) {
@@ -280,8 +286,8 @@ static int import_one(const fg_conf *conf, const fg_transforms_frame *tf,
     goto out;
   }
   const char *base = strrchr(tf->image_path, '/');
-  rc = ingest_one(image, image_len, *tf, tf->T_world_cam, featp, params, conf->max_image_side,
-                  base ? base + 1 : tf->image_path, out, err);
+  rc = ingest_one(app, image, image_len, *tf, tf->T_world_cam, featp, params,
+                  conf->max_image_side, base ? base + 1 : tf->image_path, out, err);
 out:
   free(image);
   free(feat_buf);
@@ -338,7 +344,8 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
 #pragma omp parallel for schedule(dynamic, 1) num_threads(req->app->threads) reduction(| : failed)
   for (size_t i = 0; i < t.n_frames; i++) {
     if (!t.frames[i].image_path) continue;
-    if (import_one(conf, &t.frames[i], &info.params, &frames[i], &errs[i]) != 0) failed = 1;
+    if (import_one(req->app, conf, &t.frames[i], &info.params, &frames[i], &errs[i]) != 0)
+      failed = 1;
   }
   if (failed) {
     for (size_t i = 0; i < t.n_frames; i++)
@@ -348,6 +355,21 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
         break;
       }
     goto out;
+  }
+  /* The store checks D again under its lock; checking here first lets the reply name the
+   * frame. */
+  int d = info.feature_dim;
+  for (size_t i = 0; i < t.n_frames; i++) {
+    if (!frames[i].feat_d) continue;
+    if (d && frames[i].feat_d != d) {
+      fg_resp_error(resp, 400, "invalid_features", "frame %zu (%s): features have D = %d but %s "
+                    "%d; every frame of a scene must have the same D; nothing was imported", i,
+                    t.frames[i].file_path, frames[i].feat_d,
+                    info.feature_dim ? "the scene's frames have D =" : "earlier frames have D =",
+                    d);
+      goto out;
+    }
+    d = frames[i].feat_d;
   }
   /* Pack the frames that have images to the front, in file order. */
   size_t n = 0;

@@ -61,7 +61,7 @@ void fg_resp_take(fg_resp *resp, int status, const char *content_type, char *bod
 }
 
 void fg_resp_json(fg_resp *resp, int status, json_t *obj) {
-  char *text = obj ? json_dumps(obj, JSON_COMPACT | JSON_REAL_PRECISION(17)) : NULL;
+  char *text = obj ? json_dumps(obj, JSON_COMPACT | JSON_REAL_PRECISION(15)) : NULL;
   json_decref(obj);
   if (!text) {
     static const char oom[] =
@@ -135,9 +135,11 @@ static int token_equal(const char *given, size_t given_len, const char *secret) 
   return diff == 0;
 }
 
-static int authorized(const conn_ctx *c) {
+/* Checks the bearer token. public_route says the path is one that needs none; unknown
+ * paths need the token too, so that the API's shape is not visible without it. */
+static int authorized(const conn_ctx *c, int public_route) {
   const char *token = c->req.conf->token;
-  if (!token || !*token || (c->route && (c->route->flags & FG_ROUTE_PUBLIC))) return 1;
+  if (!token || !*token || public_route) return 1;
   const char *h = fg_req_header(&c->req, MHD_HTTP_HEADER_AUTHORIZATION);
   if (!h || strncasecmp(h, "Bearer ", 7) != 0) return 0;
   h += 7;
@@ -273,11 +275,12 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
   c->req.content_type = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_TYPE);
   c->limit = c->req.conf->max_upload_bytes;
 
-  int path_known = 0;
+  int path_known = 0, public_route = 0;
   for (size_t i = 0; i < h->cfg.n_routes; i++) {
     const fg_route *r = &h->cfg.routes[i];
     if (!match_path(r->pattern, url, NULL, NULL)) continue;
     path_known = 1;
+    public_route |= (r->flags & FG_ROUTE_PUBLIC) && strcmp(r->method, method) == 0;
     if (strcmp(r->method, method) == 0) {
       c->route = r;
       c->route_idx = (int)i;
@@ -286,6 +289,12 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
     }
     size_t al = strlen(c->resp.allow);
     snprintf(c->resp.allow + al, sizeof c->resp.allow - al, "%s%s", al ? ", " : "", r->method);
+  }
+  if (!authorized(c, public_route)) {
+    c->resp.allow[0] = 0;
+    return respond_now(c, 401, "unauthorized",
+                       "this server needs \"Authorization: Bearer <token>\" with the token of its "
+                       "configuration file ([http] token)");
   }
   if (!c->route) {
     if (path_known) {
@@ -299,10 +308,6 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
     return respond_now(c, 404, "not_found", msg);
   }
   c->resp.allow[0] = 0;
-  if (!authorized(c))
-    return respond_now(c, 401, "unauthorized",
-                       "this server needs \"Authorization: Bearer <token>\" with the token of its "
-                       "configuration file ([http] token)");
 
   const char *cl = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_LENGTH);
   if (cl) {
@@ -474,12 +479,12 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
   if (ai->ai_family == AF_INET6) flags |= MHD_USE_IPv6;
   h->mhd = MHD_start_daemon(
     flags, (uint16_t)port, NULL, NULL, on_request, h,
+    MHD_OPTION_EXTERNAL_LOGGER, on_mhd_log, NULL,
     MHD_OPTION_SOCK_ADDR, ai->ai_addr,
     MHD_OPTION_THREAD_POOL_SIZE, (unsigned)(cfg->poll_threads > 0 ? cfg->poll_threads : 1),
     MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
     MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)120,
     MHD_OPTION_LISTENING_ADDRESS_REUSE, (unsigned)1,
-    MHD_OPTION_EXTERNAL_LOGGER, on_mhd_log, NULL,
     MHD_OPTION_END);
   freeaddrinfo(ai);
   if (!h->mhd) {

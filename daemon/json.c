@@ -14,7 +14,8 @@ json_t *fg_json_parse(const void *body, size_t len, char *err, size_t errlen) {
     return NULL;
   }
   json_error_t e;
-  json_t *v = json_loadb(body, len, JSON_REJECT_DUPLICATES, &e);
+  /* Any value parses, so that valid JSON of the wrong shape is told apart from bad JSON. */
+  json_t *v = json_loadb(body, len, JSON_REJECT_DUPLICATES | JSON_DECODE_ANY, &e);
   if (!v) snprintf(err, errlen, "line %d, column %d: %s", e.line, e.column, e.text);
   return v;
 }

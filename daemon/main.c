@@ -1,6 +1,7 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
 #include "conf.h"
+#include "decoder.h"
 #include "http.h"
 #include "metrics.h"
 #include "notify.h"
@@ -187,6 +188,17 @@ int main(int argc, char **argv) {
   }
   fg_app_set_conf(&app, conf);
   fg_store_sync_declared(app.store, conf);
+  /* Images are decoded by fieldgrip-decode children (one per ingest thread at most), found
+   * beside this executable or in the libexec folder. Without it the daemon still serves
+   * everything but uploads and imports, which answer 500 saying where it was looked for. */
+  if (fg_decoder_new(&app.decoder, NULL, app.threads, FG_DECODER_IDLE_SECONDS) != 0) {
+    fg_error("cannot set up the image decoder: %s", fg_error_detail());
+    fg_store_close(app.store);
+    fg_app_clear_conf(&app);
+    return 1;
+  }
+  if (fg_decoder_check(app.decoder) != 0)
+    fg_warn("%s; uploads and imports will fail until it is there", fg_error_detail());
 
   long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
   int poll_threads = ncpu > 2 ? (int)(ncpu < 8 ? ncpu : 8) : 2;
@@ -204,6 +216,7 @@ int main(int argc, char **argv) {
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
     fg_error("%s", fg_error_detail());
+    fg_decoder_free(app.decoder);
     fg_store_close(app.store);
     fg_app_clear_conf(&app);
     return 1;
@@ -225,6 +238,7 @@ int main(int argc, char **argv) {
     siginfo_t si;
     int sig = sigtimedwait(&sigs, &si, &tick);
     if (wd_usec) fg_notify_watchdog();
+    fg_decoder_reap_idle(app.decoder);
     if (sig < 0) continue; /* timeout or EINTR */
     if (sig == SIGHUP) {
       reload(&app, &o);
@@ -235,6 +249,7 @@ int main(int argc, char **argv) {
   }
   fg_notify_stopping();
   fg_http_stop(http);
+  fg_decoder_free(app.decoder);
   fg_store_close(app.store);
   fg_app_clear_conf(&app);
   pthread_mutex_destroy(&app.conf_lock);

@@ -58,7 +58,9 @@ int fg_pose_from_quat(const double p[3], const double q[4], double T[16]) {
   for (int i = 0; i < 3; i++)
     if (!isfinite(p[i])) return fg_fail(FG_EINVAL, "position entry %d is not finite", i);
   n = sqrt(n);
-  if (n < 1e-6) return fg_fail(FG_EINVAL, "quaternion has zero length");
+  if (fabs(n - 1.0) > FG_POSE_ORTHO_TOL)
+    return fg_fail(FG_EINVAL, "quaternion [w, x, y, z] must have unit length, its norm is %.6g",
+                   n);
   double w = q[0] / n, x = q[1] / n, y = q[2] / n, z = q[3] / n;
   double R[9] = {
     1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),

@@ -27,8 +27,9 @@ int fg_pose_validate(const double T[16]);
  * (negates the camera's y and z axes). Its own inverse. */
 void fg_pose_flip_yz(double T_world_cam[16]);
 
-/* Builds T from a position (metres) and a unit quaternion [w,x,y,z]; the quaternion is
- * normalised first. FG_EINVAL if it is not finite or has a norm below 1e-6. */
+/* Builds T from a position (metres) and a unit quaternion [w,x,y,z]. A norm within
+ * FG_POSE_ORTHO_TOL of 1 is rounding and is normalised away; anything further from unit
+ * length (a scaled or garbled quaternion) or not finite is FG_EINVAL. */
 int fg_pose_from_quat(const double p[3], const double q_wxyz[4], double T[16]);
 
 /* Extracts position and a unit quaternion with w >= 0 from a rigid T. */

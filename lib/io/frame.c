@@ -375,20 +375,8 @@ static int prepare_pixels(fg_frame *out, const fg_image *img, const fg_camera *c
   return 0;
 }
 
-int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const fg_camera *cam,
-                     const double T_world_cam[16], const fg_npy *features,
-                     const fg_ingest_opts *opts) {
-  if (!out) return fg_fail(FG_EINVAL, "fg_frame_prepare: no output frame");
-  memset(out, 0, sizeof *out);
-  fg_image img = {0};
-  int rc = image ? prepare_inputs(out, cam, T_world_cam, features, opts)
-                 : fg_fail(FG_EINVAL, "fg_frame_prepare: no image given");
-  if (rc == 0) rc = fg_image_decode(image, image_len, opts->background_rgb, &img);
-  if (rc == 0) rc = prepare_pixels(out, &img, cam, T_world_cam, opts);
-  fg_image_release(&img);
-  if (rc < 0) fg_frame_clear(out);
-  return rc;
-}
+/* fg_frame_prepare, the one frame function that decodes, is in image_codec.c: this file stays
+ * free of OpenImageIO so that the daemon, which decodes in a child process, links without it. */
 
 int fg_frame_prepare_image(fg_frame *out, const fg_image *img, const fg_camera *cam,
                            const double T_world_cam[16], const fg_npy *features,

@@ -137,6 +137,15 @@ void h_resp_free(h_resp *r);
 /* The value of a response header (case-insensitive name), or NULL. Borrowed from r. */
 const char *h_resp_header(const h_resp *r, const char *name);
 
+/* Sends raw bytes on a fresh TCP connection to the daemon, half-closes it, and reads what comes
+ * back until the daemon closes (30 s hang guard). Returns the number of bytes read into resp
+ * (NUL-terminated, at most cap-1), or -1 when the connection was reset before anything came. */
+long h_raw_exchange(const void *req, size_t len, char *resp, size_t cap);
+
+/* Connects, sends req (may be empty) and closes at once without reading: a client that
+ * vanishes mid-request. */
+void h_raw_abandon(const void *req, size_t len);
+
 /* Builds a multipart/form-data body by hand (for streamed uploads). Caller frees *out. */
 void h_multipart_build(const h_part *parts, int n_parts, const char *boundary, uint8_t **out,
                        size_t *out_len);
@@ -174,7 +183,7 @@ void h_assert_json_equal_at(const char *file, int line, json_t *a, json_t *b);
 json_t *h_jfind(json_t *root, const char *path);
 
 /* ---------------------------------------------------------------------------------------- */
-/* Test data made by hand                                                                     */
+/* Test data made by hand (fixtures.c)                                                        */
 
 /* A PNG (zlib, no library of the project involved) with a deterministic pattern; channels 1,
  * 3 or 4, bits 8 or 16. noise != 0 fills it with pseudo-random bytes and stores it

@@ -93,7 +93,7 @@ int main(int argc, char **argv) {
   h_resp_free(r);
 
   /* Unknown paths are behind the token too (no probing of the API without it). */
-  //TMP expect_401("GET", "/v1/nope", NULL, NULL);
+  expect_401("GET", "/v1/nope", NULL, NULL);
 
   /* /metrics needs the token. */
   expect_401("GET", "/metrics", NULL, NULL);

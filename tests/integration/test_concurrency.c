@@ -1,4 +1,4 @@
-/* Concurrency: 8 clients uploading 4 frames each to one scene at once get 32 distinct frame
+/* Concurrency: 8 clients creating one scene at once get one 201 and seven 409; 8 clients uploading 4 frames each to one scene at once get 32 distinct frame
  * numbers 0..31, each listed with the pose its client sent; and while an import of the lego
  * data set runs, /v1/health and the scene list keep answering. */
 #include <pthread.h>
@@ -142,6 +142,46 @@ static void test_health_during_import(void) {
   h_resp_free(r);
 }
 
+/* ---- 8 clients create the same scene at once: one 201, seven 409 ---- */
+
+typedef struct creator {
+  long status;
+  char code[64];
+} creator;
+
+static void *create_thread(void *arg) {
+  creator *c = arg;
+  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"race\", \"voxel_size\": 0.02}");
+  c->status = r->status;
+  json_t *code = r->json ? h_jfind(r->json, "error.code") : NULL;
+  snprintf(c->code, sizeof c->code, "%s", json_is_string(code) ? json_string_value(code) : "");
+  h_resp_free(r);
+  return NULL;
+}
+
+static void test_create_race(void) {
+  pthread_t th[THREADS];
+  creator c[THREADS];
+  memset(c, 0, sizeof c);
+  for (int t = 0; t < THREADS; t++) ASSERT_EQ(pthread_create(&th[t], NULL, create_thread, &c[t]), 0);
+  for (int t = 0; t < THREADS; t++) ASSERT_EQ(pthread_join(th[t], NULL), 0);
+  int created = 0, exists = 0;
+  for (int t = 0; t < THREADS; t++) {
+    if (c[t].status == 201) created++;
+    else if (c[t].status == 409 && strcmp(c[t].code, "scene_exists") == 0) exists++;
+    else FG_TEST_FAIL("concurrent create: %ld %s", c[t].status, c[t].code);
+  }
+  ASSERT_EQ(created, 1);
+  ASSERT_EQ(exists, THREADS - 1);
+  h_resp *r = h_get("/v1/scenes");
+  int n = 0;
+  json_t *scenes = JGET(r->json, "scenes");
+  for (size_t i = 0; i < json_array_size(scenes); i++)
+    if (strcmp(JSTR(json_array_get(scenes, i), "name"), "race") == 0) n++;
+  ASSERT_EQ(n, 1);
+  h_resp_free(r);
+}
+
 int main(int argc, char **argv) {
   h_init(argc, argv);
   char *shared = h_shared_data();
@@ -150,6 +190,7 @@ int main(int argc, char **argv) {
   free(conf);
   free(shared);
   h_start();
+  test_create_race();
   test_parallel_uploads();
   test_health_during_import();
   h_stop();

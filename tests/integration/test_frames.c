@@ -167,18 +167,34 @@ int main(int argc, char **argv) {
   check_upload_reply(r, 4, 64, 48, 6, 8, 16);
   h_resp_free(r);
 
+  /* 5: an OPENCV camera with distortion: undistorted on ingest, listed as PINHOLE. */
+  char *m5 = h_matrix_json(T0);
+  char *meta5 = h_fmt("{\"transform_matrix\": %s, \"camera\": {\"fl_x\": 50, \"fl_y\": 50, "
+                      "\"cx\": 32, \"cy\": 24, \"camera_model\": \"OPENCV\", \"k1\": 0.1, "
+                      "\"k2\": -0.02, \"p1\": 0.001, \"p2\": 0.0}}",
+                      m5);
+  r = h_upload(SCENE, g_png, g_png_len, meta5, g_feat, g_feat_len);
+  check_upload_reply(r, 5, 64, 48, 6, 8, 16);
+  h_resp_free(r);
+
   /* ---- the listing ---- */
   r = h_get(SCENE);
   ASSERT_STATUS(r, 200);
   json_t *frames = JGET(r->json, "frames");
-  ASSERT_EQ(json_array_size(frames), 5);
-  for (int i = 0; i < 5; i++) {
+  ASSERT_EQ(json_array_size(frames), 6);
+  for (int i = 0; i < 6; i++) {
     json_t *f = json_array_get(frames, (size_t)i);
     ASSERT_EQ(JINT(f, "frame"), i);
     ASSERT_STREQ(JSTR(f, "convention"), "opengl");
-    ASSERT(json_is_false(JGET(f, "undistorted")));
+    ASSERT(json_is_boolean(JGET(f, "undistorted")));
+    ASSERT_EQ(json_is_true(JGET(f, "undistorted")), i == 5);
     JSTR(f, "created");
   }
+  json_t *f5 = json_array_get(frames, 5);
+  ASSERT_STREQ(JSTR(f5, "camera.camera_model"), "PINHOLE");
+  ASSERT_EQ(JINT(f5, "camera.w"), 64);
+  ASSERT_EQ(JINT(f5, "camera.h"), 48);
+  ASSERT_MATRIX(JGET(f5, "transform_matrix"), T0, 1e-6);
   json_t *f0 = json_array_get(frames, 0);
   ASSERT_MATRIX(JGET(f0, "transform_matrix"), T0, 1e-6);
   check_camera(f0, 50, 50, 32, 24, 64, 48);
@@ -219,7 +235,7 @@ int main(int argc, char **argv) {
 
   r = h_get("/v1/scenes/s");
   ASSERT_STATUS(r, 200);
-  ASSERT_EQ(JINT(r->json, "frames"), 5);
+  ASSERT_EQ(JINT(r->json, "frames"), 6);
   ASSERT_EQ(JINT(r->json, "feature_dim"), 16);
   h_resp_free(r);
 
@@ -288,6 +304,10 @@ int main(int argc, char **argv) {
            400, "invalid_pose", "invalid_request");
   bad_meta("quaternion of 3",
            "{\"pose\": {\"position\": [0, 0, 0], \"quaternion\": [1, 0, 0]}, "
+           "\"camera\": {\"fl_x\": 50, \"fl_y\": 50, \"cx\": 32, \"cy\": 24}}",
+           400, "invalid_pose", NULL);
+  bad_meta("quaternion not of unit length",
+           "{\"pose\": {\"position\": [0, 0, 0], \"quaternion\": [2, 0, 0, 0]}, "
            "\"camera\": {\"fl_x\": 50, \"fl_y\": 50, \"cx\": 32, \"cy\": 24}}",
            400, "invalid_pose", NULL);
   bad_meta("bad convention",
@@ -367,16 +387,16 @@ int main(int argc, char **argv) {
   ASSERT_HTTP_ERROR(r, 404, "scene_not_found"); /* the upload did not create it */
   h_resp_free(r);
 
-  /* The refused uploads used no frame numbers: the next good one is 5. */
+  /* The refused uploads used no frame numbers: the next good one is 6. */
   r = h_upload(SCENE, g_png, g_png_len, meta0, feat16, feat16_len);
-  check_upload_reply(r, 5, 64, 48, 6, 8, 16);
+  check_upload_reply(r, 6, 64, 48, 6, 8, 16);
   h_resp_free(r);
   r = h_get(SCENE);
-  ASSERT_EQ(json_array_size(JGET(r->json, "frames")), 6);
+  ASSERT_EQ(json_array_size(JGET(r->json, "frames")), 7);
   json_t *base_frames = JGET(g_baseline, "frames"), *now_frames = JGET(r->json, "frames");
-  for (size_t i = 0; i < 5; i++)
+  for (size_t i = 0; i < 6; i++)
     ASSERT_JSON_EQUAL(json_array_get(now_frames, i), json_array_get(base_frames, i));
-  ASSERT_EQ(JINT(r->json, "frames.5.frame"), 5);
+  ASSERT_EQ(JINT(r->json, "frames.6.frame"), 6);
   h_resp_free(r);
 
   /* D is per scene: another scene may use D=8, and then refuses D=16. */
@@ -409,6 +429,8 @@ int main(int argc, char **argv) {
   free(m2);
   free(meta2);
   free(meta3);
+  free(m5);
+  free(meta5);
   free(g_png);
   free(rgba);
   free(png16);

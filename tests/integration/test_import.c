@@ -1,7 +1,8 @@
 /* POST /v1/scenes/{s}/import: the real NeRF lego data set (100 frames of 800x800 RGBA,
  * downscaled to max_image_side 400), the import_dirs sandbox (outside, "..", symlinks, missing),
- * and small synthetic data sets: a missing image (skipped and named), features_path, and
- * corrupt images, poses, features or transforms files that fail the whole import. */
+ * and small synthetic data sets: a missing image (skipped and named), features_path, frame
+ * files leading out of the import folders, and corrupt images, poses, features or transforms
+ * files that fail the whole import. */
 #include <errno.h>
 #include <limits.h>
 #include <unistd.h>
@@ -308,6 +309,59 @@ static void test_synthetic(void) {
   dir = h_fmt("%s/synth_badfeat", g_imports);
   bad_import("syn", dir, NULL, 400, "invalid_features", "invalid_transforms", "./img/f_1");
   free(dir);
+
+  /* Frames whose files lead out of the import folders: "..", an absolute path, a symlink, a
+   * features_path. The whole import is refused, naming the frame. */
+  {
+    char *outside = h_fmt("%s/outside", h_tmpdir());
+    h_mkdirs(outside);
+    uint8_t *png, *npy;
+    size_t png_len, npy_len;
+    h_png(40, 30, 3, 8, 1, 0, &png, &png_len);
+    static const int fshape[3] = {5, 4, 8};
+    h_npy("<f4", fshape, 3, 0, &npy, &npy_len);
+    char *p = h_fmt("%s/x.png", outside);
+    h_write_file(p, png, png_len);
+    free(p);
+    p = h_fmt("%s/f.npy", outside);
+    h_write_file(p, npy, npy_len);
+    free(p);
+    char *ds = h_fmt("%s/synth_escape", g_imports);
+    h_mkdirs(ds);
+    p = h_fmt("%s/ok.png", ds);
+    h_write_file(p, png, png_len);
+    free(p);
+    char *link = h_fmt("%s/link.png", ds);
+    char *target = h_fmt("%s/x.png", outside);
+    if (symlink(target, link) != 0) FG_TEST_FAIL("symlink: %s", strerror(errno));
+    free(link);
+    const char *id = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]";
+    char *cases[4][2] = {
+        {h_fmt("\"file_path\": \"../../outside/x.png\""), h_fmt("../../outside/x.png")},
+        {h_fmt("\"file_path\": \"%s\"", target), h_fmt("%s", target)},
+        {h_fmt("\"file_path\": \"link.png\""), h_fmt("link.png")},
+        {h_fmt("\"file_path\": \"ok.png\", \"features_path\": \"../../outside/f.npy\""), h_fmt("ok.png")},
+    };
+    for (int i = 0; i < 4; i++) {
+      char *json = h_fmt("{\"camera_angle_x\": 0.9, \"frames\": [{\"file_path\": \"ok.png\", "
+                         "\"transform_matrix\": %s}, {%s, \"transform_matrix\": %s}]}",
+                         id, cases[i][0], id);
+      char *name = h_fmt("t%d.json", i);
+      p = h_fmt("%s/%s", ds, name);
+      h_write_file(p, json, strlen(json));
+      free(p);
+      bad_import("syn", ds, name, 403, "forbidden_path", NULL, cases[i][1]);
+      free(name);
+      free(json);
+      free(cases[i][0]);
+      free(cases[i][1]);
+    }
+    free(target);
+    free(ds);
+    free(outside);
+    free(png);
+    free(npy);
+  }
 
   /* transforms.json that is not JSON, or has no frames. */
   char *bad = h_fmt("%s/synth_badjson", g_imports);

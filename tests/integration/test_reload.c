@@ -1,6 +1,7 @@
 /* Configuration: start-up errors name file, line and key; SIGHUP with a bad file keeps the old
  * settings (and logs "reload failed"); SIGHUP with a good file brings a new token, a new
- * upload limit and new declared scenes. */
+ * upload limit and new declared scenes, re-creates a deleted declared scene, and leaves the
+ * listening socket alone (listen changes need a restart). */
 #include <signal.h>
 
 #include "harness.h"
@@ -37,6 +38,36 @@ static long long metric_value(const char *text, const char *series) {
   while (p && p != text && p[-1] != '\n') p = strstr(p + 1, series);
   if (!p) FG_TEST_FAIL("no series %s in /metrics:\n%s", series, text);
   return strtoll(p + strlen(series), NULL, 10);
+}
+
+/* Waits (at most 10 s) until /metrics counts n successful reloads. */
+static void wait_reloads_ok(long long n) {
+  for (int i = 0;; i++) {
+    h_resp *r = h_get("/metrics");
+    ASSERT_STATUS(r, 200);
+    long long v = metric_value(r->body, "fieldgrip_config_reloads_total{result=\"ok\"} ");
+    h_resp_free(r);
+    if (v == n) return;
+    if (v > n || i >= 500) FG_TEST_FAIL("fieldgrip_config_reloads_total{result=\"ok\"} is %lld, expected %lld", v, n);
+    h_sleep_ms(20);
+  }
+}
+
+static int upload_one(const char *scene) {
+  uint8_t *png;
+  size_t len;
+  h_png(16, 16, 3, 8, 1, 0, &png, &len);
+  char *path = h_fmt("/v1/scenes/%s/frames", scene);
+  h_resp *r = h_upload(path, png, len,
+                       "{\"transform_matrix\": [[1,0,0,0],[0,1,0,0],[0,0,1,0.3],[0,0,0,1]], "
+                       "\"fl_x\": 20, \"fl_y\": 20, \"cx\": 8, \"cy\": 8}",
+                       NULL, 0);
+  ASSERT_STATUS(r, 201);
+  int n = (int)JINT(r->json, "frame");
+  h_resp_free(r);
+  free(path);
+  free(png);
+  return n;
 }
 
 int main(int argc, char **argv) {
@@ -128,6 +159,36 @@ int main(int argc, char **argv) {
   ASSERT_EQ(metric_value(r->body, "fieldgrip_config_reloads_total{result=\"failed\"} "), 1);
   ASSERT_EQ(metric_value(r->body, "fieldgrip_config_reloads_total{result=\"ok\"} "), 1);
   h_resp_free(r);
+
+  /* A declared scene deleted through the API comes back, empty, at the next reload. */
+  ASSERT_EQ(upload_one("shelf"), 0);
+  r = h_delete("/v1/scenes/shelf");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  r = h_get("/v1/scenes/shelf");
+  ASSERT_HTTP_ERROR(r, 404, "scene_not_found");
+  h_resp_free(r);
+  h_signal(SIGHUP);
+  wait_reloads_ok(2);
+  r = h_get("/v1/scenes/shelf");
+  ASSERT_STATUS(r, 200);
+  ASSERT_EQ(JINT(r->json, "frames"), 0);
+  ASSERT(json_is_true(JGET(r->json, "declared_in_config")));
+  h_resp_free(r);
+
+  /* listen needs a restart: a reload that changes it keeps serving where it was. */
+  int port = h_port();
+  h_write_config("[http]\nlisten = 127.0.0.1:1\ntoken = tokenB\nmax_upload_mb = 1\n\n"
+                 "[scene shelf]\nworkspace_min = -0.2 -0.3 0.0\nworkspace_max = 0.2 0.3 0.5\n"
+                 "voxel_size = 0.005\n");
+  h_signal(SIGHUP);
+  wait_reloads_ok(3);
+  ASSERT(h_alive());
+  ASSERT_EQ(h_port(), port);
+  r = h_get("/v1/health");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  ASSERT_EQ(status_with("tokenB", "/v1/scenes"), 200);
 
   h_stop();
   h_done();

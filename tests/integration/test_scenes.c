@@ -242,7 +242,7 @@ static void test_bad_bodies(void) {
 
   /* Valid JSON of the wrong shape. */
   expect_create_error("[1, 2]", 400, "invalid_request");
-  //TMP expect_create_error("\"tabletop2\"", 400, "invalid_request");
+  expect_create_error("\"tabletop2\"", 400, "invalid_request");
   expect_create_error("{}", 400, "invalid_request");
   expect_create_error("{\"name\": 5}", 400, "invalid_request");
   expect_create_error("{\"name\": null}", 400, "invalid_request");

@@ -170,6 +170,11 @@ int main(int argc, char **argv) {
   r = h_get("/v1/scenes/s");
   ASSERT_EQ(JINT(r->json, "frames"), 2);
   h_resp_free(r);
+  /* On disk: the two accepted frames and no leftovers of the refused bodies. */
+  char *fdir = h_fmt("%s/scenes/s/frames", h_state_dir());
+  ASSERT_EQ(h_count_files(fdir, ".fgf"), 2);
+  free(fdir);
+  ASSERT_EQ(h_count_files(h_state_dir(), ".tmp."), 0);
   h_stop();
   json_decref(baseline);
   free(g_meta);

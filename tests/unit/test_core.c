@@ -78,7 +78,10 @@ static void test_pose(void) {
   ASSERT_OK(fg_pose_validate(I));
 
   double T[16];
-  const double p[3] = {0.4, -0.2, 0.3}, q[4] = {0.9, 0.1, -0.3, 0.2};
+  /* A unit quaternion off by rounding (norm 1 + 5e-4) is normalised, not refused. */
+  const double p[3] = {0.4, -0.2, 0.3};
+  const double qn = sqrt(0.95) / 1.0005;
+  const double q[4] = {0.9 / qn, 0.1 / qn, -0.3 / qn, 0.2 / qn};
   ASSERT_OK(fg_pose_from_quat(p, q, T));
   ASSERT_OK(fg_pose_validate(T));
 
@@ -135,7 +138,9 @@ static void test_pose(void) {
   ASSERT_NEAR(T[4], 1, 1e-12);
   ASSERT_NEAR(T[1], -1, 1e-12);
   const double q0[4] = {0, 0, 0, 0};
-  ASSERT_ERR(fg_pose_from_quat(p, q0, T), FG_EINVAL, "zero");
+  ASSERT_ERR(fg_pose_from_quat(p, q0, T), FG_EINVAL, "unit length");
+  const double q2x[4] = {2, 0, 0, 0};
+  ASSERT_ERR(fg_pose_from_quat(p, q2x, T), FG_EINVAL, "norm is 2");
 
   fg_convention conv;
   ASSERT_OK(fg_convention_parse("opencv", &conv));

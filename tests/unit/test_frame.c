@@ -56,7 +56,8 @@ static const fg_camera cam800 = {.fl_x = 700, .fl_y = 700, .cx = 400.5, .cy = 29
                                  .h = H, .model = FG_CAMERA_PINHOLE};
 
 static void make_pose(double T[16]) {
-  const double p[3] = {0.5, -0.1, 0.6}, q[4] = {0.3, 0.8, -0.4, 0.2};
+  const double n = sqrt(0.3 * 0.3 + 0.8 * 0.8 + 0.4 * 0.4 + 0.2 * 0.2);
+  const double p[3] = {0.5, -0.1, 0.6}, q[4] = {0.3 / n, 0.8 / n, -0.4 / n, 0.2 / n};
   ASSERT_OK(fg_pose_from_quat(p, q, T));
 }
 

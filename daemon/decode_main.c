@@ -1,0 +1,105 @@
+/* fieldgrip-decode: decodes images for fieldgripd in a process of its own, so that the daemon
+ * never links OpenImageIO and a codec crashing on a hostile image takes down only this child.
+ * Reads requests on stdin and writes replies on stdout in the format decoder.h describes,
+ * one at a time, until EOF on stdin. Not meant to be run by hand.
+ *
+ * Test hook: when the environment has FG_DECODE_CRASH_ON=<text>, a request whose image
+ * starts with those bytes makes the program abort(), standing in for a codec crash. */
+#include "decoder.h"
+
+#include "config.h"
+#include "core/error.h"
+#include "io/image.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <unistd.h>
+
+/* Sends one reply: header, message, pixels (float [h][w][3] when rc is 0). */
+static int send_reply(int fd, int rc, const char *message, fg_image *img) {
+  size_t mlen = strlen(message);
+  if (mlen > FG_DECODER_MAX_MESSAGE) mlen = FG_DECODER_MAX_MESSAGE;
+  size_t n = rc == 0 ? (size_t)img->w * (size_t)img->h * 3 : 0;
+  fg_decoder_reply rep = {.version = FG_DECODER_VERSION, .rc = rc,
+                          .w = rc == 0 ? img->w : 0, .h = rc == 0 ? img->h : 0,
+                          .message_len = (uint32_t)mlen, .pixel_bytes = n * sizeof(float)};
+  uint8_t hdr[FG_DECODER_REPLY_SIZE];
+  fg_decoder_reply_pack(&rep, hdr);
+  if (fg_decoder_write_full(fd, hdr, sizeof hdr) != 0 ||
+      fg_decoder_write_full(fd, message, mlen) != 0)
+    return -1;
+  if (n == 0) return 0;
+  fg_decoder_floats_le(img->rgb, n);
+  return fg_decoder_write_full(fd, img->rgb, n * sizeof(float));
+}
+
+/* The test hook (see the top of the file). */
+static void crash_if_asked(const void *bytes, size_t len) {
+  const char *magic = getenv("FG_DECODE_CRASH_ON");
+  if (magic && *magic && len >= strlen(magic) && memcmp(bytes, magic, strlen(magic)) == 0)
+    abort();
+}
+
+int main(int argc, char **argv) {
+  (void)argv;
+  if (argc != 1 || isatty(0)) {
+    fprintf(stderr, "fieldgrip-decode %s: the image decoder of fieldgripd, which starts it and "
+                    "talks to it over pipes; it takes no arguments and is not meant to be run "
+                    "by hand\n", FG_VERSION);
+    return 2;
+  }
+  /* Die with the daemon (more exactly, with the daemon thread that started us, which lives
+   * as long as the daemon's decoder pool). */
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+
+  /* Replies go out on a private copy of stdout; fd 1 itself is pointed at stderr, so that
+   * anything a codec library prints cannot corrupt the stream of replies. */
+  int out = fcntl(1, F_DUPFD_CLOEXEC, 3);
+  if (out < 0 || dup2(2, 1) < 0) {
+    fprintf(stderr, "fieldgrip-decode: cannot set up stdout: %s\n", strerror(errno));
+    return 1;
+  }
+
+  for (;;) {
+    uint8_t hdr[FG_DECODER_REQUEST_SIZE];
+    ssize_t got = fg_decoder_read_full(0, hdr, sizeof hdr);
+    if (got == 0) return 0; /* the daemon is done with us */
+    if (got != (ssize_t)sizeof hdr) {
+      fprintf(stderr, "fieldgrip-decode: %s\n",
+              got < 0 ? strerror(errno) : "the request header was cut short");
+      return 1;
+    }
+    fg_decoder_request req;
+    fg_image img = {0};
+    if (fg_decoder_request_unpack(hdr, &req) != 0) {
+      send_reply(out, FG_EINVAL, fg_error_detail(), &img);
+      return 1;
+    }
+    uint8_t *bytes = malloc(req.length ? (size_t)req.length : 1);
+    if (!bytes) {
+      send_reply(out, FG_ENOMEM, "the image decoder is out of memory for the encoded image",
+                 &img);
+      return 1;
+    }
+    if (fg_decoder_read_full(0, bytes, (size_t)req.length) != (ssize_t)req.length) {
+      fprintf(stderr, "fieldgrip-decode: the request's image was cut short\n");
+      free(bytes);
+      return 1;
+    }
+    crash_if_asked(bytes, (size_t)req.length);
+    fg_error_clear();
+    int rc = fg_image_decode(bytes, (size_t)req.length, req.background, &img);
+    free(bytes);
+    int sent = send_reply(out, rc, rc == 0 ? "" : fg_error_detail(), &img);
+    fg_image_release(&img);
+    if (sent != 0) {
+      fprintf(stderr, "fieldgrip-decode: cannot send a reply: %s\n", strerror(errno));
+      return 1;
+    }
+  }
+}

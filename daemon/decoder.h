@@ -1,0 +1,110 @@
+/* Image decoding in child processes: a pool of fieldgrip-decode programs that the daemon talks
+ * to over pipes, so that the daemon never links OpenImageIO (and the ~260 libraries it
+ * brings) and a crash in a codec on a hostile image kills a child, not the daemon.
+ *
+ * The wire format (second half of this header) is shared with the child, decode_main.c. */
+#ifndef FG_DAEMON_DECODER_H
+#define FG_DAEMON_DECODER_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <sys/types.h>
+
+#include "io/image.h"
+
+typedef struct fg_decoder fg_decoder;
+
+/* Default seconds a child may sit idle before fg_decoder_reap_idle ends it. */
+#define FG_DECODER_IDLE_SECONDS 30
+
+/* Creates a pool of at most max_procs (>= 1) children running program, started on demand and
+ * ended after idle_seconds (>= 1) without work. program is copied; NULL means the default
+ * places, tried in order at every start: fieldgrip-decode beside the running executable
+ * (the build tree), then FG_LIBEXECDIR/fieldgrip/fieldgrip-decode (an install). A missing
+ * program is not an error here (see fg_decoder_check). On success the caller owns *out and
+ * frees it with fg_decoder_free; on failure *out is NULL. */
+int fg_decoder_new(fg_decoder **out, const char *program, int max_procs, int idle_seconds);
+
+/* Ends every child (closes its stdin, waits up to a second, then SIGKILL) and reaps it, so no
+ * zombie is left; frees the pool. No decode may be running. Accepts NULL. */
+void fg_decoder_free(fg_decoder *dec);
+
+/* 0 when the decoder program can be found and executed, else FG_ENOENT with a detail naming
+ * where it was looked for. Start-up uses it to warn early. */
+int fg_decoder_check(fg_decoder *dec);
+
+/* fg_image_decode in a child: same arguments, same contract, same return codes, and the
+ * child's detail message re-raised with fg_fail on the calling thread. Besides those:
+ * FG_EFORMAT when the child died on this image (a crash in a codec: the data is corrupt or
+ * hostile; the next call starts a fresh child), FG_ENOENT when the program is missing,
+ * FG_EIO when a child cannot be started or talked to. Blocks while max_procs decodes are
+ * running. Thread-safe. On success the caller owns out->rgb (fg_image_release); on failure
+ * *out is empty. */
+int fg_decoder_decode(fg_decoder *dec, const void *bytes, size_t len,
+                      const float background_rgb[3], fg_image *out);
+
+/* Ends children idle for more than idle_seconds; the daemon calls it every second or so.
+ * Waits for them to exit (they do at once on EOF), so it may take a few milliseconds. When it
+ * ended any, it also returns the process's free heap memory to the system (malloc_trim). */
+void fg_decoder_reap_idle(fg_decoder *dec);
+
+/* Test hook: writes the pids of up to max live children (idle or busy) to pids and returns
+ * how many there are. */
+size_t fg_decoder_child_pids(fg_decoder *dec, pid_t *pids, size_t max);
+
+/* ---- wire format -----------------------------------------------------------------------
+ * The daemon writes a request on the child's stdin and reads the reply on its stdout; every
+ * integer is little-endian, floats are IEEE 754 binary32 in little-endian byte order.
+ *
+ *   request (40 bytes): "FGDQ", u32 version (1), u32 op (1 = decode), u32 reserved (0),
+ *                       f32 background[3], u32 pad (0), u64 length; then length bytes of
+ *                       encoded image.
+ *   reply (32 bytes):   "FGDR", u32 version, i32 rc (0 or an FG_E* code), i32 w, i32 h,
+ *                       u32 message length, u64 pixel bytes; then the message (the child's
+ *                       fg_error_detail(), no NUL), then float RGB [h][w][3] when rc is 0.
+ *
+ * The child reads a whole request before it replies, so the daemon may write the request and
+ * then read the reply. A request the child cannot parse gets an FG_EINVAL reply, after which
+ * the child exits; EOF on its stdin makes it exit 0. */
+
+#define FG_DECODER_VERSION 1u
+#define FG_DECODER_OP_DECODE 1u
+#define FG_DECODER_REQUEST_SIZE 40
+#define FG_DECODER_REPLY_SIZE 32
+#define FG_DECODER_MAX_REQUEST (1ull << 30) /* bytes of encoded image */
+#define FG_DECODER_MAX_MESSAGE 4096u
+
+typedef struct fg_decoder_request {
+  uint32_t version, op;
+  float background[3];
+  uint64_t length;
+} fg_decoder_request;
+
+typedef struct fg_decoder_reply {
+  uint32_t version;
+  int32_t rc, w, h;
+  uint32_t message_len;
+  uint64_t pixel_bytes;
+} fg_decoder_reply;
+
+void fg_decoder_request_pack(const fg_decoder_request *req, uint8_t out[FG_DECODER_REQUEST_SIZE]);
+/* Checks the magic, the version, the op and the length; FG_EINVAL with a detail otherwise.
+ * *req is filled as far as it could be read either way. */
+int fg_decoder_request_unpack(const uint8_t in[FG_DECODER_REQUEST_SIZE], fg_decoder_request *req);
+
+void fg_decoder_reply_pack(const fg_decoder_reply *rep, uint8_t out[FG_DECODER_REPLY_SIZE]);
+/* Checks the magic, the version and that the sizes agree with rc, w and h; FG_EINVAL with a
+ * detail otherwise. */
+int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep);
+
+/* Converts n floats between host order and the wire's little-endian order, in place (a no-op
+ * on little-endian hosts). */
+void fg_decoder_floats_le(float *v, size_t n);
+
+/* read(2) and write(2) of exactly n bytes, through EINTR and short transfers. read returns
+ * the bytes read (less than n only at EOF) or -1 with errno; write returns 0 or -1 with
+ * errno (EPIPE when the reader is gone; the caller decides about SIGPIPE). */
+ssize_t fg_decoder_read_full(int fd, void *buf, size_t n);
+int fg_decoder_write_full(int fd, const void *buf, size_t n);
+
+#endif

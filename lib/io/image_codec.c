@@ -1,0 +1,228 @@
+/* Image decode and encode through OpenImageIO (oiio_shim.cpp): format checks, compositing
+ * and colour conversion in C; and fg_frame_prepare, which decodes. Kept apart from image.c so
+ * that only programs that call these functions link OpenImageIO; the daemon decodes in a
+ * child process (fieldgrip-decode) and never does.
+ *
+ * Pixel convention as in image.c: row-major [h][w][3], sRGB-encoded floats in [0, 1]. */
+#include "io/image.h"
+#include "core/error.h"
+#include "core/pose.h"
+#include "io/frame.h"
+#include "io/shim.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---- decode ------------------------------------------------------------------------- */
+
+/* The extension that steers OIIO to the right reader, since memory has no file name; name
+ * is what fg_image_sniff (image.c, the one place that knows the magic bytes) returned. */
+static const char *reader_ext(const char *name) {
+  if (strcmp(name, "PNG") == 0) return "png";
+  if (strcmp(name, "JPEG") == 0) return "jpg";
+  if (strcmp(name, "OpenEXR") == 0) return "exr";
+  return "tif";
+}
+
+/* Walks a PNG's chunk list (length, type, data, CRC) up to IEND without reading any data.
+ * A PNG cut short is the commonest corrupt upload, and letting it reach OIIO costs more than
+ * a clear message: OIIO 2.4's read callback longjmps over a std::string when the data runs
+ * out, leaking it on every such upload, and libpng prints to stderr. CRCs and the compressed
+ * data are left to libpng. */
+static int png_check_chunks(const uint8_t *b, size_t len) {
+  size_t off = 8;
+  for (int n = 0;; n++) {
+    if (len - off < 12)
+      return fg_fail(FG_EFORMAT, "the PNG data is truncated or corrupt: it ends after %zu bytes, "
+                                 "before its IEND chunk",
+                     len);
+    size_t clen = (size_t)b[off] << 24 | (size_t)b[off + 1] << 16 | (size_t)b[off + 2] << 8 |
+                  (size_t)b[off + 3];
+    if (clen > 0x7fffffffu || clen > len - off - 12)
+      return fg_fail(FG_EFORMAT, "the PNG data is truncated or corrupt: chunk %d at byte %zu "
+                                 "declares %zu bytes but only %zu remain",
+                     n, off, clen, len - off - 12);
+    if (memcmp(b + off + 4, "IEND", 4) == 0) return 0;
+    off += 12 + clen;
+  }
+}
+
+/* Clamps to [0, 1] and maps NaN to 0. Written with comparisons rather than fminf/fmaxf, which
+ * gcc leaves as libm calls on x86-64 and which dominated the compositing pass. */
+static inline float clamp01(float v) { return !(v > 0.0f) ? 0.0f : v > 1.0f ? 1.0f : v; }
+
+static float srgb_encode(float v) {
+  v = clamp01(v);
+  return v <= 0.0031308f ? 12.92f * v : 1.055f * powf(v, 1.0f / 2.4f) - 0.055f;
+}
+
+static float srgb_decode(float v) {
+  return v <= 0.04045f ? v / 12.92f : powf((v + 0.055f) / 1.055f, 2.4f);
+}
+
+/* Converts n decoded samples to float: integers to [0, 1] (by division, so that full scale
+ * is exactly 1 and every 16-bit value survives a round trip), floats as they are. */
+static void samples_to_float(const void *src, int type, size_t n, float *dst) {
+  if (type == FG_SHIM_U8) {
+    const uint8_t *s = src;
+    for (size_t i = 0; i < n; i++) dst[i] = (float)s[i] / 255.0f;
+  } else if (type == FG_SHIM_U16) {
+    const uint16_t *s = src;
+    for (size_t i = 0; i < n; i++) dst[i] = (float)s[i] / 65535.0f;
+  } else {
+    memcpy(dst, src, n * sizeof(float));
+  }
+}
+
+/* Turns one row of w decoded pixels, in[w][nch] floats, into out[w][3] sRGB-encoded RGB:
+ * grey is expanded, alpha composited over bg, linear light encoded and clamped.
+ *
+ * Compositing of linear data happens in linear light, with the background converted there
+ * too, which is what a physically blended pixel would be; sRGB data is composited in its
+ * encoding, as browsers and viewers do. bg is already in the data's space. */
+static void row_to_rgb(const float *in, size_t w, int nch, int alpha, int associated, int linear,
+                       const float bg[3], float *out) {
+  if (nch == 3) {
+    for (size_t i = 0; i < w * 3; i++) out[i] = linear ? srgb_encode(in[i]) : in[i];
+  } else if (nch == 1) {
+    for (size_t i = 0; i < w; i++) {
+      float g = linear ? srgb_encode(in[i]) : in[i];
+      out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = g;
+    }
+  } else if (nch == 2 && alpha == 1) {
+    for (size_t i = 0; i < w; i++) {
+      float a = clamp01(in[2 * i + 1]);
+      float g = associated ? in[2 * i] : in[2 * i] * a;
+      for (int k = 0; k < 3; k++) {
+        float v = g + bg[k] * (1.0f - a);
+        out[3 * i + (size_t)k] = linear ? srgb_encode(v) : clamp01(v);
+      }
+    }
+  } else { /* nch == 4, alpha == 3 */
+    for (size_t i = 0; i < w; i++) {
+      const float *s = in + 4 * i;
+      float a = clamp01(s[3]), na = 1.0f - a;
+      float ca = associated ? 1.0f : a;
+      float *d = out + 3 * i;
+      for (int k = 0; k < 3; k++) {
+        float v = s[k] * ca + bg[k] * na;
+        d[k] = linear ? srgb_encode(v) : clamp01(v);
+      }
+    }
+  }
+}
+
+int fg_image_decode(const void *bytes, size_t len, const float background_rgb[3], fg_image *out) {
+  if (!out) return fg_fail(FG_EINVAL, "fg_image_decode: no output image");
+  memset(out, 0, sizeof *out);
+  if (!bytes || len == 0)
+    return fg_fail(FG_EFORMAT, "the image is empty; send PNG, JPEG, OpenEXR or TIFF data");
+  const uint8_t *b = bytes;
+  const char *name = fg_image_sniff(b, len);
+  if (!name) {
+    unsigned c[4] = {0, 0, 0, 0};
+    for (size_t i = 0; i < 4 && i < len; i++) c[i] = b[i];
+    return fg_fail(FG_EFORMAT,
+                   "unrecognised image format (data starts with %02x %02x %02x %02x); supported "
+                   "formats are PNG, JPEG, OpenEXR and TIFF",
+                   c[0], c[1], c[2], c[3]);
+  }
+  const char *ext = reader_ext(name);
+  if (strcmp(ext, "png") == 0) FG_TRY(png_check_chunks(b, len));
+  static const float white[3] = {1, 1, 1};
+  if (!background_rgb) background_rgb = white;
+  fg_shim_decoded d;
+  FG_TRY(fg_oiio_decode(bytes, len, ext, name, FG_IMAGE_MAX_SIDE,
+                        (size_t)FG_IMAGE_MAX_PIXELS, &d));
+  float bg[3];
+  for (int k = 0; k < 3; k++)
+    bg[k] = d.linear ? srgb_decode(clamp01(background_rgb[k])) : clamp01(background_rgb[k]);
+
+  size_t w = (size_t)d.w, h = (size_t)d.h, nch = (size_t)d.nch;
+  size_t ssize = d.type == FG_SHIM_U8 ? 1 : d.type == FG_SHIM_U16 ? 2 : 4;
+  float *rgb = malloc(w * h * 3 * sizeof(float));
+  /* Plain sRGB colour converts straight into the output; anything else goes through one row
+   * of floats, which stays in cache, so the image is still walked once. */
+  int direct = nch == 3 && !d.linear;
+  float *row = direct ? NULL : malloc(w * nch * sizeof(float));
+  if (!rgb || (!direct && !row)) {
+    free(rgb);
+    free(row);
+    free(d.px);
+    return fg_fail(FG_ENOMEM, "out of memory decoding a %dx%d image", d.w, d.h);
+  }
+  if (direct) {
+    samples_to_float(d.px, d.type, w * h * 3, rgb);
+  } else {
+    for (size_t y = 0; y < h; y++) {
+      samples_to_float((const uint8_t *)d.px + y * w * nch * ssize, d.type, w * nch, row);
+      row_to_rgb(row, w, d.nch, d.alpha, d.associated, d.linear, bg, rgb + y * w * 3);
+    }
+  }
+  free(row);
+  free(d.px);
+  out->w = d.w;
+  out->h = d.h;
+  out->rgb = rgb;
+  return 0;
+}
+
+/* ---- encode ------------------------------------------------------------------------- */
+
+/* The same limits as image.c's check of resampling sizes (kept beside each user, as both are
+ * static and three lines long). */
+static int check_size(const char *what, int w, int h) {
+  if (w <= 0 || h <= 0 || w > FG_IMAGE_MAX_SIDE || h > FG_IMAGE_MAX_SIDE ||
+      (size_t)w * (size_t)h > (size_t)FG_IMAGE_MAX_PIXELS)
+    return fg_fail(FG_EINVAL, "%s: size %dx%d is outside 1..%d pixels per side", what, w, h,
+                   FG_IMAGE_MAX_SIDE);
+  return 0;
+}
+
+int fg_image_encode_png(const void *pixels, int w, int h, int channels, int bits, uint8_t **out,
+                        size_t *out_len) {
+  if (!out || !out_len) return fg_fail(FG_EINVAL, "fg_image_encode_png: no output buffer");
+  *out = NULL;
+  *out_len = 0;
+  if (!pixels) return fg_fail(FG_EINVAL, "fg_image_encode_png: no pixels");
+  FG_TRY(check_size("PNG encode", w, h));
+  if (channels != 1 && channels != 3 && channels != 4)
+    return fg_fail(FG_EINVAL, "PNG encode: channels must be 1, 3 or 4, got %d", channels);
+  if (bits != 8 && bits != 16)
+    return fg_fail(FG_EINVAL, "PNG encode: bits must be 8 or 16, got %d", bits);
+  return fg_oiio_encode_png(pixels, w, h, channels, bits, out, out_len);
+}
+
+int fg_image_write_file(const char *path, const float *pixels, int w, int h, int channels) {
+  if (!path || !pixels) return fg_fail(FG_EINVAL, "fg_image_write_file: no path or pixels");
+  FG_TRY(check_size("image write", w, h));
+  if (channels < 1 || channels > 4)
+    return fg_fail(FG_EINVAL, "image write: channels must be 1..4, got %d", channels);
+  return fg_oiio_write_file(path, pixels, w, h, channels);
+}
+
+/* ---- frames from encoded images ----------------------------------------------------- */
+
+/* Declared in frame.h; here because it decodes (see the comment at the top). */
+int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const fg_camera *cam,
+                     const double T_world_cam[16], const fg_npy *features,
+                     const fg_ingest_opts *opts) {
+  if (!out) return fg_fail(FG_EINVAL, "fg_frame_prepare: no output frame");
+  memset(out, 0, sizeof *out);
+  if (!image) return fg_fail(FG_EINVAL, "fg_frame_prepare: no image given");
+  if (!cam || !T_world_cam || !opts)
+    return fg_fail(FG_EINVAL, "frame ingest: camera, pose and options are required");
+  /* The checks that need no pixels come first, so that a bad pose or feature file costs no
+   * decode; fg_frame_prepare_image repeats them, which is cheap next to decoding. */
+  if (opts->max_image_side < 0)
+    return fg_fail(FG_EINVAL, "max_image_side must be 0 (keep) or positive, got %d",
+                   opts->max_image_side);
+  FG_TRY(fg_pose_validate(T_world_cam));
+  if (features) FG_TRY(fg_frame_check_features(features));
+  fg_image img;
+  FG_TRY(fg_image_decode(image, image_len, opts->background_rgb, &img));
+  int rc = fg_frame_prepare_image(out, &img, cam, T_world_cam, features, opts);
+  fg_image_release(&img);
+  return rc;
+}

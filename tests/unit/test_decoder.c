@@ -1,0 +1,460 @@
+/* Unit tests of daemon/decoder: images decoded by fieldgrip-decode children give the same
+ * floats as fg_image_decode in process, errors come back with the child's detail, a child
+ * that crashes or is killed is replaced, the pool stays within max_procs under concurrent
+ * use, idle children are reaped, and fg_decoder_free leaves no process behind.
+ * argv[1] is the fieldgrip-decode program. */
+#include "test.h"
+
+#include "config.h"
+#include "core/error.h"
+#include "decoder.h"
+#include "io/image.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdint.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+static const char *program;
+
+/* The crash hook of decode_main.c is armed with this prefix. */
+#define CRASH_MAGIC "FG-CRASH-TEST"
+
+enum { W = 61, H = 37 };
+
+/* An 8-bit RGBA PNG with every alpha from transparent to opaque, so compositing on the
+ * background is exercised. The caller frees *png. */
+static void make_rgba_png(uint8_t **png, size_t *len) {
+  static uint8_t px[H][W][4];
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      px[y][x][0] = (uint8_t)(x * 4);
+      px[y][x][1] = (uint8_t)(y * 7);
+      px[y][x][2] = (uint8_t)((x * y) % 256);
+      px[y][x][3] = (uint8_t)((x * 31 + y * 17) % 256);
+    }
+  ASSERT_OK(fg_image_encode_png(px, W, H, 4, 8, png, len));
+}
+
+static int process_exists(pid_t pid) {
+  char path[64];
+  snprintf(path, sizeof path, "/proc/%d", (int)pid);
+  return access(path, F_OK) == 0;
+}
+
+static void assert_same_image(const fg_image *a, const fg_image *b) {
+  ASSERT_EQ(a->w, b->w);
+  ASSERT_EQ(a->h, b->h);
+  ASSERT(memcmp(a->rgb, b->rgb, (size_t)a->w * (size_t)a->h * 3 * sizeof(float)) == 0);
+}
+
+static void test_same_pixels(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  const float bg[3] = {0.2f, 0.5f, 0.9f};
+  fg_image direct, via;
+  ASSERT_OK(fg_image_decode(png, len, bg, &direct));
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 2, 30));
+  ASSERT_OK(fg_decoder_check(d));
+  ASSERT_OK(fg_decoder_decode(d, png, len, bg, &via));
+  assert_same_image(&direct, &via);
+  fg_image_release(&via);
+  /* A second request goes to the same child. */
+  pid_t pids[4];
+  ASSERT_EQ(fg_decoder_child_pids(d, pids, 4), 1);
+  ASSERT_OK(fg_decoder_decode(d, png, len, bg, &via));
+  assert_same_image(&direct, &via);
+  pid_t again[4];
+  ASSERT_EQ(fg_decoder_child_pids(d, again, 4), 1);
+  ASSERT_EQ(again[0], pids[0]);
+  fg_image_release(&via);
+  /* A NULL background means white, as for fg_image_decode. */
+  fg_image_release(&direct);
+  ASSERT_OK(fg_image_decode(png, len, NULL, &direct));
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &via));
+  assert_same_image(&direct, &via);
+  fg_image_release(&via);
+  fg_image_release(&direct);
+  fg_decoder_free(d);
+  free(png);
+}
+
+static void test_errors(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  fg_image img;
+
+  /* Truncated: same code and the very detail fg_image_decode gives. */
+  ASSERT_ERR(fg_image_decode(png, len / 2, NULL, &img), FG_EFORMAT, "truncated");
+  char direct[1024];
+  snprintf(direct, sizeof direct, "%s", fg_error_detail());
+  fg_error_clear();
+  ASSERT_ERR(fg_decoder_decode(d, png, len / 2, NULL, &img), FG_EFORMAT, "truncated");
+  ASSERT_STREQ(fg_error_detail(), direct);
+  ASSERT(img.rgb == NULL);
+
+  /* Random bytes, and nothing at all. */
+  uint8_t noise[777];
+  uint32_t s = 12345;
+  for (size_t i = 0; i < sizeof noise; i++) {
+    s = s * 1664525u + 1013904223u;
+    noise[i] = (uint8_t)(s >> 24);
+  }
+  noise[0] = 0x42; /* no magic byte of a supported format */
+  ASSERT_ERR(fg_decoder_decode(d, noise, sizeof noise, NULL, &img), FG_EFORMAT, "supported");
+  ASSERT_ERR(fg_decoder_decode(d, noise, 0, NULL, &img), FG_EFORMAT, "empty");
+  /* PNG magic on noise reaches the codec, and OpenImageIO's failure comes back. */
+  memcpy(noise, "\x89PNG\r\n\x1a\n", 8);
+  ASSERT_ERR(fg_decoder_decode(d, noise, sizeof noise, NULL, &img), FG_EFORMAT, "PNG");
+
+  /* The child survived all of that. */
+  pid_t pids[2];
+  ASSERT_EQ(fg_decoder_child_pids(d, pids, 2), 1);
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t again[2];
+  ASSERT_EQ(fg_decoder_child_pids(d, again, 2), 1);
+  ASSERT_EQ(again[0], pids[0]);
+  fg_decoder_free(d);
+  free(png);
+}
+
+static void test_crash_and_kill(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t first;
+  ASSERT_EQ(fg_decoder_child_pids(d, &first, 1), 1);
+
+  /* A child that crashes on an image: FG_EFORMAT naming the signal, the child is gone. */
+  static const char hostile[] = CRASH_MAGIC " and then whatever would have crashed a codec";
+  ASSERT_ERR(fg_decoder_decode(d, hostile, sizeof hostile, NULL, &img), FG_EFORMAT,
+             "the image decoder stopped on this image (killed by signal 6)");
+  ASSERT_STRCONTAINS(fg_error_detail(), "corrupt or hostile");
+  ASSERT(img.rgb == NULL);
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  ASSERT(!process_exists(first));
+
+  /* The next image gets a fresh child. */
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t second;
+  ASSERT_EQ(fg_decoder_child_pids(d, &second, 1), 1);
+  ASSERT_NE(second, first);
+
+  /* A child killed while idle is not the next image's fault: it is replaced silently. */
+  ASSERT_EQ(kill(second, SIGKILL), 0);
+  /* Until it is wholly dead (all its threads gone, so its pipes are closed), without reaping
+   * it: that stays the decoder's job. */
+  siginfo_t si;
+  ASSERT_EQ(waitid(P_PID, (id_t)second, &si, WEXITED | WNOWAIT), 0);
+  ASSERT_EQ(si.si_status, SIGKILL);
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t third;
+  ASSERT_EQ(fg_decoder_child_pids(d, &third, 1), 1);
+  ASSERT_NE(third, second);
+  ASSERT(!process_exists(second)); /* reaped, not left a zombie */
+  fg_decoder_free(d);
+  ASSERT(!process_exists(third));
+  free(png);
+}
+
+typedef struct worker {
+  fg_decoder *d;
+  const uint8_t *png;
+  size_t len;
+  const fg_image *expect;
+  int failures;
+} worker;
+
+static void *worker_main(void *arg) {
+  worker *w = arg;
+  static const char bad[] = "not an image";
+  for (int i = 0; i < 12; i++) {
+    fg_image img;
+    if (i % 4 == 3) { /* errors travel per thread */
+      if (fg_decoder_decode(w->d, bad, sizeof bad, NULL, &img) != FG_EFORMAT ||
+          !strstr(fg_error_detail(), "unrecognised"))
+        w->failures++;
+      continue;
+    }
+    if (fg_decoder_decode(w->d, w->png, w->len, NULL, &img) != 0) {
+      fprintf(stderr, "decode failed: %s\n", fg_error_detail());
+      w->failures++;
+      continue;
+    }
+    if (img.w != w->expect->w || img.h != w->expect->h ||
+        memcmp(img.rgb, w->expect->rgb, (size_t)img.w * (size_t)img.h * 3 * sizeof(float)) != 0)
+      w->failures++;
+    fg_image_release(&img);
+  }
+  return NULL;
+}
+
+static void test_concurrent(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_image expect;
+  ASSERT_OK(fg_image_decode(png, len, NULL, &expect));
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 2, 30));
+  enum { N = 8 };
+  pthread_t th[N];
+  worker w[N];
+  for (int i = 0; i < N; i++) {
+    w[i] = (worker){.d = d, .png = png, .len = len, .expect = &expect};
+    ASSERT_EQ(pthread_create(&th[i], NULL, worker_main, &w[i]), 0);
+  }
+  for (int i = 0; i < N; i++) {
+    pthread_join(th[i], NULL);
+    ASSERT_EQ(w[i].failures, 0);
+  }
+  size_t n = fg_decoder_child_pids(d, NULL, 0);
+  ASSERT(n >= 1 && n <= 2);
+  /* The children outlive the threads that happened to need them first. */
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  fg_decoder_free(d);
+  fg_image_release(&expect);
+  free(png);
+}
+
+static void test_reap_idle(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 2, 1));
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t pid;
+  ASSERT_EQ(fg_decoder_child_pids(d, &pid, 1), 1);
+  fg_decoder_reap_idle(d); /* just used: stays */
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 1);
+  struct timespec wait = {1, 300000000};
+  nanosleep(&wait, NULL);
+  fg_decoder_reap_idle(d);
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  ASSERT(!process_exists(pid));
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t again;
+  ASSERT_EQ(fg_decoder_child_pids(d, &again, 1), 1);
+  ASSERT_NE(again, pid);
+  fg_decoder_free(d);
+  ASSERT(!process_exists(again));
+  free(png);
+}
+
+static void test_free_leaves_nothing(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 3, 30));
+  enum { N = 3 };
+  pthread_t th[N];
+  worker w[N];
+  fg_image expect;
+  ASSERT_OK(fg_image_decode(png, len, NULL, &expect));
+  for (int i = 0; i < N; i++) {
+    w[i] = (worker){.d = d, .png = png, .len = len, .expect = &expect};
+    ASSERT_EQ(pthread_create(&th[i], NULL, worker_main, &w[i]), 0);
+  }
+  for (int i = 0; i < N; i++) pthread_join(th[i], NULL);
+  pid_t pids[8];
+  size_t n = fg_decoder_child_pids(d, pids, 8);
+  ASSERT(n >= 1 && n <= 3);
+  fg_decoder_free(d);
+  for (size_t i = 0; i < n; i++) ASSERT(!process_exists(pids[i]));
+  /* Nothing left to wait for: no zombie and no child of ours at all. */
+  ASSERT_EQ(waitpid(-1, NULL, WNOHANG), -1);
+  ASSERT_EQ(errno, ECHILD);
+  fg_decoder_free(NULL);
+  fg_image_release(&expect);
+  free(png);
+}
+
+static void test_missing_program(void) {
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, "/nonexistent/fieldgrip-decode", 1, 30));
+  ASSERT_ERR(fg_decoder_check(d), FG_ENOENT, "/nonexistent/fieldgrip-decode");
+  fg_image img;
+  ASSERT_ERR(fg_decoder_decode(d, "\x89PNG", 4, NULL, &img), FG_ENOENT,
+             "/nonexistent/fieldgrip-decode is missing");
+  fg_decoder_free(d);
+  /* The default places: beside this test (not there) and the install folder. */
+  ASSERT_OK(fg_decoder_new(&d, NULL, 1, 30));
+  if (access(FG_LIBEXECDIR "/fieldgrip/fieldgrip-decode", X_OK) != 0) {
+    ASSERT_ERR(fg_decoder_check(d), FG_ENOENT, FG_LIBEXECDIR "/fieldgrip/fieldgrip-decode");
+    ASSERT_STRCONTAINS(fg_error_detail(), "tests/unit/fieldgrip-decode");
+  }
+  fg_decoder_free(d);
+  ASSERT_ERR(fg_decoder_new(&d, program, 0, 30), FG_EINVAL, "max_procs");
+  ASSERT(d == NULL);
+}
+
+/* Writes an executable shell script that stands in for fieldgrip-decode. */
+static void write_script(const char *path, const char *body) {
+  FILE *f = fopen(path, "w");
+  ASSERT(f != NULL);
+  fprintf(f, "#!/bin/sh\n%s\n", body);
+  ASSERT_EQ(fclose(f), 0);
+  ASSERT_EQ(chmod(path, 0755), 0);
+}
+
+/* Programs that answer wrongly: another protocol version is the installation's fault
+ * (FG_EIO), a malformed reply is treated like a crash (FG_EFORMAT). */
+static void test_impostors(void) {
+  char dir[] = "/tmp/fg-test-decoder-XXXXXX";
+  ASSERT(mkdtemp(dir) != NULL);
+  char v2[64], junk[64];
+  snprintf(v2, sizeof v2, "%s/v2", dir);
+  snprintf(junk, sizeof junk, "%s/junk", dir);
+  /* A reply header of version 2: "FGDR", 2, then 24 zero bytes. */
+  write_script(v2, "printf 'FGDR\\002\\000\\000\\000'; head -c 24 /dev/zero");
+  write_script(junk, "printf 'HTTP/1.1 200 OK\\r\\nContent-Length: 0\\r\\n\\r\\n'");
+  fg_decoder *d;
+  fg_image img;
+  ASSERT_OK(fg_decoder_new(&d, v2, 1, 30));
+  ASSERT_ERR(fg_decoder_decode(d, "\x89PNG", 4, NULL, &img), FG_EIO, "protocol version 2");
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  fg_decoder_free(d);
+  ASSERT_OK(fg_decoder_new(&d, junk, 1, 30));
+  ASSERT_ERR(fg_decoder_decode(d, "\x89PNG", 4, NULL, &img), FG_EFORMAT,
+             "the image decoder stopped on this image (exited with status 0)");
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  fg_decoder_free(d);
+  ASSERT_EQ(unlink(v2), 0);
+  ASSERT_EQ(unlink(junk), 0);
+  ASSERT_EQ(rmdir(dir), 0);
+}
+
+/* Talks to fieldgrip-decode directly: what it answers to a request it cannot accept. */
+static void raw_exchange(const uint8_t *req, size_t req_len, int *rc, char *msg, size_t msglen,
+                         int *status) {
+  int in[2], out[2];
+  ASSERT_EQ(pipe(in), 0);
+  ASSERT_EQ(pipe(out), 0);
+  pid_t pid = fork();
+  ASSERT(pid >= 0);
+  if (pid == 0) {
+    dup2(in[0], 0);
+    dup2(out[1], 1);
+    close(in[0]), close(in[1]), close(out[0]), close(out[1]);
+    execl(program, program, (char *)NULL);
+    _exit(127);
+  }
+  close(in[0]);
+  close(out[1]);
+  ASSERT_EQ(fg_decoder_write_full(in[1], req, req_len), 0);
+  close(in[1]);
+  uint8_t hdr[FG_DECODER_REPLY_SIZE];
+  ssize_t got = fg_decoder_read_full(out[0], hdr, sizeof hdr);
+  *rc = 0;
+  msg[0] = '\0';
+  if (got == (ssize_t)sizeof hdr) {
+    fg_decoder_reply rep;
+    ASSERT_OK(fg_decoder_reply_unpack(hdr, &rep));
+    *rc = rep.rc;
+    ASSERT(rep.message_len < msglen);
+    ASSERT_EQ(fg_decoder_read_full(out[0], msg, rep.message_len), rep.message_len);
+    msg[rep.message_len] = '\0';
+  } else {
+    ASSERT_EQ(got, 0);
+  }
+  close(out[0]);
+  ASSERT_EQ(waitpid(pid, status, 0), pid);
+}
+
+static void test_wire(void) {
+  uint8_t req[FG_DECODER_REQUEST_SIZE];
+  fg_decoder_request r = {.version = FG_DECODER_VERSION, .op = FG_DECODER_OP_DECODE,
+                          .background = {0.25f, 0.5f, 1.0f}, .length = 123456789012ull};
+  fg_decoder_request_pack(&r, req);
+  ASSERT(memcmp(req, "FGDQ\x01\0\0\0\x01\0\0\0", 12) == 0);
+  fg_decoder_request back;
+  ASSERT_ERR(fg_decoder_request_unpack(req, &back), FG_EINVAL, "more than");
+  ASSERT_EQ(back.length, 123456789012ull);
+  ASSERT(back.background[0] == 0.25f && back.background[2] == 1.0f);
+  r.length = 10;
+  fg_decoder_request_pack(&r, req);
+  ASSERT_OK(fg_decoder_request_unpack(req, &back));
+
+  fg_decoder_reply rep = {.version = FG_DECODER_VERSION, .rc = 0, .w = 2, .h = 3,
+                          .pixel_bytes = 2 * 3 * 12 + 4};
+  uint8_t rb[FG_DECODER_REPLY_SIZE];
+  fg_decoder_reply_pack(&rep, rb);
+  fg_decoder_reply rback;
+  ASSERT_ERR(fg_decoder_reply_unpack(rb, &rback), FG_EINVAL, "2x3");
+  rep.pixel_bytes = 2 * 3 * 12;
+  fg_decoder_reply_pack(&rep, rb);
+  ASSERT_OK(fg_decoder_reply_unpack(rb, &rback));
+
+  /* The program refuses a bad magic, a wrong version and an oversized image, and exits. */
+  int rc, status;
+  char msg[FG_DECODER_MAX_MESSAGE + 1];
+  uint8_t bad[FG_DECODER_REQUEST_SIZE];
+  memcpy(bad, req, sizeof bad);
+  memcpy(bad, "GET ", 4);
+  raw_exchange(bad, sizeof bad, &rc, msg, sizeof msg, &status);
+  ASSERT_EQ(rc, FG_EINVAL);
+  ASSERT_STRCONTAINS(msg, "magic");
+  ASSERT(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+  r.version = 2;
+  fg_decoder_request_pack(&r, bad);
+  raw_exchange(bad, sizeof bad, &rc, msg, sizeof msg, &status);
+  ASSERT_EQ(rc, FG_EINVAL);
+  ASSERT_STRCONTAINS(msg, "version 2");
+  r.version = FG_DECODER_VERSION;
+  r.length = FG_DECODER_MAX_REQUEST + 1;
+  fg_decoder_request_pack(&r, bad);
+  raw_exchange(bad, sizeof bad, &rc, msg, sizeof msg, &status);
+  ASSERT_EQ(rc, FG_EINVAL);
+  ASSERT_STRCONTAINS(msg, "more than");
+  /* EOF before any request: a clean exit. */
+  raw_exchange(bad, 0, &rc, msg, sizeof msg, &status);
+  ASSERT(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+}
+
+int main(int argc, char **argv) {
+  if (argc != 2) {
+    fprintf(stderr, "usage: %s PATH-OF-fieldgrip-decode\n", argv[0]);
+    return 2;
+  }
+  program = argv[1];
+  /* The crash test aborts a child on purpose; no core file for it. */
+  struct rlimit nocore = {0, 0};
+  setrlimit(RLIMIT_CORE, &nocore);
+  setenv("FG_DECODE_CRASH_ON", CRASH_MAGIC, 1);
+  test_wire();
+  test_same_pixels();
+  test_errors();
+  test_crash_and_kill();
+  test_concurrent();
+  test_reap_idle();
+  test_free_leaves_nothing();
+  test_missing_program();
+  test_impostors();
+  printf("decoder: all passed\n");
+  return 0;
+}
