@@ -3,8 +3,9 @@
  * Reads requests on stdin and writes replies on stdout in the format decoder.h describes,
  * one at a time, until EOF on stdin. Not meant to be run by hand.
  *
- * Test hook: when the environment has FG_DECODE_CRASH_ON=<text>, a request whose image
- * starts with those bytes makes the program abort(), standing in for a codec crash. */
+ * Test hooks: when the environment has FG_DECODE_CRASH_ON=<text>, a request whose image
+ * starts with those bytes makes the program abort(), standing in for a codec crash; with
+ * FG_DECODE_HANG_ON=<text> it sleeps instead, standing in for a codec stuck in a loop. */
 #include "decoder.h"
 
 #include "config.h"
@@ -38,11 +39,16 @@ static int send_reply(int fd, int rc, const char *message, fg_image *img) {
   return fg_decoder_write_full(fd, img->rgb, n * sizeof(float));
 }
 
-/* The test hook (see the top of the file). */
+static int starts_with_env(const char *var, const void *bytes, size_t len) {
+  const char *magic = getenv(var);
+  return magic && *magic && len >= strlen(magic) && memcmp(bytes, magic, strlen(magic)) == 0;
+}
+
+/* The test hooks (see the top of the file). */
 static void crash_if_asked(const void *bytes, size_t len) {
-  const char *magic = getenv("FG_DECODE_CRASH_ON");
-  if (magic && *magic && len >= strlen(magic) && memcmp(bytes, magic, strlen(magic)) == 0)
-    abort();
+  if (starts_with_env("FG_DECODE_CRASH_ON", bytes, len)) abort();
+  if (starts_with_env("FG_DECODE_HANG_ON", bytes, len))
+    for (;;) pause();
 }
 
 int main(int argc, char **argv) {

@@ -171,6 +171,8 @@ typedef struct child {
   int to_fd;        /* the child's stdin */
   int from_fd;      /* the child's stdout */
   int busy;         /* checked out by a decode */
+  double busy_since; /* CLOCK_MONOTONIC seconds when checked out */
+  int overran;      /* killed by the reaper for taking longer than the busy limit */
   double last_used; /* CLOCK_MONOTONIC seconds when last checked in */
   struct child *next;
 } child;
@@ -187,7 +189,7 @@ typedef struct spawn_ticket {
 struct fg_decoder {
   char *program;      /* as given, or NULL for the default places */
   char *beside_exe;   /* <dir of /proc/self/exe>/fieldgrip-decode, or NULL */
-  int max_procs, idle_seconds;
+  int max_procs, idle_seconds, busy_seconds;
   pthread_mutex_t lock;
   pthread_cond_t changed;   /* a child came back or went, a slot freed, a ticket done */
   pthread_cond_t spawn_cv;  /* work for the spawner */
@@ -421,6 +423,7 @@ int fg_decoder_new(fg_decoder **out, const char *program, int max_procs, int idl
   if (!d) return fg_fail(FG_ENOMEM, "out of memory");
   d->max_procs = max_procs;
   d->idle_seconds = idle_seconds;
+  d->busy_seconds = FG_DECODER_BUSY_SECONDS;
   if (program && !(d->program = strdup(program))) goto nomem;
   if (!program) {
     char exe[PATH_MAX];
@@ -497,6 +500,7 @@ static int checkout(fg_decoder *d, child **out) {
       if (!c->busy && (!best || c->last_used > best->last_used)) best = c;
     if (best) {
       best->busy = 1;
+      best->busy_since = now_s();
       pthread_mutex_unlock(&d->lock);
       *out = best;
       return 0;
@@ -517,6 +521,7 @@ static int checkout(fg_decoder *d, child **out) {
     pthread_mutex_unlock(&d->lock);
     return fg_fail(t.rc, "%s", t.message);
   }
+  t.result->busy_since = now_s();
   pthread_mutex_unlock(&d->lock);
   *out = t.result;
   return 0;
@@ -654,8 +659,14 @@ int fg_decoder_decode(fg_decoder *d, const void *bytes, size_t len,
       return rc;
     }
     pid_t pid = c->pid;
+    pthread_mutex_lock(&d->lock);
+    int overran = c->overran;
+    pthread_mutex_unlock(&d->lock);
     int status = 0;
     discard(d, c, &status);
+    if (overran)
+      return fg_fail(FG_EFORMAT, "the image decoder took longer than %d s on this image and was "
+                     "stopped; the data is corrupt or hostile", d->busy_seconds);
     char ended[64];
     describe_status(status, ended, sizeof ended);
     if (how == EXCHANGE_DEAD_BEFORE) {
@@ -686,6 +697,13 @@ void fg_decoder_reap_idle(fg_decoder *d) {
   pthread_mutex_lock(&d->lock);
   for (child **p = &d->children; *p;) {
     child *c = *p;
+    if (c->busy && !c->overran && now - c->busy_since > (double)d->busy_seconds) {
+      /* Its decode sees the pipe close and discards it; see fg_decoder_decode. */
+      c->overran = 1;
+      kill(c->pid, SIGKILL);
+      fg_warn("image decoder pid %d took longer than %d s on one image; stopped it", (int)c->pid,
+              d->busy_seconds);
+    }
     if (!c->busy && now - c->last_used > (double)d->idle_seconds) {
       *p = c->next;
       c->next = old;
@@ -704,6 +722,12 @@ void fg_decoder_reap_idle(fg_decoder *d) {
    * grows past an image's size after the first one is freed), which left an idle daemon at
    * 30-110 MB after an import instead of ~15. Handing them back now is cheap. */
   malloc_trim(0);
+}
+
+void fg_decoder_set_busy_limit(fg_decoder *d, int seconds) {
+  pthread_mutex_lock(&d->lock);
+  d->busy_seconds = seconds >= 1 ? seconds : 1;
+  pthread_mutex_unlock(&d->lock);
 }
 
 size_t fg_decoder_child_pids(fg_decoder *d, pid_t *pids, size_t max) {

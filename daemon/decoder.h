@@ -17,6 +17,11 @@ typedef struct fg_decoder fg_decoder;
 /* Default seconds a child may sit idle before fg_decoder_reap_idle ends it. */
 #define FG_DECODER_IDLE_SECONDS 30
 
+/* Default seconds one image may take before fg_decoder_reap_idle kills the child decoding
+ * it: an image within FG_IMAGE_MAX_PIXELS decodes in well under this, so a child that takes
+ * longer is stuck on hostile data. */
+#define FG_DECODER_BUSY_SECONDS 60
+
 /* Creates a pool of at most max_procs (>= 1) children running program, started on demand and
  * ended after idle_seconds (>= 1) without work. program is copied; NULL means the default
  * places, tried in order at every start: fieldgrip-decode beside the running executable
@@ -43,7 +48,12 @@ int fg_decoder_check(fg_decoder *dec);
 int fg_decoder_decode(fg_decoder *dec, const void *bytes, size_t len,
                       const float background_rgb[3], fg_image *out);
 
-/* Ends children idle for more than idle_seconds; the daemon calls it every second or so.
+/* Changes the busy limit (default FG_DECODER_BUSY_SECONDS, >= 1); for tests. */
+void fg_decoder_set_busy_limit(fg_decoder *dec, int seconds);
+
+/* Ends children idle for more than idle_seconds, and kills those busy on one image for more
+ * than the busy limit (their decode then fails with FG_EFORMAT saying so); the daemon calls
+ * it every second or so.
  * Waits for them to exit (they do at once on EOF), so it may take a few milliseconds. When it
  * ended any, it also returns the process's free heap memory to the system (malloc_trim). */
 void fg_decoder_reap_idle(fg_decoder *dec);

@@ -22,8 +22,9 @@
 
 static const char *program;
 
-/* The crash hook of decode_main.c is armed with this prefix. */
+/* The crash and hang hooks of decode_main.c are armed with these prefixes. */
 #define CRASH_MAGIC "FG-CRASH-TEST"
+#define HANG_MAGIC "FG-HANG-TEST"
 
 enum { W = 61, H = 37 };
 
@@ -265,6 +266,51 @@ static void test_reap_idle(void) {
   free(png);
 }
 
+typedef struct hang_call {
+  fg_decoder *d;
+  int rc;
+  char detail[512];
+  volatile int done;
+} hang_call;
+
+static void *decode_hanging(void *arg) {
+  hang_call *h = arg;
+  static const char stuck[] = HANG_MAGIC " and then a codec that never returns";
+  fg_image img;
+  h->rc = fg_decoder_decode(h->d, stuck, sizeof stuck, NULL, &img);
+  snprintf(h->detail, sizeof h->detail, "%s", fg_error_detail());
+  h->done = 1;
+  return NULL;
+}
+
+/* A child stuck on one image is killed once it passes the busy limit; the request fails
+ * with a sentence that says so, and the pool goes on with a new child. */
+static void test_busy_limit(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  fg_decoder_set_busy_limit(d, 1);
+  hang_call h = {.d = d};
+  pthread_t t;
+  ASSERT_EQ(pthread_create(&t, NULL, decode_hanging, &h), 0);
+  for (int i = 0; i < 100 && !h.done; i++) { /* the daemon's main loop ticks like this */
+    struct timespec tick = {0, 100000000};
+    nanosleep(&tick, NULL);
+    fg_decoder_reap_idle(d);
+  }
+  pthread_join(t, NULL);
+  ASSERT_EQ(h.rc, FG_EFORMAT);
+  ASSERT_STRCONTAINS(h.detail, "took longer than 1 s");
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  fg_decoder_free(d);
+  free(png);
+}
+
 static void test_free_leaves_nothing(void) {
   uint8_t *png;
   size_t len;
@@ -446,12 +492,14 @@ int main(int argc, char **argv) {
   struct rlimit nocore = {0, 0};
   setrlimit(RLIMIT_CORE, &nocore);
   setenv("FG_DECODE_CRASH_ON", CRASH_MAGIC, 1);
+  setenv("FG_DECODE_HANG_ON", HANG_MAGIC, 1);
   test_wire();
   test_same_pixels();
   test_errors();
   test_crash_and_kill();
   test_concurrent();
   test_reap_idle();
+  test_busy_limit();
   test_free_leaves_nothing();
   test_missing_program();
   test_impostors();
