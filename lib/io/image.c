@@ -34,7 +34,7 @@ const char *fg_image_sniff(const void *bytes, size_t len) {
   return NULL;
 }
 
-static int check_size(const char *what, int w, int h) {
+int fg_image_check_size(const char *what, int w, int h) {
   if (w <= 0 || h <= 0 || w > FG_IMAGE_MAX_SIDE || h > FG_IMAGE_MAX_SIDE ||
       (size_t)w * (size_t)h > (size_t)FG_IMAGE_MAX_PIXELS)
     return fg_fail(FG_EINVAL, "%s: size %dx%d is outside 1..%d pixels per side", what, w, h,
@@ -46,8 +46,8 @@ static int check_size(const char *what, int w, int h) {
 
 int fg_image_resize_area(const float *src, int sw, int sh, int c, float *dst, int dw, int dh) {
   if (!src || !dst) return fg_fail(FG_EINVAL, "fg_image_resize_area: no source or destination");
-  FG_TRY(check_size("resize source", sw, sh));
-  FG_TRY(check_size("resize destination", dw, dh));
+  FG_TRY(fg_image_check_size("resize source", sw, sh));
+  FG_TRY(fg_image_check_size("resize destination", dw, dh));
   if (c < 1 || c > 512) /* OpenCV's channel limit (CV_CN_MAX) */
     return fg_fail(FG_EINVAL, "resize: channels must be 1..512, got %d", c);
   if (sw == dw && sh == dh) {
@@ -75,7 +75,7 @@ static void to_cv(const fg_camera *cam, fg_cv_intrinsics *in) {
 int fg_image_undistort(const float *src, const fg_camera *cam, float *dst, fg_camera *out_cam) {
   if (!src || !dst || !out_cam) return fg_fail(FG_EINVAL, "fg_image_undistort: null argument");
   FG_TRY(fg_camera_validate(cam));
-  FG_TRY(check_size("undistort", cam->w, cam->h));
+  FG_TRY(fg_image_check_size("undistort", cam->w, cam->h));
   fg_camera nc = *cam;
   nc.model = FG_CAMERA_PINHOLE;
   nc.k1 = nc.k2 = nc.k3 = nc.p1 = nc.p2 = 0;

@@ -24,6 +24,10 @@ void fg_image_release(fg_image *img);
  * "TIFF" (static strings), or NULL for anything fg_image_decode would refuse as unknown. */
 const char *fg_image_sniff(const void *bytes, size_t len);
 
+/* Checks an image size against FG_IMAGE_MAX_SIDE and FG_IMAGE_MAX_PIXELS; what names the
+ * caller in the FG_EINVAL detail. */
+int fg_image_check_size(const char *what, int w, int h);
+
 /* Decodes PNG (8 or 16 bit), JPEG, OpenEXR or TIFF from memory, recognised by their magic
  * bytes. Grey images are expanded to RGB; an alpha channel is composited over background_rgb
  * (floats in [0,1]); linear formats (EXR, float TIFF) are converted to sRGB encoding and

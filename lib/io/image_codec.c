@@ -170,15 +170,6 @@ int fg_image_decode(const void *bytes, size_t len, const float background_rgb[3]
 
 /* ---- encode ------------------------------------------------------------------------- */
 
-/* The same limits as image.c's check of resampling sizes (kept beside each user, as both are
- * static and three lines long). */
-static int check_size(const char *what, int w, int h) {
-  if (w <= 0 || h <= 0 || w > FG_IMAGE_MAX_SIDE || h > FG_IMAGE_MAX_SIDE ||
-      (size_t)w * (size_t)h > (size_t)FG_IMAGE_MAX_PIXELS)
-    return fg_fail(FG_EINVAL, "%s: size %dx%d is outside 1..%d pixels per side", what, w, h,
-                   FG_IMAGE_MAX_SIDE);
-  return 0;
-}
 
 int fg_image_encode_png(const void *pixels, int w, int h, int channels, int bits, uint8_t **out,
                         size_t *out_len) {
@@ -186,7 +177,7 @@ int fg_image_encode_png(const void *pixels, int w, int h, int channels, int bits
   *out = NULL;
   *out_len = 0;
   if (!pixels) return fg_fail(FG_EINVAL, "fg_image_encode_png: no pixels");
-  FG_TRY(check_size("PNG encode", w, h));
+  FG_TRY(fg_image_check_size("PNG encode", w, h));
   if (channels != 1 && channels != 3 && channels != 4)
     return fg_fail(FG_EINVAL, "PNG encode: channels must be 1, 3 or 4, got %d", channels);
   if (bits != 8 && bits != 16)
@@ -196,7 +187,7 @@ int fg_image_encode_png(const void *pixels, int w, int h, int channels, int bits
 
 int fg_image_write_file(const char *path, const float *pixels, int w, int h, int channels) {
   if (!path || !pixels) return fg_fail(FG_EINVAL, "fg_image_write_file: no path or pixels");
-  FG_TRY(check_size("image write", w, h));
+  FG_TRY(fg_image_check_size("image write", w, h));
   if (channels < 1 || channels > 4)
     return fg_fail(FG_EINVAL, "image write: channels must be 1..4, got %d", channels);
   return fg_oiio_write_file(path, pixels, w, h, channels);
@@ -211,15 +202,7 @@ int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const f
   if (!out) return fg_fail(FG_EINVAL, "fg_frame_prepare: no output frame");
   memset(out, 0, sizeof *out);
   if (!image) return fg_fail(FG_EINVAL, "fg_frame_prepare: no image given");
-  if (!cam || !T_world_cam || !opts)
-    return fg_fail(FG_EINVAL, "frame ingest: camera, pose and options are required");
-  /* The checks that need no pixels come first, so that a bad pose or feature file costs no
-   * decode; fg_frame_prepare_image repeats them, which is cheap next to decoding. */
-  if (opts->max_image_side < 0)
-    return fg_fail(FG_EINVAL, "max_image_side must be 0 (keep) or positive, got %d",
-                   opts->max_image_side);
-  FG_TRY(fg_pose_validate(T_world_cam));
-  if (features) FG_TRY(fg_frame_check_features(features));
+  if (!opts) return fg_fail(FG_EINVAL, "frame ingest: options are required");
   fg_image img;
   FG_TRY(fg_image_decode(image, image_len, opts->background_rgb, &img));
   int rc = fg_frame_prepare_image(out, &img, cam, T_world_cam, features, opts);
