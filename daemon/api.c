@@ -8,6 +8,7 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 const fg_route fg_api_routes[] = {
   {"GET", "/v1/health", "/v1/health", fg_api_health, FG_ROUTE_PUBLIC},
@@ -86,6 +87,12 @@ void fg_app_conf_release(fg_app *app, const fg_conf *conf) {
   fg_conf_ref *dead = unref_locked(app, conf);
   pthread_mutex_unlock(&app->conf_lock);
   ref_free(dead);
+}
+
+int fg_conf_threads(const fg_conf *conf) {
+  if (conf->train_threads > 0) return conf->train_threads;
+  long n = sysconf(_SC_NPROCESSORS_ONLN);
+  return n > 0 ? (int)n : 1;
 }
 
 /* ---------------------------------------------------------------- shared helpers */

@@ -15,7 +15,7 @@ typedef struct fg_app {
   fg_store *store;
   pthread_mutex_t conf_lock;
   fg_conf_ref *conf; /* current configuration; requests hold references */
-  int threads;       /* worker threads for ingest ([train] threads resolved; >= 1) */
+  int threads;       /* [train] threads at start-up, resolved (>= 1): sizes the decoder pool */
   struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
 } fg_app;
 
@@ -26,6 +26,9 @@ void fg_app_set_conf(fg_app *app, fg_conf *conf);
 /* Reference-counted access for the HTTP layer (fg_http_config callbacks). */
 const fg_conf *fg_app_conf_acquire(fg_app *app);
 void fg_app_conf_release(fg_app *app, const fg_conf *conf);
+
+/* [train] threads of conf, 0 resolved to the number of online cores; >= 1. */
+int fg_conf_threads(const fg_conf *conf);
 
 /* Drops the current configuration at shutdown. */
 void fg_app_clear_conf(fg_app *app);

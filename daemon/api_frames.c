@@ -341,7 +341,7 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
   int failed = 0;
   /* Decoding dominates: one frame per thread. Errors are kept per frame so the reply names
    * the first failing frame in file order, whatever the threads' timing. */
-#pragma omp parallel for schedule(dynamic, 1) num_threads(req->app->threads) reduction(| : failed)
+#pragma omp parallel for schedule(dynamic, 1) num_threads(fg_conf_threads(conf)) reduction(| : failed)
   for (size_t i = 0; i < t.n_frames; i++) {
     if (!t.frames[i].image_path) continue;
     if (import_one(req->app, conf, &t.frames[i], &info.params, &frames[i], &errs[i]) != 0)

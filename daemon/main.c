@@ -119,12 +119,6 @@ static int load_conf(const options *o, fg_conf **out, char *err, size_t errlen) 
   return 0;
 }
 
-static int resolve_threads(const fg_conf *conf) {
-  if (conf->train_threads > 0) return conf->train_threads;
-  long n = sysconf(_SC_NPROCESSORS_ONLN);
-  return n > 0 ? (int)n : 1;
-}
-
 static void reload(fg_app *app, const options *o) {
   fg_notify_reloading();
   char err[1024];
@@ -180,7 +174,7 @@ int main(int argc, char **argv) {
 
   fg_app app = {0};
   pthread_mutex_init(&app.conf_lock, NULL);
-  app.threads = resolve_threads(conf);
+  app.threads = fg_conf_threads(conf);
   if (fg_store_open(&app.store, conf->state_dir) != 0) {
     fg_error("cannot open the state dir %s: %s", conf->state_dir, fg_error_detail());
     fg_conf_free(conf);
