@@ -5,23 +5,6 @@
 
 #include "harness.h"
 
-typedef struct buf {
-  char *p;
-  size_t n, cap;
-} buf;
-
-static void buf_add(buf *b, const void *data, size_t n) {
-  if (b->n + n + 1 > b->cap) {
-    size_t cap = b->cap ? b->cap : 256;
-    while (cap < b->n + n + 1) cap *= 2;
-    b->p = realloc(b->p, cap);
-    if (!b->p) FG_TEST_FAIL("out of memory");
-    b->cap = cap;
-  }
-  memcpy(b->p + b->n, data, n);
-  b->n += n;
-  b->p[b->n] = '\0';
-}
 
 
 static void put_be32(uint8_t *p, uint32_t v) {
@@ -31,17 +14,17 @@ static void put_be32(uint8_t *p, uint32_t v) {
   p[3] = (uint8_t)v;
 }
 
-static void png_chunk(buf *b, const char *type, const uint8_t *data, size_t n) {
+static void png_chunk(it_buf *b, const char *type, const uint8_t *data, size_t n) {
   uint8_t hdr[8];
   put_be32(hdr, (uint32_t)n);
   memcpy(hdr + 4, type, 4);
-  buf_add(b, hdr, 8);
-  if (n) buf_add(b, data, n);
+  it_buf_add(b, hdr, 8);
+  if (n) it_buf_add(b, data, n);
   uLong crc = crc32(0L, (const Bytef *)type, 4);
   if (n) crc = crc32(crc, data, (uInt)n);
   uint8_t c[4];
   put_be32(c, (uint32_t)crc);
-  buf_add(b, c, 4);
+  it_buf_add(b, c, 4);
 }
 
 static uint32_t xorshift(uint32_t *s) {
@@ -89,9 +72,9 @@ void h_png(int w, int h, int channels, int bits, unsigned seed, int noise, uint8
   if (compress2(z, &zn, raw, (uLong)raw_n, noise ? 0 : 6) != Z_OK) FG_TEST_FAIL("compress2 failed");
   free(raw);
 
-  buf b = {0};
+  it_buf b = {0};
   static const uint8_t sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  buf_add(&b, sig, 8);
+  it_buf_add(&b, sig, 8);
   uint8_t ihdr[13];
   put_be32(ihdr, (uint32_t)w);
   put_be32(ihdr + 4, (uint32_t)h);

@@ -425,12 +425,7 @@ void h_set_token(const char *token) {
   pthread_mutex_unlock(&g_token_lock);
 }
 
-typedef struct buf {
-  char *p;
-  size_t n, cap;
-} buf;
-
-static void buf_add(buf *b, const void *data, size_t n) {
+void it_buf_add(it_buf *b, const void *data, size_t n) {
   if (b->n + n + 1 > b->cap) {
     size_t cap = b->cap ? b->cap : 256;
     while (cap < b->n + n + 1) cap *= 2;
@@ -444,7 +439,7 @@ static void buf_add(buf *b, const void *data, size_t n) {
 }
 
 static size_t on_body(char *ptr, size_t size, size_t nmemb, void *ud) {
-  buf_add(ud, ptr, size * nmemb);
+  it_buf_add(ud, ptr, size * nmemb);
   return size * nmemb;
 }
 
@@ -510,7 +505,7 @@ h_resp *h_request(const h_req *req) {
   /* A hang guard for a wedged daemon; meson's timeout is the real limit. */
   curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
   curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT, 30L);
-  buf body = {0};
+  it_buf body = {0};
   curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);
   curl_easy_setopt(c, CURLOPT_WRITEDATA, &body);
   curl_easy_setopt(c, CURLOPT_HEADERFUNCTION, on_header);
@@ -579,7 +574,7 @@ h_resp *h_request(const h_req *req) {
   curl_easy_cleanup(c);
   curl_mime_free(mime);
   curl_slist_free_all(hdrs);
-  if (!body.p) buf_add(&body, "", 0);
+  if (!body.p) it_buf_add(&body, "", 0);
   r->body = body.p;
   r->len = body.n;
   r->json = json_loadb(r->body, r->len, JSON_DECODE_ANY, NULL);
@@ -669,7 +664,7 @@ long h_raw_exchange(const void *req, size_t len, char *resp, size_t cap) {
 
 void h_multipart_build(const h_part *parts, int n_parts, const char *boundary, uint8_t **out,
                        size_t *out_len) {
-  buf b = {0};
+  it_buf b = {0};
   for (int i = 0; i < n_parts; i++) {
     const h_part *p = &parts[i];
     char *head;
@@ -682,13 +677,13 @@ void h_multipart_build(const h_part *parts, int n_parts, const char *boundary, u
                    boundary, p->name, p->type);
     else
       head = h_fmt("--%s\r\nContent-Disposition: form-data; name=\"%s\"\r\n\r\n", boundary, p->name);
-    buf_add(&b, head, strlen(head));
+    it_buf_add(&b, head, strlen(head));
     free(head);
-    buf_add(&b, p->data, p->len);
-    buf_add(&b, "\r\n", 2);
+    it_buf_add(&b, p->data, p->len);
+    it_buf_add(&b, "\r\n", 2);
   }
   char *tail = h_fmt("--%s--\r\n", boundary);
-  buf_add(&b, tail, strlen(tail));
+  it_buf_add(&b, tail, strlen(tail));
   free(tail);
   *out = (uint8_t *)b.p;
   *out_len = b.n;

@@ -222,4 +222,11 @@ int h_count_files(const char *dir, const char *needle);
 char *h_shared_data(void);
 void h_sleep_ms(int ms);
 
+/* A growable byte buffer, NUL-terminated past n; exits the test on allocation failure. */
+typedef struct it_buf {
+  char *p;
+  size_t n, cap;
+} it_buf;
+void it_buf_add(it_buf *b, const void *data, size_t n);
+
 #endif
