@@ -185,29 +185,8 @@ float fg_occgrid_density_threshold(float dt_min) {
   return FG_OCCGRID_MIN_OPTICAL_THICKNESS / dt_min;
 }
 
-void fg_occgrid_update_bits(fg_occgrid *g, float density_threshold, int n_threads) {
-  const int nt = threads_for(n_threads);
-  const float *restrict dens = g->density;
-  /* mean: MEAN_BLOCKS fixed blocks summed in double, combined in block order */
-  double part[MEAN_BLOCKS];
-  const int32_t per_block = g->n_cells / MEAN_BLOCKS; /* n_cells is a multiple of 64 */
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1)
-  for (int b = 0; b < MEAN_BLOCKS; b++) {
-    double s = 0.0;
-    for (int32_t c = b * per_block; c < (b + 1) * per_block; c++) s += (double)dens[c];
-    part[b] = s;
-  }
-  double sum = 0.0;
-  for (int b = 0; b < MEAN_BLOCKS; b++) sum += part[b];
-  const float mean = (float)(sum / (double)g->n_cells);
-  const float thr = density_threshold < mean ? density_threshold : mean;
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1)
-  for (int32_t w = 0; w < g->n_words; w++) {
-    const float *restrict d = dens + (size_t)w * 64;
-    uint64_t word = 0;
-    for (int j = 0; j < 64; j++) word |= (uint64_t)(d[j] > thr) << j;
-    g->bits[w] = word;
-  }
+/* Everything derived from the bits: the rank table, n_occupied and the coarse levels. */
+static void rebuild_from_bits(fg_occgrid *g) {
   uint32_t acc = 0;
   for (int32_t w = 0; w < g->n_words; w++) {
     g->rank[w] = acc;
@@ -234,7 +213,46 @@ void fg_occgrid_update_bits(fg_occgrid *g, float density_threshold, int n_thread
           coarse[c >> 6] |= (uint64_t)any << (c & 63);
         }
   }
+}
+
+void fg_occgrid_update_bits(fg_occgrid *g, float density_threshold, int n_threads) {
+  const int nt = threads_for(n_threads);
+  const float *restrict dens = g->density;
+  /* mean: MEAN_BLOCKS fixed blocks summed in double, combined in block order */
+  double part[MEAN_BLOCKS];
+  const int32_t per_block = g->n_cells / MEAN_BLOCKS; /* n_cells is a multiple of 64 */
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1)
+  for (int b = 0; b < MEAN_BLOCKS; b++) {
+    double s = 0.0;
+    for (int32_t c = b * per_block; c < (b + 1) * per_block; c++) s += (double)dens[c];
+    part[b] = s;
+  }
+  double sum = 0.0;
+  for (int b = 0; b < MEAN_BLOCKS; b++) sum += part[b];
+  const float mean = (float)(sum / (double)g->n_cells);
+  const float thr = density_threshold < mean ? density_threshold : mean;
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1)
+  for (int32_t w = 0; w < g->n_words; w++) {
+    const float *restrict d = dens + (size_t)w * 64;
+    uint64_t word = 0;
+    for (int j = 0; j < 64; j++) word |= (uint64_t)(d[j] > thr) << j;
+    g->bits[w] = word;
+  }
+  rebuild_from_bits(g);
   g->threshold = thr;
+  g->mean = mean;
+}
+
+int fg_occgrid_set_bits(fg_occgrid *g, const uint64_t *bits, int n_threads) {
+  (void)n_threads; /* the rebuild is serial: a few ms for N = 128 */
+  if (!g || !bits) return fg_fail(FG_EINVAL, "occgrid set_bits: grid and bits must not be NULL");
+  memcpy(g->bits, bits, (size_t)g->n_words * sizeof(uint64_t));
+  rebuild_from_bits(g);
+  return 0;
+}
+
+void fg_occgrid_set_stats(fg_occgrid *g, float threshold, float mean) {
+  g->threshold = threshold;
   g->mean = mean;
 }
 
@@ -389,6 +407,7 @@ static inline int same_block(const fg_occgrid *g, const float *o, const float *d
 static inline float clamp01(float v) { return v < 0.0f ? 0.0f : (v > 1.0f ? 1.0f : v); }
 
 static inline float ray_t_start(float t_near, float dt, uint64_t seed, int32_t step, int32_t r) {
+  if (step < 0) return t_near + 0.5f * dt; /* inference: lattice centres, no jitter */
   return t_near + unit24(hash4(seed, step, (uint64_t)r, STREAM_MARCH), 40) * dt;
 }
 

@@ -28,7 +28,8 @@
  *
  * Marching (fg_occgrid_march): samples on a fixed lattice t_k = t_start + k dt (float
  * arithmetic, exactly that expression), t_start = t_near + u dt with u in [0,1) drawn per ray
- * from (seed, step, ray). A sample is emitted when its cell is occupied; empty cells are
+ * from (seed, step, ray), or u = 0.5 for every ray when step < 0 (inference). A sample is
+ * emitted when its cell is occupied; empty cells are
  * skipped with a DDA that lands on the first lattice point outside the cell, so the output is
  * bit-identical to fg_occgrid_march_ref, which visits every lattice point. */
 #ifndef FG_FIELD_OCCUPANCY_H
@@ -93,6 +94,17 @@ float fg_occgrid_density_threshold(float dt_min);
  * the mean summed in double in a fixed order. Used by fg_occgrid_update_density. */
 void fg_occgrid_update_bits(fg_occgrid *g, float density_threshold, int n_threads);
 
+/* Replaces the bits with bits (N^3 / 64 words, cell c is bit c % 64 of word c / 64; only
+ * read) and rebuilds what derives from them (rank table, n_occupied, coarse levels) as
+ * fg_occgrid_update_bits does; densities, threshold and mean stay as they are. For loaders,
+ * which restore bits that were saved rather than recompute them from rounded densities.
+ * n_threads is accepted for symmetry (the rebuild is serial). 0, or FG_EINVAL for NULL. */
+int fg_occgrid_set_bits(fg_occgrid *g, const uint64_t *bits, int n_threads);
+
+/* Sets what fg_occgrid_threshold and fg_occgrid_mean_density report, for loaders that restore
+ * a saved grid; changes nothing else. */
+void fg_occgrid_set_stats(fg_occgrid *g, float threshold, float mean);
+
 /* ---- update --------------------------------------------------------------------------- */
 
 /* Number of points fg_occgrid_update_points writes at this step: N^3 while
@@ -126,6 +138,7 @@ int fg_occgrid_update_density(fg_occgrid *g, const int32_t *cells, const float *
  * component is handled without division); rays that miss the cube, have a zero or non-finite
  * direction or a non-finite origin get no samples. Samples, for k = 0, 1, ...:
  *   t_k = t_start + (float)k * dt,  t_start = t_near + u dt,  u = hash(seed, step, ray) in [0,1)
+ *                                                     (u = 0.5 when step < 0)
  *   while t_k <= t_far; position p = o + t_k d; cell = floor(p N) clamped to [0, N-1];
  *   emitted when that cell is occupied, until max_samples_per_ray have been emitted.
  * So a ray through an all-occupied grid gets floor((t_far - t_start) / dt) + 1 samples (as

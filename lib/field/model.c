@@ -1,0 +1,429 @@
+#include "field/model.h"
+
+#include <cblas.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+
+#include "core/arena.h"
+#include "core/error.h"
+#include "field/render.h"
+#include "io/camera.h"
+#include "field/sh.h"
+
+#define HUGE_ALIGN ((size_t)2 << 20)
+
+static void default_grids(fg_field_config *cfg) {
+  fg_hashgrid_config_default(&cfg->grid);
+  cfg->grid.log2_table_size = 18;
+  cfg->feat_grid = (fg_hashgrid_config){
+      .n_levels = 12, .n_features = 4, .log2_table_size = 18,
+      .base_resolution = 16, .finest_resolution = 128};
+}
+
+int fg_field_config_for_workspace(fg_field_config *cfg, const double ws_min[3],
+                                  const double ws_max[3], double field_scale, int feature_dim) {
+  memset(cfg, 0, sizeof *cfg);
+  if (!(field_scale >= 1.0 && field_scale <= 64.0))
+    return fg_fail(FG_EINVAL, "field_scale must be in [1, 64], got %g", field_scale);
+  double extent = 0.0;
+  for (int k = 0; k < 3; k++) {
+    if (!(ws_max[k] > ws_min[k]) || !isfinite(ws_min[k]) || !isfinite(ws_max[k]))
+      return fg_fail(FG_EINVAL, "workspace max must exceed min on every axis");
+    if (ws_max[k] - ws_min[k] > extent) extent = ws_max[k] - ws_min[k];
+  }
+  cfg->box_size = extent * field_scale;
+  for (int k = 0; k < 3; k++) cfg->box_min[k] = 0.5 * (ws_min[k] + ws_max[k]) - 0.5 * cfg->box_size;
+  default_grids(cfg);
+  cfg->feature_dim = feature_dim;
+  cfg->learn_background = 0;
+  cfg->occ_resolution = FG_OCCGRID_DEFAULT_RES;
+  cfg->dt = FG_OCCGRID_DEFAULT_DT;
+  return fg_field_config_check(cfg);
+}
+
+int fg_field_config_check(const fg_field_config *cfg) {
+  for (int k = 0; k < 3; k++)
+    if (!isfinite(cfg->box_min[k]) || fabs(cfg->box_min[k]) > 1e6)
+      return fg_fail(FG_EINVAL, "field box_min must be finite and within 1e6 m");
+  if (!(cfg->box_size > 1e-6 && cfg->box_size < 1e6))
+    return fg_fail(FG_EINVAL, "field box_size must be in (1e-6, 1e6) m, got %g", cfg->box_size);
+  if (fg_hashgrid_config_check(&cfg->grid) < 0) return FG_EINVAL;
+  if (cfg->grid.n_levels * cfg->grid.n_features > 64)
+    return fg_fail(FG_EINVAL, "density grid gives more than 64 features per point");
+  if (cfg->feature_dim < 0 || cfg->feature_dim > FG_FIELD_MAX_FEATURE_DIM)
+    return fg_fail(FG_EINVAL, "feature_dim must be in [0, %d], got %d", FG_FIELD_MAX_FEATURE_DIM,
+                   cfg->feature_dim);
+  if (cfg->feature_dim > 0) {
+    if (fg_hashgrid_config_check(&cfg->feat_grid) < 0) return FG_EINVAL;
+    if (cfg->feat_grid.n_levels * cfg->feat_grid.n_features > 256)
+      return fg_fail(FG_EINVAL, "feature grid gives more than 256 features per point");
+  }
+  if (cfg->learn_background != 0 && cfg->learn_background != 1)
+    return fg_fail(FG_EINVAL, "learn_background must be 0 or 1");
+  if (!fg_occgrid_size(cfg->occ_resolution))
+    return fg_fail(FG_EINVAL, "occ_resolution must be a multiple of 4 in [4, 1024], got %d",
+                   cfg->occ_resolution);
+  if (!(cfg->dt > 1e-6f && cfg->dt < 0.5f))
+    return fg_fail(FG_EINVAL, "dt must be in (1e-6, 0.5) cube units, got %g", (double)cfg->dt);
+  return 0;
+}
+
+static void *alloc_huge(size_t bytes) {
+  const size_t size = (bytes + HUGE_ALIGN - 1) / HUGE_ALIGN * HUGE_ALIGN;
+  void *p = aligned_alloc(HUGE_ALIGN, size ? size : HUGE_ALIGN);
+  if (p && size >= HUGE_ALIGN) (void)madvise(p, size, MADV_HUGEPAGE);
+  return p;
+}
+
+int fg_field_alloc(fg_field **out, const fg_field_config *cfg) {
+  if (!out || !cfg) return fg_fail(FG_EINVAL, "field: NULL out or config");
+  *out = NULL;
+  FG_TRY(fg_field_config_check(cfg));
+  fg_field *f = calloc(1, sizeof *f);
+  if (!f) return fg_fail(FG_ENOMEM, "cannot allocate a field");
+  f->cfg = *cfg;
+  const int D = cfg->feature_dim;
+  f->density_net = (fg_mlp_config){cfg->grid.n_levels * cfg->grid.n_features, 64, 1,
+                                   FG_FIELD_GEO_DIM};
+  f->colour_net = (fg_mlp_config){FG_SH4_DIM + FG_FIELD_GEO_DIM, 64, 2, 3};
+  /* The feature grid's config is only checked, and only used, with a feature branch. */
+  f->feat_net = (fg_mlp_config){D > 0 ? cfg->feat_grid.n_levels * cfg->feat_grid.n_features : 1,
+                                64, 1, FG_FIELD_FEATURE_HIDDEN};
+  size_t n[FG_FIELD_N_GROUPS] = {0};
+  if (fg_hashgrid_layout(&cfg->grid, NULL, &n[FG_FIELD_GRID]) < 0) goto bad;
+  n[FG_FIELD_DENSITY] = fg_mlp_n_params(&f->density_net);
+  n[FG_FIELD_COLOUR] = fg_mlp_n_params(&f->colour_net);
+  n[FG_FIELD_BACKGROUND] = cfg->learn_background ? 3 * FG_SH4_DIM : 0;
+  if (D > 0) {
+    if (fg_hashgrid_layout(&cfg->feat_grid, NULL, &n[FG_FIELD_FEAT_GRID]) < 0) goto bad;
+    n[FG_FIELD_FEAT_MLP] = fg_mlp_n_params(&f->feat_net);
+    n[FG_FIELD_FEAT_OUT] = (size_t)D * FG_FIELD_FEATURE_HIDDEN;
+  }
+  /* Each group starts on a 64-byte boundary so that kernels see aligned arrays. */
+  size_t off = 0;
+  for (int g = 0; g < FG_FIELD_N_GROUPS; g++) {
+    f->group_offset[g] = off;
+    f->group_len[g] = n[g];
+    off += (n[g] + 15) / 16 * 16;
+  }
+  f->group_offset[FG_FIELD_N_GROUPS] = off;
+  f->n_params = f->group_offset[FG_FIELD_N_GROUPS];
+  f->params = alloc_huge(f->n_params * sizeof(float));
+  if (!f->params) {
+    const size_t n_params = f->n_params;
+    free(f);
+    return fg_fail(FG_ENOMEM, "cannot allocate %zu field parameters", n_params);
+  }
+  memset(f->params, 0, f->n_params * sizeof(float));
+  if (fg_occgrid_new(&f->occ, cfg->occ_resolution) < 0) {
+    free(f->params);
+    free(f);
+    return FG_ENOMEM;
+  }
+  *out = f;
+  return 0;
+bad:
+  free(f);
+  return FG_EINVAL;
+}
+
+int fg_field_new(fg_field **out, const fg_field_config *cfg, uint64_t seed) {
+  FG_TRY(fg_field_alloc(out, cfg));
+  fg_field *f = *out;
+  /* One stream per group, so that adding a group later leaves the others' values alone. */
+  fg_hashgrid_init(&cfg->grid, fg_field_group(f, FG_FIELD_GRID, NULL), seed * 8 + 0);
+  fg_mlp_init(&f->density_net, fg_field_group(f, FG_FIELD_DENSITY, NULL), seed * 8 + 1);
+  fg_mlp_init(&f->colour_net, fg_field_group(f, FG_FIELD_COLOUR, NULL), seed * 8 + 2);
+  if (cfg->feature_dim > 0) {
+    fg_hashgrid_init(&cfg->feat_grid, fg_field_group(f, FG_FIELD_FEAT_GRID, NULL), seed * 8 + 4);
+    fg_mlp_init(&f->feat_net, fg_field_group(f, FG_FIELD_FEAT_MLP, NULL), seed * 8 + 5);
+    /* W_out: Glorot uniform for a 64 -> D layer, through a one-layer MLP config. */
+    const fg_mlp_config out_layer = {FG_FIELD_FEATURE_HIDDEN, 1, 0, cfg->feature_dim};
+    fg_mlp_init(&out_layer, fg_field_group(f, FG_FIELD_FEAT_OUT, NULL), seed * 8 + 6);
+  }
+  return 0;
+}
+
+void fg_field_free(fg_field *f) {
+  if (!f) return;
+  fg_occgrid_free(f->occ);
+  free(f->params);
+  free(f);
+}
+
+float *fg_field_group(fg_field *f, int g, size_t *n) {
+  if (n) *n = f->group_len[g];
+  return f->params + f->group_offset[g];
+}
+
+const float *fg_field_group_const(const fg_field *f, int g, size_t *n) {
+  if (n) *n = f->group_len[g];
+  return f->params + f->group_offset[g];
+}
+
+void fg_field_to_cube(const fg_field *f, const float *world, int64_t B, float *cube) {
+  const float inv = (float)(1.0 / f->cfg.box_size);
+  const float m0 = (float)f->cfg.box_min[0], m1 = (float)f->cfg.box_min[1],
+              m2 = (float)f->cfg.box_min[2];
+  for (int64_t i = 0; i < B; i++) {
+    cube[3 * i + 0] = (world[3 * i + 0] - m0) * inv;
+    cube[3 * i + 1] = (world[3 * i + 1] - m1) * inv;
+    cube[3 * i + 2] = (world[3 * i + 2] - m2) * inv;
+  }
+}
+
+/* ---- inference ------------------------------------------------------------------------ */
+
+/* Points per chunk of fg_field_density / fg_field_features, and the sample capacity of one
+ * fg_field_render_rays chunk: about 300 floats a sample, so some 80 MB of scratch. */
+#define POINT_CHUNK 65536
+#define SAMPLE_CHUNK 65536
+#define RAY_CHUNK 4096
+
+/* Scratch of the inference passes, one allocation carved into named arrays. */
+typedef struct infer_buf {
+  float *x, *dt, *t;              /* (S,3), (S), (S) cube units */
+  float *enc, *dacts, *dout;      /* (S,32), (S,64), (S,16) */
+  float *cin, *cacts, *rgb;       /* (S,32), (2,S,64), (S,3) */
+  float *sigma;                   /* (S) 1/cube unit */
+  float *fenc, *facts, *h;        /* (S,48), (S,64), (S,64) */
+  float *o, *d, *sh;              /* (R,3), (R,3), (R,16) */
+  float *hc;                      /* (R,64) composited hidden features */
+  int32_t *off, *cnt;             /* (R) */
+  void *mem;
+} infer_buf;
+
+static int infer_buf_new(infer_buf *b, const fg_field *f, int64_t S, int64_t R) {
+  const size_t ld = (size_t)f->density_net.n_in, lf = (size_t)f->feat_net.n_in;
+  const size_t fs = f->cfg.feature_dim > 0 ? (size_t)S : 0, fr = fs ? (size_t)R : 0;
+  const size_t F = sizeof(float);
+  fg_arena a = {0};
+  for (int pass = 0; pass < 2; pass++) {
+    if (pass && fg_arena_alloc(&a) < 0)
+      return fg_fail(FG_ENOMEM, "cannot allocate %zu MB of render scratch", a.used >> 20);
+    b->x = fg_arena_take(&a, 3 * (size_t)S * F);
+    b->dt = fg_arena_take(&a, (size_t)S * F);
+    b->t = fg_arena_take(&a, (size_t)S * F);
+    b->enc = fg_arena_take(&a, ld * (size_t)S * F);
+    b->dacts = fg_arena_take(&a, 64 * (size_t)S * F);
+    b->dout = fg_arena_take(&a, FG_FIELD_GEO_DIM * (size_t)S * F);
+    b->cin = fg_arena_take(&a, 32 * (size_t)S * F);
+    b->cacts = fg_arena_take(&a, 128 * (size_t)S * F);
+    b->rgb = fg_arena_take(&a, 3 * (size_t)S * F);
+    b->sigma = fg_arena_take(&a, (size_t)S * F);
+    b->fenc = fg_arena_take(&a, lf * fs * F);
+    b->facts = fg_arena_take(&a, 64 * fs * F);
+    b->h = fg_arena_take(&a, 64 * fs * F);
+    b->o = fg_arena_take(&a, 3 * (size_t)R * F);
+    b->d = fg_arena_take(&a, 3 * (size_t)R * F);
+    b->sh = fg_arena_take(&a, 16 * (size_t)R * F);
+    b->hc = fg_arena_take(&a, 64 * fr * F);
+    b->off = fg_arena_take(&a, (size_t)R * sizeof(int32_t));
+    b->cnt = fg_arena_take(&a, (size_t)R * sizeof(int32_t));
+  }
+  b->mem = a.base;
+  return 0;
+}
+
+/* Density network on S cube points b->x: sigma (1/cube unit) and the geo features. */
+static void eval_density(const fg_field *f, infer_buf *b, int S, int nt) {
+  fg_hashgrid_forward(&f->cfg.grid, fg_field_group_const(f, FG_FIELD_GRID, NULL), b->x, S,
+                      b->enc, nt);
+  fg_mlp_forward(&f->density_net, fg_field_group_const(f, FG_FIELD_DENSITY, NULL), b->enc, S,
+                 b->dacts, b->dout, nt);
+  for (int i = 0; i < S; i++) b->sigma[i] = b->dout[(size_t)i * FG_FIELD_GEO_DIM];
+  fg_act_trunc_exp_forward(b->sigma, b->sigma, (size_t)S);
+}
+
+/* Feature network's hidden output h (S,64) on the S cube points b->x. */
+static void eval_hidden(const fg_field *f, infer_buf *b, int S, int nt) {
+  fg_hashgrid_forward(&f->cfg.feat_grid, fg_field_group_const(f, FG_FIELD_FEAT_GRID, NULL),
+                      b->x, S, b->fenc, nt);
+  fg_mlp_forward(&f->feat_net, fg_field_group_const(f, FG_FIELD_FEAT_MLP, NULL), b->fenc, S,
+                 b->facts, b->h, nt);
+  for (size_t i = 0; i < (size_t)S * FG_FIELD_FEATURE_HIDDEN; i++)
+    if (!(b->h[i] > 0.0f)) b->h[i] = 0.0f;
+}
+
+/* out (n, D) = hidden (n, 64) @ W_out^T. */
+static void apply_feat_out(const fg_field *f, const float *hidden, int64_t n, float *out) {
+  const int D = f->cfg.feature_dim;
+  const float *W = fg_field_group_const(f, FG_FIELD_FEAT_OUT, NULL);
+  cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)n, D, FG_FIELD_FEATURE_HIDDEN, 1.0f,
+              hidden, FG_FIELD_FEATURE_HIDDEN, W, FG_FIELD_FEATURE_HIDDEN, 0.0f, out, D);
+}
+
+static int check_points(const fg_field *f, const float *x, int64_t B, const float *sigma) {
+  if (!f || B < 0 || (B > 0 && (!x || !sigma)))
+    return fg_fail(FG_EINVAL, "field: NULL field or point arrays, or negative count");
+  return 0;
+}
+
+int fg_field_density(const fg_field *f, const float *x_world, int64_t B, float *sigma,
+                     int n_threads) {
+  FG_TRY(check_points(f, x_world, B, sigma));
+  infer_buf b;
+  FG_TRY(infer_buf_new(&b, f, B < POINT_CHUNK ? B : POINT_CHUNK, 1));
+  const float to_m = (float)(1.0 / f->cfg.box_size);
+  for (int64_t i0 = 0; i0 < B; i0 += POINT_CHUNK) {
+    const int n = (int)(B - i0 < POINT_CHUNK ? B - i0 : POINT_CHUNK);
+    fg_field_to_cube(f, x_world + 3 * i0, n, b.x);
+    eval_density(f, &b, n, n_threads);
+    for (int i = 0; i < n; i++) sigma[i0 + i] = b.sigma[i] * to_m;
+  }
+  free(b.mem);
+  return 0;
+}
+
+int fg_field_features(const fg_field *f, const float *x_world, int64_t B, float *sigma,
+                      float *hidden, float *feat, int n_threads) {
+  FG_TRY(check_points(f, x_world, B, sigma));
+  if (f->cfg.feature_dim <= 0)
+    return fg_fail(FG_EINVAL, "the field has no feature branch (its frames had no features)");
+  infer_buf b;
+  FG_TRY(infer_buf_new(&b, f, B < POINT_CHUNK ? B : POINT_CHUNK, 1));
+  const float to_m = (float)(1.0 / f->cfg.box_size);
+  const int D = f->cfg.feature_dim;
+  for (int64_t i0 = 0; i0 < B; i0 += POINT_CHUNK) {
+    const int n = (int)(B - i0 < POINT_CHUNK ? B - i0 : POINT_CHUNK);
+    fg_field_to_cube(f, x_world + 3 * i0, n, b.x);
+    eval_density(f, &b, n, n_threads);
+    eval_hidden(f, &b, n, n_threads);
+    for (int i = 0; i < n; i++) sigma[i0 + i] = b.sigma[i] * to_m;
+    if (hidden) memcpy(hidden + i0 * 64, b.h, (size_t)n * 64 * sizeof(float));
+    if (feat) apply_feat_out(f, b.h, n, feat + i0 * D);
+  }
+  free(b.mem);
+  return 0;
+}
+
+/* The learned background of R rays with SH-encoded directions sh (R,16): bg (R,3). */
+void fg_field_background(const fg_field *f, const float *sh, int64_t R, float *bg) {
+  const float *W = fg_field_group_const(f, FG_FIELD_BACKGROUND, NULL);
+  for (int64_t r = 0; r < R; r++)
+    for (int c = 0; c < 3; c++) {
+      float acc = 0.0f;
+      for (int k = 0; k < FG_SH4_DIM; k++) acc += W[c * FG_SH4_DIM + k] * sh[r * FG_SH4_DIM + k];
+      bg[3 * r + c] = acc;
+    }
+  fg_act_sigmoid_forward(bg, bg, (size_t)(3 * R));
+}
+
+/* Colour network on S samples whose rays' SH encodings are in b->sh: b->rgb (S,3). */
+static void eval_colour(const fg_field *f, infer_buf *b, int R, int S, int nt) {
+  for (int r = 0; r < R; r++)
+    for (int32_t i = b->off[r]; i < b->off[r] + b->cnt[r]; i++) {
+      memcpy(b->cin + (size_t)i * 32, b->sh + (size_t)r * 16, 16 * sizeof(float));
+      memcpy(b->cin + (size_t)i * 32 + 16, b->dout + (size_t)i * 16, 16 * sizeof(float));
+    }
+  fg_mlp_forward(&f->colour_net, fg_field_group_const(f, FG_FIELD_COLOUR, NULL), b->cin, S,
+                 b->cacts, b->rgb, nt);
+  fg_act_sigmoid_forward(b->rgb, b->rgb, (size_t)S * 3);
+}
+
+int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *rays_d, int64_t R,
+                         const float bg[3], float *rgb, float *depth, float *opacity,
+                         float *feat, int n_threads) {
+  if (!f || R < 0 || (R > 0 && (!rays_o || !rays_d)))
+    return fg_fail(FG_EINVAL, "render: NULL field or ray arrays, or negative count");
+  if (feat && f->cfg.feature_dim <= 0)
+    return fg_fail(FG_EINVAL, "the field has no feature branch (its frames had no features)");
+  if (!bg && !f->cfg.learn_background)
+    return fg_fail(FG_EINVAL, "render: no background given and the field learned none");
+  const int D = f->cfg.feature_dim;
+  infer_buf b;
+  FG_TRY(infer_buf_new(&b, f, SAMPLE_CHUNK, RAY_CHUNK));
+  float *bgr = malloc((size_t)RAY_CHUNK * 3 * sizeof(float));
+  float *crgb = malloc((size_t)RAY_CHUNK * 3 * sizeof(float));
+  float *cdepth = malloc((size_t)RAY_CHUNK * 2 * sizeof(float));
+  int32_t *used = malloc((size_t)RAY_CHUNK * sizeof(int32_t));
+  int rc = 0;
+  if (!bgr || !crgb || !cdepth || !used) {
+    rc = fg_fail(FG_ENOMEM, "cannot allocate render scratch");
+    goto out;
+  }
+  const float L = (float)f->cfg.box_size;
+  for (int64_t r0 = 0; r0 < R;) {
+    int n = (int)(R - r0 < RAY_CHUNK ? R - r0 : RAY_CHUNK);
+    fg_field_to_cube(f, rays_o + 3 * r0, n, b.o);
+    memcpy(b.d, rays_d + 3 * r0, (size_t)n * 3 * sizeof(float));
+    int32_t S = 0;
+    rc = fg_occgrid_march(f->occ, n, b.o, b.d, f->cfg.dt, FG_FIELD_MAX_SAMPLES_PER_RAY, 0, -1,
+                          SAMPLE_CHUNK, b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
+    if (rc == FG_ERANGE) {
+      /* Too many samples for one chunk: keep the rays that fit (at least one, whose count
+       * is capped at 1024 <= SAMPLE_CHUNK) and march them again. */
+      int keep = 0;
+      for (int64_t acc = 0; keep < n && acc + b.cnt[keep] <= SAMPLE_CHUNK; keep++)
+        acc += b.cnt[keep];
+      n = keep;
+      rc = fg_occgrid_march(f->occ, n, b.o, b.d, f->cfg.dt, FG_FIELD_MAX_SAMPLES_PER_RAY, 0, -1,
+                            SAMPLE_CHUNK, b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
+    }
+    if (rc < 0) goto out;
+    fg_sh4_encode(b.d, n, b.sh);
+    eval_density(f, &b, S, n_threads);
+    eval_colour(f, &b, n, S, n_threads);
+    if (bg) {
+      for (int r = 0; r < n; r++) memcpy(bgr + 3 * r, bg, 3 * sizeof(float));
+    } else {
+      fg_field_background(f, b.sh, n, bgr);
+    }
+    if (feat) eval_hidden(f, &b, S, n_threads);
+    fg_render_forward(n, b.off, b.cnt, b.sigma, b.rgb, b.dt, b.t, feat ? b.h : NULL,
+                      feat ? FG_FIELD_FEATURE_HIDDEN : 0, bgr, 1, 1e-4f, crgb, cdepth,
+                      cdepth + RAY_CHUNK, feat ? b.hc : NULL, used, n_threads);
+    if (rgb) memcpy(rgb + 3 * r0, crgb, (size_t)n * 3 * sizeof(float));
+    for (int r = 0; r < n; r++) {
+      if (depth) depth[r0 + r] = cdepth[r] * L;
+      if (opacity) opacity[r0 + r] = cdepth[RAY_CHUNK + r];
+    }
+    if (feat) apply_feat_out(f, b.hc, n, feat + r0 * D);
+    r0 += n;
+  }
+out:
+  free(used);
+  free(cdepth);
+  free(crgb);
+  free(bgr);
+  free(b.mem);
+  return rc;
+}
+
+int fg_field_render_camera(const fg_field *f, const double T_world_cam[16],
+                           const struct fg_camera *cam, const float bg[3], float *rgb,
+                           float *depth, float *opacity, float *feat, int n_threads) {
+  if (!f || !T_world_cam || !cam || cam->w < 1 || cam->h < 1 || !(cam->fl_x > 0.0) ||
+      !(cam->fl_y > 0.0))
+    return fg_fail(FG_EINVAL, "render: a camera needs a size and positive focal lengths");
+  const int64_t R = (int64_t)cam->w * cam->h;
+  float *o = malloc((size_t)R * 3 * sizeof(float)), *d = malloc((size_t)R * 3 * sizeof(float));
+  if (!o || !d) {
+    free(o);
+    free(d);
+    return fg_fail(FG_ENOMEM, "cannot allocate %lld rays", (long long)R);
+  }
+  const double *T = T_world_cam;
+  for (int v = 0; v < cam->h; v++)
+    for (int u = 0; u < cam->w; u++) {
+      const int64_t r = (int64_t)v * cam->w + u;
+      const double dc[3] = {(u + 0.5 - cam->cx) / cam->fl_x, -(v + 0.5 - cam->cy) / cam->fl_y,
+                            -1.0};
+      double dw[3], n2 = 0.0;
+      for (int k = 0; k < 3; k++) {
+        dw[k] = T[4 * k] * dc[0] + T[4 * k + 1] * dc[1] + T[4 * k + 2] * dc[2];
+        n2 += dw[k] * dw[k];
+      }
+      const double inv = 1.0 / sqrt(n2);
+      for (int k = 0; k < 3; k++) {
+        o[3 * r + k] = (float)T[4 * k + 3];
+        d[3 * r + k] = (float)(dw[k] * inv);
+      }
+    }
+  const int rc = fg_field_render_rays(f, o, d, R, bg, rgb, depth, opacity, feat, n_threads);
+  free(d);
+  free(o);
+  return rc;
+}

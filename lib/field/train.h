@@ -1,0 +1,87 @@
+/* Training a feature field from a scene's frames (Instant-NGP's loop, F3RM's feature loss).
+ *
+ * One step:
+ *   1. draws R rays: ray r takes frame, pixel and sub-pixel jitter from a hash of
+ *      (seed, step, r) over the training frames (held-out frames are never drawn);
+ *   2. marches them through the occupancy grid with a jittered start (occupancy.h);
+ *   3. evaluates the density and colour networks on every sample, and the feature branch on
+ *      the samples of the first R_f = ceil(feature_ray_fraction R) rays when the frames have
+ *      features (each such ray's target is its frame's feature cell per SPEC.md "Files");
+ *   4. composites (render.h) against the learned background, or the scene background when
+ *      learn_background is 0, and takes L = L2(rgb) + feature_weight L2(feature);
+ *   5. back-propagates through everything (the feature loss does not reach the density: F3RM's
+ *      features follow the geometry that colour found) and takes one Adam step per group
+ *      (tables: lr 1e-2, no L2, entries without gradient skipped; MLPs: lr 1e-2, L2 1e-6);
+ *   6. every 16 steps updates the occupancy grid (Instant-NGP's schedule);
+ *   7. sets R for the next step so that the samples approach target_samples.
+ * Every buffer is allocated by fg_trainer_new for the largest step; a step allocates nothing.
+ * The same frames, options (seed included) and thread count give bit-identical parameters.
+ *
+ * Threads: every OpenMP region of a trainer runs n_threads threads from the calling thread's
+ * own team, so a trainer driven from a dedicated thread may lower that team's priority. */
+#ifndef FG_FIELD_TRAIN_H
+#define FG_FIELD_TRAIN_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "field/model.h"
+#include "io/frame.h"
+
+typedef struct fg_trainer fg_trainer;
+
+typedef struct fg_train_opts {
+  uint64_t seed;
+  int n_threads;              /* >= 1 */
+  int holdout_every;          /* 0: none; k: frames i with i % k == 0 are held out */
+  int32_t target_samples;     /* samples per step (2^17) */
+  float feature_ray_fraction; /* share of rays that carry a feature target (0.25) */
+  float feature_weight;       /* lambda (1) */
+  float lr;                   /* Adam learning rate (1e-2) */
+  float background[3];        /* the scene's background, sRGB in [0,1] */
+} fg_train_opts;
+
+void fg_train_opts_default(fg_train_opts *o);
+
+typedef struct fg_train_stats {
+  int64_t step;      /* steps done */
+  int32_t rays;      /* rays of the last step */
+  int32_t samples;   /* samples of the last step */
+  float loss;        /* last step's total loss */
+  float loss_rgb;    /* its colour part (mean squared error over the rays' channels) */
+  float loss_feat;   /* its feature part before weighting (NaN when no features) */
+  float occupancy;   /* share of occupied grid cells */
+} fg_train_stats;
+
+/* Prepares training of field on frames[0..n) (all of one scene, same feature dimension as
+ * field->cfg.feature_dim; frames whose feat_d is 0 then train colour only). The trainer
+ * keeps pointers to field and frames, which must outlive it; it owns its buffers and the
+ * optimiser state. FG_EINVAL (no training frame, mismatched features, bad options),
+ * FG_ENOMEM. */
+int fg_trainer_new(fg_trainer **out, fg_field *field, const fg_frame *frames, size_t n,
+                   const fg_train_opts *opts);
+void fg_trainer_free(fg_trainer *t);
+
+/* One training step; updates field->params, field->occ and field->trained_steps. stats may
+ * be NULL. 0, or FG_ERANGE when the loss stopped being finite (the field is then left as it
+ * was before this step). */
+int fg_trainer_step(fg_trainer *t, fg_train_stats *stats);
+
+/* The loss of the rays the next step would draw, with the current parameters, and its
+ * gradient with respect to every parameter into the trainer's gradient buffer
+ * (fg_trainer_grad: n_params floats in the field's layout), without changing the field or
+ * the step count: the first half of fg_trainer_step, for gradient checks. stats may be NULL.
+ * 0, or FG_ERANGE when the loss is not finite (the gradient is then not computed). */
+int fg_trainer_loss_grad(fg_trainer *t, fg_train_stats *stats);
+const float *fg_trainer_grad(const fg_trainer *t);
+
+/* Number of held-out frames. */
+size_t fg_trainer_n_heldout(const fg_trainer *t);
+
+/* PSNR (dB) of the field's renders of the held-out frames against their images, over every
+ * pixel of every held-out frame (full = 1) or over a fixed sample of at most 16384 held-out
+ * pixels (full = 0, cheap enough to report during training). NaN when no frame is held out.
+ * 0, or FG_ENOMEM. */
+int fg_trainer_eval(fg_trainer *t, int full, double *psnr);
+
+#endif
