@@ -2,6 +2,7 @@
 
 #include <cblas.h>
 #include <math.h>
+#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -323,6 +324,21 @@ static void eval_colour(const fg_field *f, infer_buf *b, int R, int S, int nt) {
   fg_act_sigmoid_forward(b->rgb, b->rgb, (size_t)S * 3);
 }
 
+/* Rendering marches in waves, as Instant-NGP's inference does: every live ray takes up to
+ * WAVE_SAMPLES more samples from where it stopped, those are evaluated and composited, and
+ * rays that left the cube, used their samples or became opaque (T < 1e-4) drop out. The
+ * networks then see only the samples that count, not the occupied space behind a surface.
+ * A ray resumes from its last sample shifted by half a step, so its samples stay on one
+ * lattice with spacing dt. */
+#define WAVE_SAMPLES 16
+#define WAVE_RAYS (SAMPLE_CHUNK / WAVE_SAMPLES)
+
+typedef struct ray_state {
+  float T, rgb[3], depth; /* transmittance, accumulated colour, accumulated w t (cube) */
+  float t0;               /* distance of the ray's current origin from its start (cube) */
+  int32_t n;              /* samples used so far */
+} ray_state;
+
 int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *rays_d, int64_t R,
                          const float bg[3], float *rgb, float *depth, float *opacity,
                          float *feat, int n_threads) {
@@ -332,62 +348,98 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
     return fg_fail(FG_EINVAL, "the field has no feature branch (its frames had no features)");
   if (!bg && !f->cfg.learn_background)
     return fg_fail(FG_EINVAL, "render: no background given and the field learned none");
-  const int D = f->cfg.feature_dim;
+  const int D = f->cfg.feature_dim, H = FG_FIELD_FEATURE_HIDDEN;
   infer_buf b;
   FG_TRY(infer_buf_new(&b, f, SAMPLE_CHUNK, RAY_CHUNK));
-  float *bgr = malloc((size_t)RAY_CHUNK * 3 * sizeof(float));
-  float *crgb = malloc((size_t)RAY_CHUNK * 3 * sizeof(float));
-  float *cdepth = malloc((size_t)RAY_CHUNK * 2 * sizeof(float));
-  int32_t *used = malloc((size_t)RAY_CHUNK * sizeof(int32_t));
+  ray_state *st = malloc((size_t)RAY_CHUNK * sizeof *st);
+  int32_t *live = malloc((size_t)RAY_CHUNK * sizeof(int32_t));
+  float *o0 = malloc((size_t)RAY_CHUNK * 3 * sizeof(float));
+  float *shr = malloc((size_t)RAY_CHUNK * 16 * sizeof(float));
+  float *hacc = feat ? calloc((size_t)RAY_CHUNK * H, sizeof(float)) : NULL;
   int rc = 0;
-  if (!bgr || !crgb || !cdepth || !used) {
+  if (!st || !live || !o0 || !shr || (feat && !hacc)) {
     rc = fg_fail(FG_ENOMEM, "cannot allocate render scratch");
     goto out;
   }
-  const float L = (float)f->cfg.box_size;
-  for (int64_t r0 = 0; r0 < R;) {
-    int n = (int)(R - r0 < RAY_CHUNK ? R - r0 : RAY_CHUNK);
-    fg_field_to_cube(f, rays_o + 3 * r0, n, b.o);
-    memcpy(b.d, rays_d + 3 * r0, (size_t)n * 3 * sizeof(float));
-    int32_t S = 0;
-    rc = fg_occgrid_march(f->occ, n, b.o, b.d, f->cfg.dt, FG_FIELD_MAX_SAMPLES_PER_RAY, 0, -1,
-                          SAMPLE_CHUNK, b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
-    if (rc == FG_ERANGE) {
-      /* Too many samples for one chunk: keep the rays that fit (at least one, whose count
-       * is capped at 1024 <= SAMPLE_CHUNK) and march them again. */
-      int keep = 0;
-      for (int64_t acc = 0; keep < n && acc + b.cnt[keep] <= SAMPLE_CHUNK; keep++)
-        acc += b.cnt[keep];
-      n = keep;
-      rc = fg_occgrid_march(f->occ, n, b.o, b.d, f->cfg.dt, FG_FIELD_MAX_SAMPLES_PER_RAY, 0, -1,
-                            SAMPLE_CHUNK, b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
-    }
-    if (rc < 0) goto out;
-    fg_sh4_encode(b.d, n, b.sh);
-    eval_density(f, &b, S, n_threads);
-    eval_colour(f, &b, n, S, n_threads);
-    if (bg) {
-      for (int r = 0; r < n; r++) memcpy(bgr + 3 * r, bg, 3 * sizeof(float));
-    } else {
-      fg_field_background(f, b.sh, n, bgr);
-    }
-    if (feat) eval_hidden(f, &b, S, n_threads);
-    fg_render_forward(n, b.off, b.cnt, b.sigma, b.rgb, b.dt, b.t, feat ? b.h : NULL,
-                      feat ? FG_FIELD_FEATURE_HIDDEN : 0, bgr, 1, 1e-4f, crgb, cdepth,
-                      cdepth + RAY_CHUNK, feat ? b.hc : NULL, used, n_threads);
-    if (rgb) memcpy(rgb + 3 * r0, crgb, (size_t)n * 3 * sizeof(float));
+  const float L = (float)f->cfg.box_size, dt = f->cfg.dt;
+  for (int64_t r0 = 0; r0 < R; r0 += RAY_CHUNK) {
+    const int n = (int)(R - r0 < RAY_CHUNK ? R - r0 : RAY_CHUNK);
+    fg_field_to_cube(f, rays_o + 3 * r0, n, o0);
+    fg_sh4_encode(rays_d + 3 * r0, n, shr);
+    int n_live = 0;
     for (int r = 0; r < n; r++) {
-      if (depth) depth[r0 + r] = cdepth[r] * L;
-      if (opacity) opacity[r0 + r] = cdepth[RAY_CHUNK + r];
+      st[r] = (ray_state){.T = 1.0f};
+      live[n_live++] = r;
     }
-    if (feat) apply_feat_out(f, b.hc, n, feat + r0 * D);
-    r0 += n;
+    if (feat) memset(hacc, 0, (size_t)n * H * sizeof(float));
+    while (n_live > 0) {
+      /* One wave over up to WAVE_RAYS live rays, the first n_wave of the list. */
+      const int n_wave = n_live < WAVE_RAYS ? n_live : WAVE_RAYS;
+      for (int i = 0; i < n_wave; i++) {
+        const int r = live[i];
+        const float *d = rays_d + 3 * (r0 + r);
+        for (int k = 0; k < 3; k++) {
+          b.o[3 * i + k] = o0[3 * r + k] + st[r].t0 * d[k];
+          b.d[3 * i + k] = d[k];
+        }
+        memcpy(b.sh + 16 * i, shr + 16 * r, 16 * sizeof(float));
+      }
+      int32_t S = 0;
+      rc = fg_occgrid_march(f->occ, n_wave, b.o, b.d, dt, WAVE_SAMPLES, 0, -1, SAMPLE_CHUNK,
+                            b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
+      if (rc < 0) goto out;
+      eval_density(f, &b, S, n_threads);
+      eval_colour(f, &b, n_wave, S, n_threads);
+      if (feat) eval_hidden(f, &b, S, n_threads);
+#pragma omp parallel for schedule(static) num_threads(n_threads > 0 ? n_threads : omp_get_max_threads())
+      for (int i = 0; i < n_wave; i++) {
+        ray_state *s = &st[live[i]];
+        float *ha = feat ? hacc + (size_t)live[i] * H : NULL;
+        int done = b.cnt[i] < WAVE_SAMPLES; /* it left the cube */
+        for (int32_t j = b.off[i]; j < b.off[i] + b.cnt[i]; j++) {
+          if (s->T < 1e-4f || s->n >= FG_FIELD_MAX_SAMPLES_PER_RAY) {
+            done = 1;
+            break;
+          }
+          const float alpha = 1.0f - expf(-b.sigma[j] * b.dt[j]), w = s->T * alpha;
+          for (int c = 0; c < 3; c++) s->rgb[c] += w * b.rgb[3 * (size_t)j + c];
+          s->depth += w * (s->t0 + b.t[j]);
+          if (ha)
+            for (int k = 0; k < H; k++) ha[k] += w * b.h[(size_t)j * H + k];
+          s->T *= 1.0f - alpha;
+          s->n++;
+        }
+        if (s->T < 1e-4f || s->n >= FG_FIELD_MAX_SAMPLES_PER_RAY) done = 1;
+        if (!done) s->t0 += b.t[b.off[i] + b.cnt[i] - 1] + 0.5f * dt;
+        else s->n = -1 - s->n; /* marks the ray finished for the compaction below */
+      }
+      /* Keep the rays that go on, in order; rays beyond this wave wait for the next. */
+      int m = 0;
+      for (int i = 0; i < n_live; i++)
+        if (st[live[i]].n >= 0) live[m++] = live[i];
+      n_live = m;
+    }
+    for (int r = 0; r < n; r++) {
+      const ray_state *s = &st[r];
+      float bgc[3];
+      if (bg) {
+        memcpy(bgc, bg, sizeof bgc);
+      } else {
+        fg_field_background(f, shr + 16 * r, 1, bgc);
+      }
+      if (rgb)
+        for (int c = 0; c < 3; c++) rgb[3 * (r0 + r) + c] = s->rgb[c] + s->T * bgc[c];
+      if (depth) depth[r0 + r] = s->depth * L;
+      if (opacity) opacity[r0 + r] = 1.0f - s->T;
+    }
+    if (feat) apply_feat_out(f, hacc, n, feat + r0 * D);
   }
 out:
-  free(used);
-  free(cdepth);
-  free(crgb);
-  free(bgr);
+  free(hacc);
+  free(shr);
+  free(o0);
+  free(live);
+  free(st);
   free(b.mem);
   return rc;
 }

@@ -210,9 +210,9 @@ int fg_trainer_new(fg_trainer **out, fg_field *field, const fg_frame *frames, si
     if (frames[i].feat_d) t->feat_idx[t->n_feat++] = i;
   }
   if (!t->n_train) {
+    const size_t n_held = t->n_held;
     fg_trainer_free(t);
-    return fg_fail(FG_EINVAL, "no frame left to train on (%zu frames, %zu held out)", n,
-                   t->n_held);
+    return fg_fail(FG_EINVAL, "no frame left to train on (%zu frames, %zu held out)", n, n_held);
   }
   t->cap_s = opts->target_samples + opts->target_samples / 2;
   t->cap_r = MAX_RAYS;

@@ -4,7 +4,8 @@
  * Usage: bench_train --data TRANSFORMS [--threads N] [--max-side PX] [--holdout K]
  *                    [--seconds S] [--steps N] [--eval-at S1,S2,...] [--samples N]
  *                    [--workspace x0 y0 z0 x1 y1 z1] [--field-scale F] [--no-features]
- *                    [--background R G B] [--seed N]
+ *                    [--background R G B] [--seed N] [--render-out PNG]
+ *                    [--learned-background]
  * Defaults: 2 threads, 400 px, holdout 10, 300 s, no step limit, eval at 60,120,300 s,
  * workspace -1.5 -1.5 -1.5 1.5 1.5 1.5 (the NeRF synthetic scenes' box), field scale 1,
  * white background. Held-out PSNR is measured over every pixel of the held-out frames at each
@@ -12,7 +13,9 @@
  * Output, key=value lines:
  *   bench=train_eval seconds=60.0 steps=... psnr=... samples_per_s=...
  *   bench=train frames=... heldout=... steps=... seconds=... samples_per_s=... rays_per_step=...
- *   samples_per_step=... psnr=... feature_dim=... peak_rss_mb=... */
+ *   samples_per_step=... psnr=... feature_dim=... peak_rss_mb=...
+ *   bench=train_render width=... height=... seconds=...   (held-out frame 0, timed; with
+ *   --render-out it is written beside its image) */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -146,15 +149,21 @@ int main(int argc, char **argv) {
          "feature_dim=%d peak_rss_mb=%.1f\n",
          n, fg_trainer_n_heldout(t), threads, steps, train_s, samples / train_s, rays / steps,
          samples / steps, psnr, D, peak_rss_mb());
-  if (render_out && holdout > 0) {
-    /* Held-out frame 0 rendered beside its image, for a look. */
+  double render_s = NAN;
+  int render_w = 0, render_h = 0;
+  if (holdout > 0) {
+    /* Held-out frame 0: a timed render, written beside its image with --render-out. */
     const fg_frame *fr = &frames[0];
     const int w = fr->cam.w, h = fr->cam.h;
     float *rgb = malloc((size_t)w * h * 3 * sizeof(float));
     float *pair = malloc((size_t)w * h * 6 * sizeof(float));
+    const double r0 = now_s();
     if (rgb && pair &&
         fg_field_render_camera(f, fr->T_world_cam, &fr->cam, opts.background, rgb, NULL, NULL,
                                NULL, threads) == 0) {
+      render_s = now_s() - r0;
+      render_w = w;
+      render_h = h;
       for (int v = 0; v < h; v++)
         for (int u = 0; u < w; u++)
           for (int c = 0; c < 3; c++) {
@@ -162,11 +171,12 @@ int main(int argc, char **argv) {
             pair[((size_t)v * 2 * w + w + u) * 3 + c] =
                 fr->rgb[((size_t)v * w + u) * 3 + c] / 65535.0f;
           }
-      fg_image_write_file(render_out, pair, 2 * w, h, 3);
+      if (render_out) fg_image_write_file(render_out, pair, 2 * w, h, 3);
     }
     free(pair);
     free(rgb);
   }
+  printf("bench=train_render width=%d height=%d seconds=%.3f\n", render_w, render_h, render_s);
   fg_trainer_free(t);
   fg_field_free(f);
   fg_dataset_free(frames, n);

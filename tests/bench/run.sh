@@ -1,14 +1,23 @@
 #!/usr/bin/env bash
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
-# Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory]
-#   (no names: all three)
+# Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
+#   (no names: all five; train takes about 6 minutes, throughput about 3)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
 #   health  GET /v1/health under wrk -t2 -c32 -d10s on loopback: requests/s and p99 latency
 #           (targets >= 20000 req/s, p99 <= 5 ms). Needs wrk: apt-get install wrk
 #   memory  VmRSS / VmHWM of an idle daemon after start and a few requests (target <= 30 MB)
+#   train   lego at 400 px, white background, every 10th frame held out, trained in-process
+#           (bench_train) for 5 minutes of wall time on 2 threads: held-out PSNR at 1, 2 and
+#           5 minutes (target >= 30 dB at 5), a timed 400x400 render (target <= 1 s) and
+#           peak resident memory (target <= 1.5 GB)
+#   throughput  training samples/s on a generated tabletop with 512-d features, with and
+#           without the feature branch, next to a plain PyTorch CPU implementation of the
+#           same model (tests/bench/peer_field.py, Debian's python3-torch) on the same
+#           threads in the same run (targets: >= 10x PyTorch, >= 1 M RGB samples/s), and the
+#           peak memory with 512-d features (target <= 3 GB)
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -18,13 +27,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,19p' "$0" >&2
+  sed -n '2,30p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -172,12 +181,61 @@ bench_memory() {
   echo "bench=memory vmrss_kb=$rss vmhwm_kb=$hwm target_max_kb=$((30 * 1024)) pass=$pass"
 }
 
+# field KEY LINE: the value of KEY=... in a key=value line.
+field() { printf '%s\n' "$2" | tr ' ' '\n' | sed -n "s/^$1=//p" | head -n 1; }
+
+bench_train() {
+  local lego=$data/lego out line psnr rss render pass
+  if [ ! -f "$lego/transforms_train.json" ]; then
+    echo "bench=train error=no_data_set path=$lego pass=no"
+    failed=1; return
+  fi
+  out=$("$build/tests/bench/bench_train" --data "$lego/transforms_train.json" --threads 2 \
+    --max-side 400 --holdout 10 --seconds 300 --eval-at 60,120,300 --background 1 1 1)
+  printf '%s\n' "$out" | grep -E '^bench=train_(eval|load)'
+  line=$(printf '%s\n' "$out" | grep '^bench=train ')
+  psnr=$(field psnr "$line"); rss=$(field peak_rss_mb "$line")
+  render=$(field seconds "$(printf '%s\n' "$out" | grep '^bench=train_render')")
+  pass=$(awk -v p="$psnr" -v r="$rss" -v t="$render" \
+    'BEGIN { print (p >= 30 && r <= 1536 && t <= 1) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "$line render_400_s=$render target_min_psnr=30 target_max_rss_mb=1536 target_max_render_s=1 pass=$pass"
+}
+
+bench_throughput() {
+  local set=$tmp/tabletop512 c0 c512 p0 p512 ratio0 ratio512 rss pass
+  "$build/tests/scenegen/fieldgrip-scenegen" --out "$set" --dim 512 --holdout 0 >/dev/null
+  c0=$("$build/tests/bench/bench_train" --data "$set/transforms.json" --threads 2 --holdout 0 \
+    --workspace 0.10 -0.45 0.005 0.80 0.45 0.35 --field-scale 2 --seconds 30 --no-features |
+    grep '^bench=train ')
+  c512=$("$build/tests/bench/bench_train" --data "$set/transforms.json" --threads 2 --holdout 0 \
+    --workspace 0.10 -0.45 0.005 0.80 0.45 0.35 --field-scale 2 --seconds 30 |
+    grep '^bench=train ')
+  if ! /usr/bin/python3 -c 'import torch' 2>/dev/null; then
+    echo "bench=throughput error=no_pytorch hint=apt-get_install_python3-torch pass=no"
+    failed=1; return
+  fi
+  p0=$(/usr/bin/python3 "$src/tests/bench/peer_field.py" --threads 2 --seconds 20 --json |
+    sed -n 's/.*"samples_per_s": *\([0-9.]*\).*/\1/p')
+  p512=$(/usr/bin/python3 "$src/tests/bench/peer_field.py" --threads 2 --seconds 20 \
+    --feature-dim 512 --json | sed -n 's/.*"samples_per_s": *\([0-9.]*\).*/\1/p')
+  c0=$(field samples_per_s "$c0"); rss=$(field peak_rss_mb "$c512"); c512=$(field samples_per_s "$c512")
+  ratio0=$(awk -v a="$c0" -v b="$p0" 'BEGIN { printf "%.1f", a / b }')
+  ratio512=$(awk -v a="$c512" -v b="$p512" 'BEGIN { printf "%.1f", a / b }')
+  pass=$(awk -v r0="$ratio0" -v r1="$ratio512" -v c="$c0" -v m="$rss" \
+    'BEGIN { print (r0 >= 10 && r1 >= 10 && c >= 1000000 && m <= 3072) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=throughput threads=2 rgb_samples_per_s=$c0 pytorch_rgb_samples_per_s=$p0 ratio_rgb=$ratio0 feat512_samples_per_s=$c512 pytorch_feat512_samples_per_s=$p512 ratio_feat512=$ratio512 peak_rss_mb_feat512=$rss target_min_ratio=10 target_min_rgb_samples_per_s=1000000 target_max_rss_mb_feat512=3072 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
     health) bench_health ;;
     memory) bench_memory ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory)" >&2; exit 2 ;;
+    train) bench_train ;;
+    throughput) bench_throughput ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
