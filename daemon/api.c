@@ -1,11 +1,13 @@
 #include "api.h"
 
+#include "jobs.h"
 #include "json.h"
 #include "metrics.h"
 
 #include "config.h"
 #include "core/error.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -22,6 +24,13 @@ const fg_route fg_api_routes[] = {
    FG_ROUTE_MULTIPART | FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/import", "/v1/scenes/{s}/import", fg_api_scene_import,
    FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/scenes/{}/train", "/v1/scenes/{s}/train", fg_api_train_start, 0},
+  {"POST", "/v1/scenes/{}/render", "/v1/scenes/{s}/render", fg_api_scene_render,
+   FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/jobs", "/v1/jobs", fg_api_jobs_list, 0},
+  {"GET", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_get, 0},
+  {"DELETE", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_cancel, 0},
+  {"GET", "/v1/jobs/{}/events", "/v1/jobs/{id}/events", fg_api_job_events, 0},
 };
 const size_t fg_api_n_routes = sizeof fg_api_routes / sizeof fg_api_routes[0];
 
@@ -112,6 +121,17 @@ json_t *fg_api_body_object(fg_req *req, fg_resp *resp) {
   return body;
 }
 
+void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info) {
+  if (!app->jobs || !info->last_job_id[0]) return;
+  fg_job *j = fg_jobs_get(app->jobs, info->last_job_id);
+  if (!j) return;
+  uint64_t version;
+  fg_job_state state;
+  fg_job_peek(j, &version, &state);
+  fg_job_unref(j);
+  snprintf(info->last_job_state, sizeof info->last_job_state, "%s", fg_job_state_name(state));
+}
+
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_store_get(req->app->store, req->params[0]);
   if (!s)
@@ -130,8 +150,10 @@ int fg_api_health(fg_req *req, fg_resp *resp) {
 }
 
 int fg_api_metrics(fg_req *req, fg_resp *resp) {
-  fg_metrics_gauges g;
+  fg_metrics_gauges g = {0};
   fg_store_totals(req->app->store, &g.scenes, &g.frames);
+  g.trained_scenes = fg_store_trained(req->app->store);
+  if (req->app->jobs) fg_jobs_count(req->app->jobs, g.jobs);
   size_t len;
   char *text = fg_metrics_render(&g, &len);
   if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");

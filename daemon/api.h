@@ -17,6 +17,7 @@ typedef struct fg_app {
   fg_conf_ref *conf; /* current configuration; requests hold references */
   int threads;       /* [train] threads at start-up, resolved (>= 1): sizes the decoder pool */
   struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
+  struct fg_jobs *jobs;       /* trainings (jobs.h) */
 } fg_app;
 
 /* Installs conf as the current configuration (taking ownership); requests already running
@@ -47,9 +48,22 @@ int fg_api_scene_delete(fg_req *req, fg_resp *resp);
 int fg_api_frames_upload(fg_req *req, fg_resp *resp);
 int fg_api_frames_list(fg_req *req, fg_resp *resp);
 int fg_api_scene_import(fg_req *req, fg_resp *resp);
+int fg_api_train_start(fg_req *req, fg_resp *resp);
+int fg_api_jobs_list(fg_req *req, fg_resp *resp);
+int fg_api_job_get(fg_req *req, fg_resp *resp);
+int fg_api_job_cancel(fg_req *req, fg_resp *resp);
+int fg_api_job_events(fg_req *req, fg_resp *resp);
+int fg_api_scene_render(fg_req *req, fg_resp *resp);
+
+/* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
+#define FG_API_MAX_EVENT_STREAMS 64
 
 /* Shared by handlers: the JSON body as an object, or NULL after answering 400. */
 json_t *fg_api_body_object(fg_req *req, fg_resp *resp);
+
+/* Brings info's last job state up to date from the job registry (the scene's own copy lags
+ * behind a job that is finishing). */
+void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info);
 
 /* The scene named by the first path parameter with a reference, or NULL after answering 404. */
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);

@@ -1,5 +1,6 @@
 /* Scenes: create, list, describe, delete. */
 #include "api.h"
+#include "jobs.h"
 #include "json.h"
 
 #include "core/error.h"
@@ -13,7 +14,10 @@ int fg_api_scenes_list(fg_req *req, fg_resp *resp) {
   if (fg_store_list(req->app->store, &infos, &n) != 0)
     return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
   json_t *arr = json_array();
-  for (size_t i = 0; arr && i < n; i++) json_array_append_new(arr, fg_json_scene(&infos[i]));
+  for (size_t i = 0; arr && i < n; i++) {
+    fg_api_scene_info_refresh(req->app, &infos[i]);
+    json_array_append_new(arr, fg_json_scene(&infos[i]));
+  }
   free(infos);
   fg_resp_json(resp, 200, json_pack("{s:o}", "scenes", arr));
   return 0;
@@ -77,6 +81,7 @@ int fg_api_scene_get(fg_req *req, fg_resp *resp) {
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   fg_scene_unref(s);
+  fg_api_scene_info_refresh(req->app, &info);
   fg_resp_json(resp, 200, fg_json_scene(&info));
   return 0;
 }
@@ -86,6 +91,8 @@ int fg_api_scene_delete(fg_req *req, fg_resp *resp) {
   if (rc == FG_ENOENT)
     return fg_resp_error(resp, 404, "scene_not_found", "no scene named '%s'", req->params[0]);
   if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  /* After the store's delete, so that a training submitted meanwhile is caught too. */
+  if (req->app->jobs) fg_jobs_cancel_scene(req->app->jobs, req->params[0]);
   fg_resp_json(resp, 200, json_pack("{s:s}", "deleted", req->params[0]));
   return 0;
 }

@@ -1,5 +1,6 @@
-/* fieldgrip-decode: decodes images for fieldgripd in a process of its own, so that the daemon
- * never links OpenImageIO and a codec crashing on a hostile image takes down only this child.
+/* fieldgrip-decode: decodes images (and encodes rendered ones to PNG) for fieldgripd in a
+ * process of its own, so that the daemon never links OpenImageIO and a codec crashing on a
+ * hostile image takes down only this child.
  * Reads requests on stdin and writes replies on stdout in the format decoder.h describes,
  * one at a time, until EOF on stdin. Not meant to be run by hand.
  *
@@ -37,6 +38,42 @@ static int send_reply(int fd, int rc, const char *message, fg_image *img) {
   if (n == 0) return 0;
   fg_decoder_floats_le(img->rgb, n);
   return fg_decoder_write_full(fd, img->rgb, n * sizeof(float));
+}
+
+/* Sends the reply to an encode: header, message, and the PNG when rc is 0. */
+static int send_encoded(int fd, int rc, const char *message, int w, int h, const uint8_t *png,
+                        size_t png_len) {
+  size_t mlen = strlen(message);
+  if (mlen > FG_DECODER_MAX_MESSAGE) mlen = FG_DECODER_MAX_MESSAGE;
+  fg_decoder_reply rep = {.version = FG_DECODER_VERSION, .rc = rc, .w = rc == 0 ? w : 0,
+                          .h = rc == 0 ? h : 0, .message_len = (uint32_t)mlen,
+                          .pixel_bytes = rc == 0 ? png_len : 0};
+  uint8_t hdr[FG_DECODER_REPLY_SIZE];
+  fg_decoder_reply_pack(&rep, hdr);
+  if (fg_decoder_write_full(fd, hdr, sizeof hdr) != 0 ||
+      fg_decoder_write_full(fd, message, mlen) != 0)
+    return -1;
+  return rc == 0 ? fg_decoder_write_full(fd, png, png_len) : 0;
+}
+
+/* Encodes the payload of an encode request (decoder.h) to PNG and replies. */
+static int encode_request(int fd, uint8_t *payload, uint64_t length) {
+  int w, h, channels, bits;
+  fg_error_clear();
+  int rc = fg_decoder_encode_header_unpack(payload, length, &w, &h, &channels, &bits);
+  uint8_t *png = NULL;
+  size_t png_len = 0;
+  if (rc == 0) {
+    uint8_t *pixels = payload + FG_DECODER_ENCODE_HEADER;
+    if (bits == 16)
+      fg_decoder_u16_le((uint16_t *)(void *)pixels, (size_t)w * (size_t)h * (size_t)channels);
+    rc = fg_image_encode_png(pixels, w, h, channels, bits, &png, &png_len);
+  }
+  if (rc == 0 && (png_len == 0 || png_len > FG_DECODER_MAX_REQUEST))
+    rc = fg_fail(FG_EIO, "the PNG encoder produced %zu bytes", png_len);
+  int sent = send_encoded(fd, rc, rc == 0 ? "" : fg_error_detail(), w, h, png, png_len);
+  free(png);
+  return sent;
 }
 
 static int starts_with_env(const char *var, const void *bytes, size_t len) {
@@ -96,6 +133,16 @@ int main(int argc, char **argv) {
       fprintf(stderr, "fieldgrip-decode: the request's image was cut short\n");
       free(bytes);
       return 1;
+    }
+    if (req.op == FG_DECODER_OP_ENCODE_PNG) {
+      /* bytes is malloc'd, so the pixels after the 16-byte header are aligned for uint16. */
+      int sent = encode_request(out, bytes, req.length);
+      free(bytes);
+      if (sent != 0) {
+        fprintf(stderr, "fieldgrip-decode: cannot send a reply: %s\n", strerror(errno));
+        return 1;
+      }
+      continue;
     }
     crash_if_asked(bytes, (size_t)req.length);
     fg_error_clear();

@@ -77,11 +77,48 @@ int fg_decoder_request_unpack(const uint8_t in[FG_DECODER_REQUEST_SIZE], fg_deco
   if (req->version != FG_DECODER_VERSION)
     return fg_fail(FG_EINVAL, "decoder request: protocol version %u, this decoder speaks %u",
                    (unsigned)req->version, FG_DECODER_VERSION);
-  if (req->op != FG_DECODER_OP_DECODE)
+  if (req->op != FG_DECODER_OP_DECODE && req->op != FG_DECODER_OP_ENCODE_PNG)
     return fg_fail(FG_EINVAL, "decoder request: unknown op %u", (unsigned)req->op);
   if (req->length > FG_DECODER_MAX_REQUEST)
     return fg_fail(FG_EINVAL, "decoder request: %llu bytes of image, more than the %llu allowed",
                    (unsigned long long)req->length, (unsigned long long)FG_DECODER_MAX_REQUEST);
+  if (req->op == FG_DECODER_OP_ENCODE_PNG && req->length < FG_DECODER_ENCODE_HEADER)
+    return fg_fail(FG_EINVAL, "decoder request: an encode request of %llu bytes has no room for "
+                   "its %d-byte header", (unsigned long long)req->length,
+                   FG_DECODER_ENCODE_HEADER);
+  return 0;
+}
+
+void fg_decoder_encode_header_pack(int w, int h, int channels, int bits,
+                                   uint8_t out[FG_DECODER_ENCODE_HEADER]) {
+  put_u32(out, (uint32_t)w);
+  put_u32(out + 4, (uint32_t)h);
+  put_u32(out + 8, (uint32_t)channels);
+  put_u32(out + 12, (uint32_t)bits);
+}
+
+int fg_decoder_encode_header_unpack(const uint8_t in[FG_DECODER_ENCODE_HEADER], uint64_t length,
+                                    int *w, int *h, int *channels, int *bits) {
+  uint32_t uw = get_u32(in), uh = get_u32(in + 4), uc = get_u32(in + 8), ub = get_u32(in + 12);
+  *w = *h = *channels = *bits = 0;
+  if (uw < 1 || uh < 1 || uw > FG_IMAGE_MAX_SIDE || uh > FG_IMAGE_MAX_SIDE ||
+      (uint64_t)uw * uh > FG_IMAGE_MAX_PIXELS)
+    return fg_fail(FG_EINVAL, "encode request: a %ux%u image is outside the limits (sides up to "
+                   "%d, %u pixels)", (unsigned)uw, (unsigned)uh, FG_IMAGE_MAX_SIDE,
+                   FG_IMAGE_MAX_PIXELS);
+  if ((uc != 1 && uc != 3 && uc != 4) || (ub != 8 && ub != 16))
+    return fg_fail(FG_EINVAL, "encode request: %u channels of %u bits; PNG encoding takes 1, 3 "
+                   "or 4 channels of 8 or 16 bits", (unsigned)uc, (unsigned)ub);
+  uint64_t need = FG_DECODER_ENCODE_HEADER + (uint64_t)uw * uh * uc * (ub / 8);
+  if (length != need)
+    return fg_fail(FG_EINVAL, "encode request: %llu bytes, expected %llu for a %ux%u image of "
+                   "%u channels of %u bits", (unsigned long long)length,
+                   (unsigned long long)need, (unsigned)uw, (unsigned)uh, (unsigned)uc,
+                   (unsigned)ub);
+  *w = (int)uw;
+  *h = (int)uh;
+  *channels = (int)uc;
+  *bits = (int)ub;
   return 0;
 }
 
@@ -95,7 +132,10 @@ void fg_decoder_reply_pack(const fg_decoder_reply *rep, uint8_t out[FG_DECODER_R
   put_u64(out + 24, rep->pixel_bytes);
 }
 
-int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep) {
+/* The checks every reply gets; *done = 1 when nothing is left to check (an error reply). */
+static int reply_unpack_common(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep,
+                               int *done) {
+  *done = 0;
   rep->version = get_u32(in + 4);
   rep->rc = (int32_t)get_u32(in + 8);
   rep->w = (int32_t)get_u32(in + 12);
@@ -115,8 +155,27 @@ int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_
   if (rep->rc != 0) {
     if (rep->pixel_bytes != 0 || rep->w != 0 || rep->h != 0)
       return fg_fail(FG_EINVAL, "decoder reply: an error with pixels");
-    return 0;
+    *done = 1;
   }
+  return 0;
+}
+
+int fg_decoder_reply_unpack_encode(const uint8_t in[FG_DECODER_REPLY_SIZE],
+                                   fg_decoder_reply *rep) {
+  int done;
+  FG_TRY(reply_unpack_common(in, rep, &done));
+  if (done) return 0;
+  if (rep->w <= 0 || rep->h <= 0 || rep->w > FG_IMAGE_MAX_SIDE || rep->h > FG_IMAGE_MAX_SIDE ||
+      rep->pixel_bytes == 0 || rep->pixel_bytes > FG_DECODER_MAX_REQUEST)
+    return fg_fail(FG_EINVAL, "decoder reply: a %dx%d PNG of %llu bytes", (int)rep->w,
+                   (int)rep->h, (unsigned long long)rep->pixel_bytes);
+  return 0;
+}
+
+int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep) {
+  int done;
+  FG_TRY(reply_unpack_common(in, rep, &done));
+  if (done) return 0;
   if (rep->w <= 0 || rep->h <= 0 || rep->w > FG_IMAGE_MAX_SIDE || rep->h > FG_IMAGE_MAX_SIDE ||
       (uint64_t)rep->w * (uint64_t)rep->h > FG_IMAGE_MAX_PIXELS ||
       rep->pixel_bytes != (uint64_t)rep->w * (uint64_t)rep->h * 3 * sizeof(float))
@@ -133,6 +192,15 @@ void fg_decoder_floats_le(float *v, size_t n) {
     u = __builtin_bswap32(u);
     memcpy(&v[i], &u, 4);
   }
+#else
+  (void)v;
+  (void)n;
+#endif
+}
+
+void fg_decoder_u16_le(uint16_t *v, size_t n) {
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+  for (size_t i = 0; i < n; i++) v[i] = __builtin_bswap16(v[i]);
 #else
   (void)v;
   (void)n;
@@ -571,24 +639,34 @@ static int write_nosigpipe(int fd, const void *buf, size_t n) {
 /* What went wrong in one exchange. */
 enum { EXCHANGE_OK = 0, EXCHANGE_DEAD_BEFORE, EXCHANGE_BROKEN, EXCHANGE_VERSION };
 
-/* One request and its reply. Returns EXCHANGE_OK with *rc the decode's result (the child
+/* One request to a child: the header, a payload in up to two pieces, and where the reply's
+ * data goes (image for a decode, bytes for an encode). */
+typedef struct job_io {
+  fg_decoder_request req;
+  const void *p1, *p2;
+  size_t n1, n2;
+  fg_image *image;  /* op 1 */
+  uint8_t **bytes;  /* op 2 */
+  size_t *bytes_len;
+} job_io;
+
+/* One request and its reply. Returns EXCHANGE_OK with *rc the child's result (the child
  * is healthy), EXCHANGE_DEAD_BEFORE when the child was gone before it saw anything of this
  * request, EXCHANGE_VERSION when it is a fieldgrip-decode of another protocol version, or
  * EXCHANGE_BROKEN when it died or misbehaved on this request (*why says how). */
-static int exchange(child *c, const void *bytes, size_t len, const float bg[3], fg_image *out,
-                    int *rc, char *why, size_t why_len) {
+static int exchange(child *c, job_io *io, int *rc, char *why, size_t why_len) {
   uint8_t hdr[FG_DECODER_REQUEST_SIZE];
-  fg_decoder_request req = {.version = FG_DECODER_VERSION, .op = FG_DECODER_OP_DECODE,
-                            .length = len};
-  for (int k = 0; k < 3; k++) req.background[k] = bg[k];
-  fg_decoder_request_pack(&req, hdr);
+  io->req.version = FG_DECODER_VERSION;
+  io->req.length = io->n1 + io->n2;
+  fg_decoder_request_pack(&io->req, hdr);
   /* The header fits in an empty pipe, so it fails only when nobody reads: the child died
-   * while idle (killed, OOM) and this image is not to blame. */
+   * while idle (killed, OOM) and this request is not to blame. */
   if (write_nosigpipe(c->to_fd, hdr, sizeof hdr) != 0) {
     snprintf(why, why_len, "writing to it failed: %s", strerror(errno));
     return errno == EPIPE ? EXCHANGE_DEAD_BEFORE : EXCHANGE_BROKEN;
   }
-  if (len && write_nosigpipe(c->to_fd, bytes, len) != 0) {
+  if ((io->n1 && write_nosigpipe(c->to_fd, io->p1, io->n1) != 0) ||
+      (io->n2 && write_nosigpipe(c->to_fd, io->p2, io->n2) != 0)) {
     snprintf(why, why_len, "writing to it failed: %s", strerror(errno));
     return EXCHANGE_BROKEN;
   }
@@ -599,7 +677,9 @@ static int exchange(child *c, const void *bytes, size_t len, const float bg[3], 
     return EXCHANGE_BROKEN;
   }
   fg_decoder_reply rep;
-  if (fg_decoder_reply_unpack(rhdr, &rep) != 0) {
+  int encode = io->req.op == FG_DECODER_OP_ENCODE_PNG;
+  if ((encode ? fg_decoder_reply_unpack_encode(rhdr, &rep)
+              : fg_decoder_reply_unpack(rhdr, &rep)) != 0) {
     snprintf(why, why_len, "%s", fg_error_detail());
     int other = memcmp(rhdr, "FGDR", 4) == 0 && get_u32(rhdr + 4) != FG_DECODER_VERSION;
     return other ? EXCHANGE_VERSION : EXCHANGE_BROKEN;
@@ -614,25 +694,77 @@ static int exchange(child *c, const void *bytes, size_t len, const float bg[3], 
     *rc = fg_fail(rep.rc, "%s", msg);
     return EXCHANGE_OK;
   }
-  size_t n = (size_t)rep.w * (size_t)rep.h * 3;
-  float *rgb = malloc(n * sizeof(float));
-  if (!rgb) {
-    /* The pixels are still in the pipe; this child cannot be reused. */
+  size_t n = (size_t)rep.pixel_bytes;
+  void *data = malloc(n);
+  if (!data) {
+    /* The data is still in the pipe; this child cannot be reused. */
     *rc = fg_fail(FG_ENOMEM, "out of memory receiving a %dx%d image", (int)rep.w, (int)rep.h);
     snprintf(why, why_len, "out of memory");
     return EXCHANGE_BROKEN;
   }
-  if (fg_decoder_read_full(c->from_fd, rgb, n * sizeof(float)) != (ssize_t)(n * sizeof(float))) {
-    free(rgb);
-    snprintf(why, why_len, "the pixels were cut short");
+  if (fg_decoder_read_full(c->from_fd, data, n) != (ssize_t)n) {
+    free(data);
+    snprintf(why, why_len, "the %s were cut short", encode ? "PNG bytes" : "pixels");
     return EXCHANGE_BROKEN;
   }
-  fg_decoder_floats_le(rgb, n);
-  out->w = rep.w;
-  out->h = rep.h;
-  out->rgb = rgb;
+  if (encode) {
+    *io->bytes = data;
+    *io->bytes_len = n;
+  } else {
+    fg_decoder_floats_le(data, n / sizeof(float));
+    io->image->w = rep.w;
+    io->image->h = rep.h;
+    io->image->rgb = data;
+  }
   *rc = 0;
   return EXCHANGE_OK;
+}
+
+/* Runs one request on a child of the pool, replacing children found dead; what names the
+ * work in messages ("image", "image to encode"). */
+static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
+  /* A child found dead before it saw the request is replaced; twice is plenty (each try
+   * after the first runs on a child started for it). */
+  for (int attempt = 0; attempt < 3; attempt++) {
+    child *c = NULL;
+    FG_TRY(checkout(d, &c));
+    int rc = 0;
+    char why[256] = "";
+    int how = exchange(c, io, &rc, why, sizeof why);
+    if (how == EXCHANGE_OK) {
+      checkin(d, c);
+      return rc;
+    }
+    pid_t pid = c->pid;
+    pthread_mutex_lock(&d->lock);
+    int overran = c->overran;
+    pthread_mutex_unlock(&d->lock);
+    int status = 0;
+    discard(d, c, &status);
+    if (overran)
+      return fg_fail(FG_EFORMAT, "the image decoder took longer than %d s on this %s and was "
+                     "stopped; the data is corrupt or hostile", d->busy_seconds, what);
+    char ended[64];
+    describe_status(status, ended, sizeof ended);
+    if (how == EXCHANGE_DEAD_BEFORE) {
+      fg_warn("image decoder pid %d had died while idle (%s); starting another", (int)pid,
+              ended);
+      continue;
+    }
+    if (rc == FG_ENOMEM) return rc;
+    if (how == EXCHANGE_VERSION)
+      return fg_fail(FG_EIO, "the image decoder does not speak this daemon's protocol (%s); "
+                     "install fieldgrip-decode from the same build as fieldgripd", why);
+    fg_warn("image decoder pid %d stopped on an %s of %zu bytes (%s; %s)", (int)pid, what, len,
+            ended, why);
+    if (WIFSIGNALED(status))
+      return fg_fail(FG_EFORMAT, "the image decoder stopped on this %s (killed by signal %d); "
+                     "the data is corrupt or hostile", what, WTERMSIG(status));
+    return fg_fail(FG_EFORMAT, "the image decoder stopped on this %s (%s); the data is "
+                   "corrupt or hostile", what, ended);
+  }
+  return fg_fail(FG_EIO, "the image decoder keeps dying before it reads a request; see the "
+                 "daemon's log");
 }
 
 int fg_decoder_decode(fg_decoder *d, const void *bytes, size_t len,
@@ -646,48 +778,40 @@ int fg_decoder_decode(fg_decoder *d, const void *bytes, size_t len,
                    len, (unsigned long long)FG_DECODER_MAX_REQUEST);
   static const float white[3] = {1, 1, 1};
   const float *bg = background_rgb ? background_rgb : white;
-  /* A child found dead before it saw the request is replaced; twice is plenty (each try
-   * after the first runs on a child started for it). */
-  for (int attempt = 0; attempt < 3; attempt++) {
-    child *c = NULL;
-    FG_TRY(checkout(d, &c));
-    int rc = 0;
-    char why[256] = "";
-    int how = exchange(c, bytes, len, bg, out, &rc, why, sizeof why);
-    if (how == EXCHANGE_OK) {
-      checkin(d, c);
-      return rc;
-    }
-    pid_t pid = c->pid;
-    pthread_mutex_lock(&d->lock);
-    int overran = c->overran;
-    pthread_mutex_unlock(&d->lock);
-    int status = 0;
-    discard(d, c, &status);
-    if (overran)
-      return fg_fail(FG_EFORMAT, "the image decoder took longer than %d s on this image and was "
-                     "stopped; the data is corrupt or hostile", d->busy_seconds);
-    char ended[64];
-    describe_status(status, ended, sizeof ended);
-    if (how == EXCHANGE_DEAD_BEFORE) {
-      fg_warn("image decoder pid %d had died while idle (%s); starting another", (int)pid,
-              ended);
-      continue;
-    }
-    if (rc == FG_ENOMEM) return rc;
-    if (how == EXCHANGE_VERSION)
-      return fg_fail(FG_EIO, "the image decoder does not speak this daemon's protocol (%s); "
-                     "install fieldgrip-decode from the same build as fieldgripd", why);
-    fg_warn("image decoder pid %d stopped on an image of %zu bytes (%s; %s)", (int)pid, len,
-            ended, why);
-    if (WIFSIGNALED(status))
-      return fg_fail(FG_EFORMAT, "the image decoder stopped on this image (killed by signal %d); "
-                     "the data is corrupt or hostile", WTERMSIG(status));
-    return fg_fail(FG_EFORMAT, "the image decoder stopped on this image (%s); the data is "
-                   "corrupt or hostile", ended);
+  job_io io = {.req = {.op = FG_DECODER_OP_DECODE}, .p1 = bytes, .n1 = len, .image = out};
+  for (int k = 0; k < 3; k++) io.req.background[k] = bg[k];
+  return run_job(d, &io, len, "image");
+}
+
+int fg_decoder_encode_png(fg_decoder *d, const void *pixels, int w, int h, int channels,
+                          int bits, uint8_t **out, size_t *out_len) {
+  if (!out || !out_len) return fg_fail(FG_EINVAL, "fg_decoder_encode_png: no output");
+  *out = NULL;
+  *out_len = 0;
+  if (!d || !pixels) return fg_fail(FG_EINVAL, "fg_decoder_encode_png: no decoder or pixels");
+  uint8_t head[FG_DECODER_ENCODE_HEADER];
+  fg_decoder_encode_header_pack(w, h, channels, bits, head);
+  uint64_t n = w > 0 && h > 0 && channels > 0 && bits > 0
+                 ? (uint64_t)w * (uint64_t)h * (uint64_t)channels * (uint64_t)(bits / 8) : 0;
+  int iw, ih, ic, ib;
+  FG_TRY(fg_decoder_encode_header_unpack(head, FG_DECODER_ENCODE_HEADER + n, &iw, &ih, &ic,
+                                         &ib));
+  const void *payload = pixels;
+  uint16_t *swapped = NULL;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+  if (bits == 16) {
+    swapped = malloc((size_t)n);
+    if (!swapped) return fg_fail(FG_ENOMEM, "out of memory");
+    memcpy(swapped, pixels, (size_t)n);
+    fg_decoder_u16_le(swapped, (size_t)n / 2);
+    payload = swapped;
   }
-  return fg_fail(FG_EIO, "the image decoder keeps dying before it reads a request; see the "
-                 "daemon's log");
+#endif
+  job_io io = {.req = {.op = FG_DECODER_OP_ENCODE_PNG}, .p1 = head, .n1 = sizeof head,
+               .p2 = payload, .n2 = (size_t)n, .bytes = out, .bytes_len = out_len};
+  int rc = run_job(d, &io, (size_t)n, "image to encode");
+  free(swapped);
+  return rc;
 }
 
 void fg_decoder_reap_idle(fg_decoder *d) {

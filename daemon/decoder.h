@@ -48,6 +48,16 @@ int fg_decoder_check(fg_decoder *dec);
 int fg_decoder_decode(fg_decoder *dec, const void *bytes, size_t len,
                       const float background_rgb[3], fg_image *out);
 
+/* Encodes pixels to PNG with fg_image_encode_png (io/image.h) in a child, so that the
+ * daemon never loads the encoder's libraries either. pixels are [h][w][channels] of uint8_t
+ * (bits 8) or uint16_t (bits 16, host order), channels 1, 3 or 4, w and h within
+ * FG_IMAGE_MAX_SIDE and FG_IMAGE_MAX_PIXELS; pixels stay the caller's. On success the caller
+ * owns *out (free); on failure *out is NULL. FG_EINVAL for bad arguments (detail), and the
+ * codes of fg_decoder_decode for a child that is missing, cannot be talked to or dies.
+ * Thread-safe; shares the pool and its limits with decoding. */
+int fg_decoder_encode_png(fg_decoder *dec, const void *pixels, int w, int h, int channels,
+                          int bits, uint8_t **out, size_t *out_len);
+
 /* Changes the busy limit (default FG_DECODER_BUSY_SECONDS, >= 1); for tests. */
 void fg_decoder_set_busy_limit(fg_decoder *dec, int seconds);
 
@@ -66,12 +76,20 @@ size_t fg_decoder_child_pids(fg_decoder *dec, pid_t *pids, size_t max);
  * The daemon writes a request on the child's stdin and reads the reply on its stdout; every
  * integer is little-endian, floats are IEEE 754 binary32 in little-endian byte order.
  *
- *   request (40 bytes): "FGDQ", u32 version (1), u32 op (1 = decode), u32 reserved (0),
+ *   request (40 bytes): "FGDQ", u32 version (1), u32 op, u32 reserved (0),
  *                       f32 background[3], u32 pad (0), u64 length; then length bytes of
- *                       encoded image.
+ *                       payload:
+ *                       op 1 (decode): the encoded image;
+ *                       op 2 (encode PNG): u32 w, u32 h, u32 channels (1, 3, 4), u32 bits
+ *                       (8, 16), then the pixels [h][w][channels] (uint16 little-endian
+ *                       when bits is 16); length = 16 + w h channels bits / 8; background
+ *                       is unused (zero).
  *   reply (32 bytes):   "FGDR", u32 version, i32 rc (0 or an FG_E* code), i32 w, i32 h,
  *                       u32 message length, u64 pixel bytes; then the message (the child's
- *                       fg_error_detail(), no NUL), then float RGB [h][w][3] when rc is 0.
+ *                       fg_error_detail(), no NUL), then, when rc is 0:
+ *                       op 1: float RGB [h][w][3] (pixel bytes = w h 12);
+ *                       op 2: the PNG file (pixel bytes = its length; w, h echo the
+ *                       request's).
  *
  * The child reads a whole request before it replies, so the daemon may write the request and
  * then read the reply. A request the child cannot parse gets an FG_EINVAL reply, after which
@@ -79,6 +97,8 @@ size_t fg_decoder_child_pids(fg_decoder *dec, pid_t *pids, size_t max);
 
 #define FG_DECODER_VERSION 1u
 #define FG_DECODER_OP_DECODE 1u
+#define FG_DECODER_OP_ENCODE_PNG 2u
+#define FG_DECODER_ENCODE_HEADER 16 /* the encode payload's w, h, channels, bits */
 #define FG_DECODER_REQUEST_SIZE 40
 #define FG_DECODER_REPLY_SIZE 32
 #define FG_DECODER_MAX_REQUEST (1ull << 30) /* bytes of encoded image */
@@ -103,13 +123,28 @@ void fg_decoder_request_pack(const fg_decoder_request *req, uint8_t out[FG_DECOD
 int fg_decoder_request_unpack(const uint8_t in[FG_DECODER_REQUEST_SIZE], fg_decoder_request *req);
 
 void fg_decoder_reply_pack(const fg_decoder_reply *rep, uint8_t out[FG_DECODER_REPLY_SIZE]);
-/* Checks the magic, the version and that the sizes agree with rc, w and h; FG_EINVAL with a
- * detail otherwise. */
+/* Checks the magic, the version and that the sizes agree with rc, w and h for a reply to a
+ * decode (op 1); FG_EINVAL with a detail otherwise. */
 int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep);
+
+/* The same for a reply to an encode (op 2): the PNG's length instead of the pixels'. */
+int fg_decoder_reply_unpack_encode(const uint8_t in[FG_DECODER_REPLY_SIZE],
+                                   fg_decoder_reply *rep);
+
+/* The encode payload's header (FG_DECODER_ENCODE_HEADER bytes), packed and checked against
+ * the request's length: sizes within the image limits, channels 1, 3 or 4, bits 8 or 16.
+ * FG_EINVAL with a detail otherwise. */
+void fg_decoder_encode_header_pack(int w, int h, int channels, int bits,
+                                   uint8_t out[FG_DECODER_ENCODE_HEADER]);
+int fg_decoder_encode_header_unpack(const uint8_t in[FG_DECODER_ENCODE_HEADER], uint64_t length,
+                                    int *w, int *h, int *channels, int *bits);
 
 /* Converts n floats between host order and the wire's little-endian order, in place (a no-op
  * on little-endian hosts). */
 void fg_decoder_floats_le(float *v, size_t n);
+
+/* The same for n uint16 values. */
+void fg_decoder_u16_le(uint16_t *v, size_t n);
 
 /* read(2) and write(2) of exactly n bytes, through EINTR and short transfers. read returns
  * the bytes read (less than n only at EOF) or -1 with errno; write returns 0 or -1 with

@@ -39,6 +39,17 @@ typedef struct conn_ctx {
   struct conn_ctx *next;      /* offload queue */
 } conn_ctx;
 
+/* A streamed body in flight (fg_resp_stream): owned by libmicrohttpd's response object,
+ * freed by its free callback (stream_free). */
+typedef struct http_stream {
+  struct fg_http *http;
+  struct MHD_Connection *conn;
+  const fg_stream_ops *ops;
+  void *ctx;
+  int parked;                 /* suspended until the ticker resumes it; guarded by slock */
+  struct http_stream *prev, *next;
+} http_stream;
+
 struct fg_http {
   struct MHD_Daemon *mhd;
   fg_http_config cfg;
@@ -48,12 +59,27 @@ struct fg_http {
   pthread_cond_t qcond;
   conn_ctx *qhead, *qtail;
   int stopping;
+  /* Streamed bodies: every live one, and the ticker thread that resumes parked ones. */
+  pthread_mutex_t slock;
+  pthread_cond_t scond;
+  http_stream *streams;
+  int streams_closing;        /* fg_http_stop began: no stream parks any more */
+  int ticker_started;
+  pthread_t ticker;
 };
 
 /* ---------------------------------------------------------------- responses */
 
+/* Frees a streamed body's producer that was never handed to libmicrohttpd. */
+static void resp_drop_stream(fg_resp *resp) {
+  if (resp->stream_ops && resp->stream_ops->free) resp->stream_ops->free(resp->stream_ctx);
+  resp->stream_ops = NULL;
+  resp->stream_ctx = NULL;
+}
+
 void fg_resp_take(fg_resp *resp, int status, const char *content_type, char *body, size_t len) {
   free(resp->body);
+  resp_drop_stream(resp);
   resp->status = status;
   resp->content_type = content_type;
   resp->body = body;
@@ -80,6 +106,13 @@ int fg_resp_error(fg_resp *resp, int status, const char *code, const char *fmt, 
   va_end(ap);
   fg_resp_json(resp, status, json_pack("{s:{s:s,s:s}}", "error", "code", code, "message", msg));
   return 0;
+}
+
+void fg_resp_stream(fg_resp *resp, int status, const char *content_type,
+                    const fg_stream_ops *ops, void *ctx) {
+  fg_resp_take(resp, status, content_type, NULL, 0);
+  resp->stream_ops = ops;
+  resp->stream_ctx = ctx;
 }
 
 const char *fg_req_header(const fg_req *req, const char *name) {
@@ -147,18 +180,149 @@ static int authorized(const conn_ctx *c, int public_route) {
   return token_equal(h, strlen(h), token);
 }
 
+/* ---------------------------------------------------------------- streamed bodies */
+
+/* Streamed bodies and libmicrohttpd 0.9.75. The server runs a pool of polling threads with
+ * epoll (MHD_USE_INTERNAL_POLLING_THREAD + MHD_OPTION_THREAD_POOL_SIZE), each thread serving
+ * many connections. A content-reader callback that blocks until an event would hold its
+ * polling thread and every connection on it. Returning 0 ("nothing yet") alone is allowed
+ * but spins: the connection stays in MHD_CONNECTION_CHUNKED_BODY_UNREADY on the thread's
+ * "ready" list, which makes its epoll_wait time out at once (MHD_get_timeout) and call the
+ * reader again, so each idle stream would burn a polling thread's core (microhttpd.h: "use
+ * zero only with MHD_suspend_connection() to avoid busy waiting"). MHD allows suspending
+ * from inside the reader: the connection leaves the event loop (no thread, no CPU, no
+ * timeout) until MHD_resume_connection(), after which MHD calls the reader again.
+ *
+ * So: stream_reader asks the producer for bytes; when it has none, it marks the stream
+ * parked and suspends the connection, both under slock. The ticker thread wakes every
+ * FG_HTTP_STREAM_TICK_MS while any stream is parked, asks each parked stream's producer whether
+ * it is ready, and resumes those that are, clearing parked under the same lock; so resume
+ * always follows a completed suspend. A dead client is noticed when the next write fails
+ * (producers send a keep-alive comment now and then). fg_http_stop sets streams_closing,
+ * resumes every parked stream and lets the readers end their bodies, so no connection is
+ * suspended when MHD_stop_daemon runs (an API violation in libmicrohttpd). */
+
+static double mono_now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static ssize_t stream_reader(void *cls, uint64_t pos, char *buf, size_t max) {
+  (void)pos;
+  http_stream *hs = cls;
+  fg_http *h = hs->http;
+  pthread_mutex_lock(&h->slock);
+  int closing = h->streams_closing;
+  pthread_mutex_unlock(&h->slock);
+  long n = hs->ops->read(hs->ctx, buf, max, closing);
+  if (n > 0) return (ssize_t)(n > (long)max ? (long)max : n);
+  if (n < 0) return MHD_CONTENT_READER_END_OF_STREAM;
+  pthread_mutex_lock(&h->slock);
+  if (h->streams_closing) { /* fg_http_stop began after the read: never park now */
+    pthread_mutex_unlock(&h->slock);
+    n = hs->ops->read(hs->ctx, buf, max, 1);
+    return n > 0 ? (ssize_t)(n > (long)max ? (long)max : n) : MHD_CONTENT_READER_END_OF_STREAM;
+  }
+  hs->parked = 1;
+  MHD_suspend_connection(hs->conn);
+  pthread_cond_signal(&h->scond);
+  pthread_mutex_unlock(&h->slock);
+  return 0;
+}
+
+static void stream_free(void *cls) {
+  http_stream *hs = cls;
+  fg_http *h = hs->http;
+  pthread_mutex_lock(&h->slock);
+  if (hs->prev) hs->prev->next = hs->next;
+  else h->streams = hs->next;
+  if (hs->next) hs->next->prev = hs->prev;
+  pthread_mutex_unlock(&h->slock);
+  if (hs->ops->free) hs->ops->free(hs->ctx);
+  free(hs);
+}
+
+/* Resumes parked streams whose producer is ready; sleeps while no stream is parked. */
+static void *ticker_main(void *arg) {
+  fg_http *h = arg;
+  pthread_setname_np(pthread_self(), "fg-stream");
+  pthread_mutex_lock(&h->slock);
+  while (!h->streams_closing) {
+    int any_parked = 0;
+    double now = mono_now();
+    for (http_stream *hs = h->streams; hs; hs = hs->next) {
+      if (!hs->parked) continue;
+      if (hs->ops->ready(hs->ctx, now)) {
+        hs->parked = 0;
+        MHD_resume_connection(hs->conn);
+      } else {
+        any_parked = 1;
+      }
+    }
+    if (!any_parked) {
+      pthread_cond_wait(&h->scond, &h->slock); /* a stream parked, or stop */
+      continue;
+    }
+    struct timespec until;
+    clock_gettime(CLOCK_REALTIME, &until);
+    until.tv_nsec += FG_HTTP_STREAM_TICK_MS * 1000000L;
+    if (until.tv_nsec >= 1000000000L) {
+      until.tv_sec++;
+      until.tv_nsec -= 1000000000L;
+    }
+    pthread_cond_timedwait(&h->scond, &h->slock, &until);
+  }
+  pthread_mutex_unlock(&h->slock);
+  return NULL;
+}
+
+/* Hands a streamed body to libmicrohttpd; r->stream_* are owned by it afterwards. */
+static struct MHD_Response *stream_response(conn_ctx *c) {
+  fg_http *h = c->http;
+  fg_resp *r = &c->resp;
+  http_stream *hs = calloc(1, sizeof *hs);
+  if (!hs) return NULL;
+  hs->http = h;
+  hs->conn = c->conn;
+  hs->ops = r->stream_ops;
+  hs->ctx = r->stream_ctx;
+  struct MHD_Response *mr =
+    MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, stream_reader, hs, stream_free);
+  if (!mr) {
+    free(hs);
+    return NULL;
+  }
+  r->stream_ops = NULL; /* stream_free owns the producer now */
+  r->stream_ctx = NULL;
+  pthread_mutex_lock(&h->slock);
+  hs->next = h->streams;
+  if (h->streams) h->streams->prev = hs;
+  h->streams = hs;
+  pthread_mutex_unlock(&h->slock);
+  MHD_add_response_header(mr, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+  MHD_add_response_header(mr, "X-Accel-Buffering", "no");
+  return mr;
+}
+
 /* ---------------------------------------------------------------- sending */
 
 static enum MHD_Result send_response(conn_ctx *c) {
   fg_resp *r = &c->resp;
   if (r->status == 0) fg_resp_error(r, 500, "internal_error", "the handler produced no response");
-  struct MHD_Response *mr =
-    r->body ? MHD_create_response_from_buffer(r->len, r->body, MHD_RESPMEM_MUST_FREE)
-            : MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+  struct MHD_Response *mr = NULL;
+  if (r->stream_ops) {
+    mr = stream_response(c);
+    if (!mr) fg_resp_error(r, 500, "internal_error", "out of memory starting the stream");
+  }
+  if (!mr)
+    mr = r->body ? MHD_create_response_from_buffer(r->len, r->body, MHD_RESPMEM_MUST_FREE)
+                 : MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
   if (!mr) return MHD_NO;
   r->body = NULL; /* owned by libmicrohttpd now */
   if (r->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, r->content_type);
   if (r->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, r->allow);
+  if (r->location[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_LOCATION, r->location);
   if (r->status == 401)
     MHD_add_response_header(mr, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"fieldgrip\"");
   enum MHD_Result ok = MHD_queue_response(c->conn, (unsigned)r->status, mr);
@@ -225,6 +389,7 @@ static int append_body(fg_req *q, const char *data, size_t size) {
 
 static void *offload_main(void *arg) {
   fg_http *h = arg;
+  pthread_setname_np(pthread_self(), "fg-offload");
   for (;;) {
     pthread_mutex_lock(&h->qlock);
     while (!h->qhead && !h->stopping) pthread_cond_wait(&h->qcond, &h->qlock);
@@ -429,6 +594,7 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
   }
   free(c->req.body);
   free(c->resp.body);
+  resp_drop_stream(&c->resp);
   if (c->req.conf) h->cfg.conf_release(h->cfg.app, c->req.conf);
   free(c);
   *con_cls = NULL;
@@ -471,6 +637,8 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
   h->cfg = *cfg;
   pthread_mutex_init(&h->qlock, NULL);
   pthread_cond_init(&h->qcond, NULL);
+  pthread_mutex_init(&h->slock, NULL);
+  pthread_cond_init(&h->scond, NULL);
   for (size_t i = 0; i < cfg->n_routes && i < FG_METRICS_MAX_ROUTES; i++)
     fg_metrics_set_route((int)i, cfg->routes[i].method, cfg->routes[i].metric);
 
@@ -492,6 +660,8 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
                      "machine?)", cfg->listen);
     pthread_mutex_destroy(&h->qlock);
     pthread_cond_destroy(&h->qcond);
+    pthread_mutex_destroy(&h->slock);
+    pthread_cond_destroy(&h->scond);
     free(h);
     free(host);
     return rc;
@@ -509,12 +679,13 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
       h->n_workers = i;
       break;
     }
-  if (!h->workers || h->n_workers == 0) {
+  h->ticker_started = pthread_create(&h->ticker, NULL, ticker_main, h) == 0;
+  if (!h->workers || h->n_workers == 0 || !h->ticker_started) {
     free(h->workers);
     h->workers = NULL;
     h->n_workers = 0;
     fg_http_stop(h);
-    return fg_fail(FG_ENOMEM, "cannot start the request worker threads");
+    return fg_fail(FG_ENOMEM, "cannot start the request worker or stream threads");
   }
   *out = h;
   return 0;
@@ -528,9 +699,22 @@ void fg_http_stop(fg_http *h) {
   pthread_cond_broadcast(&h->qcond);
   pthread_mutex_unlock(&h->qlock);
   for (int i = 0; i < h->n_workers; i++) pthread_join(h->workers[i], NULL);
+  /* End streamed bodies: nothing may stay suspended when MHD_stop_daemon runs. */
+  pthread_mutex_lock(&h->slock);
+  h->streams_closing = 1;
+  for (http_stream *hs = h->streams; hs; hs = hs->next)
+    if (hs->parked) {
+      hs->parked = 0;
+      MHD_resume_connection(hs->conn);
+    }
+  pthread_cond_broadcast(&h->scond);
+  pthread_mutex_unlock(&h->slock);
+  if (h->ticker_started) pthread_join(h->ticker, NULL);
   MHD_stop_daemon(h->mhd);
   pthread_mutex_destroy(&h->qlock);
   pthread_cond_destroy(&h->qcond);
+  pthread_mutex_destroy(&h->slock);
+  pthread_cond_destroy(&h->scond);
   free(h->workers);
   free(h);
 }

@@ -43,12 +43,34 @@ typedef struct fg_req {
   void *mhd_conn;                   /* for header lookups via fg_req_header */
 } fg_req;
 
+/* A streamed body (Server-Sent Events): a producer the HTTP layer pulls bytes from while the
+ * client is connected. See fg_resp_stream. */
+typedef struct fg_stream_ops {
+  /* Copies at most max bytes of the body into buf. Returns how many (> 0), 0 when there is
+   * nothing to send now (the connection is then parked: taken out of libmicrohttpd's event
+   * loop, holding no thread, until ready() says otherwise), or -1 at the end of the body.
+   * closing = 1 says the server is stopping: return -1 now or after a last few bytes. Runs
+   * on a polling thread: must not block. */
+  long (*read)(void *ctx, char *buf, size_t max, int closing);
+  /* Whether a parked stream has something to send at now_s (CLOCK_MONOTONIC seconds). The
+   * layer asks every FG_HTTP_STREAM_TICK_MS for each parked stream, under a lock that read()
+   * does not take: must be cheap and must not block. */
+  int (*ready)(void *ctx, double now_s);
+  /* Frees ctx once the connection is done with it (or the response was never sent). */
+  void (*free)(void *ctx);
+} fg_stream_ops;
+
+#define FG_HTTP_STREAM_TICK_MS 50
+
 typedef struct fg_resp {
   int status;
   char *body;               /* owned (malloc) */
   size_t len;
   const char *content_type; /* static string */
   char allow[64];           /* for 405 */
+  char location[160];       /* Location header, when not empty (202, 201) */
+  const fg_stream_ops *stream_ops; /* a streamed body instead of body (fg_resp_stream) */
+  void *stream_ctx;                /* owned: given to stream_ops->free */
 } fg_resp;
 
 typedef int (*fg_handler)(fg_req *req, fg_resp *resp);
@@ -83,6 +105,13 @@ int fg_resp_error(fg_resp *resp, int status, const char *code, const char *fmt, 
 /* Sets a body with a content type; takes ownership of body (malloc'd). */
 void fg_resp_take(fg_resp *resp, int status, const char *content_type, char *body, size_t len);
 
+/* Answers with a body of unknown length pulled from ops (chunked transfer encoding), with
+ * "Cache-Control: no-store" and "X-Accel-Buffering: no". Takes ownership of ctx: ops->free
+ * runs once the connection ends, or at once if the response is replaced. Only for handlers
+ * that run on a polling thread (not FG_ROUTE_OFFLOAD). */
+void fg_resp_stream(fg_resp *resp, int status, const char *content_type,
+                    const fg_stream_ops *ops, void *ctx);
+
 typedef struct fg_http fg_http;
 
 typedef struct fg_http_config {
@@ -102,7 +131,8 @@ typedef struct fg_http_config {
  * is written to bound ("http://127.0.0.1:7070"). */
 int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t bound_len);
 
-/* Stops accepting, lets offloaded handlers finish, closes every connection and frees. */
+/* Stops accepting, lets offloaded handlers finish, ends every streamed body (read() sees
+ * closing = 1), closes every connection and frees. */
 void fg_http_stop(fg_http *http);
 
 #endif

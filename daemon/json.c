@@ -179,13 +179,29 @@ void fg_iso8601(int64_t ms, char out[32]) {
 json_t *fg_json_scene(const fg_scene_info *info) {
   char created[32];
   fg_iso8601(info->created_ms, created);
-  return json_pack("{s:s,s:{s:o,s:o},s:f,s:o,s:I,s:o,s:b,s:n,s:s,s:b}", "name", info->name,
-                   "workspace", "min", fg_json_from_vec(info->params.workspace_min, 3), "max",
-                   fg_json_from_vec(info->params.workspace_max, 3), "voxel_size",
-                   info->params.voxel_size, "background", fg_json_from_vec(info->params.background, 3),
-                   "frames", (json_int_t)info->n_frames, "feature_dim",
-                   info->feature_dim ? json_integer(info->feature_dim) : json_null(), "trained", 0,
-                   "last_job", "created", created, "declared_in_config", info->declared_in_config);
+  json_t *last_job = info->last_job_id[0]
+    ? json_pack("{s:s,s:s}", "id", info->last_job_id, "state", info->last_job_state)
+    : json_null();
+  json_t *o = json_pack("{s:s,s:{s:o,s:o},s:f,s:o,s:I,s:o,s:b,s:o,s:s,s:b}", "name", info->name,
+                        "workspace", "min", fg_json_from_vec(info->params.workspace_min, 3),
+                        "max", fg_json_from_vec(info->params.workspace_max, 3), "voxel_size",
+                        info->params.voxel_size, "background",
+                        fg_json_from_vec(info->params.background, 3), "frames",
+                        (json_int_t)info->n_frames, "feature_dim",
+                        info->feature_dim ? json_integer(info->feature_dim) : json_null(),
+                        "trained", info->trained, "last_job", last_job, "created", created,
+                        "declared_in_config", info->declared_in_config);
+  if (!o) return NULL;
+  json_object_set_new(o, "trained_steps", json_integer(info->trained_steps));
+  json_object_set_new(o, "checkpoint_bytes", json_integer(info->checkpoint_bytes));
+  json_object_set_new(o, "partial", json_boolean(info->partial));
+  json_t *err = NULL;
+  if (info->checkpoint_error[0]) {
+    err = json_string(info->checkpoint_error);
+    if (!err) err = json_string("the checkpoint does not load (see the daemon's log)");
+  }
+  json_object_set_new(o, "checkpoint_error", err ? err : json_null());
+  return o;
 }
 
 json_t *fg_json_frame(const fg_frame *f, int index) {

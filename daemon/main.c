@@ -3,6 +3,7 @@
 #include "conf.h"
 #include "decoder.h"
 #include "http.h"
+#include "jobs.h"
 #include "metrics.h"
 #include "notify.h"
 #include "store.h"
@@ -192,7 +193,15 @@ int main(int argc, char **argv) {
     return 1;
   }
   if (fg_decoder_check(app.decoder) != 0)
-    fg_warn("%s; uploads and imports will fail until it is there", fg_error_detail());
+    fg_warn("%s; uploads, imports and renders will fail until it is there", fg_error_detail());
+  /* Trainings: each scene's last job comes back from its last_job.json. */
+  if (fg_jobs_new(&app.jobs, &app) != 0) {
+    fg_error("cannot set up training: %s", fg_error_detail());
+    fg_decoder_free(app.decoder);
+    fg_store_close(app.store);
+    fg_app_clear_conf(&app);
+    return 1;
+  }
 
   long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
   int poll_threads = ncpu > 2 ? (int)(ncpu < 8 ? ncpu : 8) : 2;
@@ -210,6 +219,7 @@ int main(int argc, char **argv) {
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
     fg_error("%s", fg_error_detail());
+    fg_jobs_free(app.jobs);
     fg_decoder_free(app.decoder);
     fg_store_close(app.store);
     fg_app_clear_conf(&app);
@@ -243,6 +253,7 @@ int main(int argc, char **argv) {
   }
   fg_notify_stopping();
   fg_http_stop(http);
+  fg_jobs_free(app.jobs); /* a running training stops after its step and keeps its field */
   fg_decoder_free(app.decoder);
   fg_store_close(app.store);
   fg_app_clear_conf(&app);

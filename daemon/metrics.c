@@ -11,7 +11,7 @@
 /* Status codes the daemon answers with get their own counter; anything else lands in
  * the last slot and is reported as "other". */
 static const int statuses[] = {200, 201, 202, 204, 400, 401, 403, 404, 405,
-                               409, 413, 415, 422, 500, 502, 503, 504};
+                               409, 413, 415, 422, 500, 501, 502, 503, 504};
 #define N_STATUS (sizeof statuses / sizeof statuses[0] + 1)
 
 static const double buckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
@@ -31,6 +31,8 @@ static struct {
 
 static atomic_ullong frames_ingested;
 static atomic_ullong reloads_ok, reloads_failed;
+static atomic_ullong training_steps;
+static _Atomic double training_samples_per_s;
 
 void fg_metrics_set_route(int idx, const char *method, const char *route) {
   if (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) return;
@@ -57,6 +59,10 @@ void fg_metrics_observe_request(int idx, int status, double seconds) {
 void fg_metrics_add_frames_ingested(unsigned n) { atomic_fetch_add(&frames_ingested, n); }
 
 void fg_metrics_count_reload(int ok) { atomic_fetch_add(ok ? &reloads_ok : &reloads_failed, 1); }
+
+void fg_metrics_add_training_steps(unsigned n) { atomic_fetch_add(&training_steps, n); }
+
+void fg_metrics_set_training_samples_per_s(double v) { atomic_store(&training_samples_per_s, v); }
 
 typedef struct {
   char *buf;
@@ -148,6 +154,23 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "fieldgrip_config_reloads_total{result=\"ok\"} %llu\n"
                  "fieldgrip_config_reloads_total{result=\"failed\"} %llu\n",
             atomic_load(&reloads_ok), atomic_load(&reloads_failed));
+  static const char *const job_states[FG_METRICS_JOB_STATES] = {"queued", "running", "done",
+                                                                "failed", "cancelled"};
+  sb_printf(&sb, "# HELP fieldgrip_jobs Jobs the daemon knows (this run's, and each scene's "
+                 "last one from before), by state.\n# TYPE fieldgrip_jobs gauge\n");
+  for (int i = 0; i < FG_METRICS_JOB_STATES; i++)
+    sb_printf(&sb, "fieldgrip_jobs{state=\"%s\"} %zu\n", job_states[i], g->jobs[i]);
+  sb_printf(&sb, "# HELP fieldgrip_trained_scenes Scenes holding a trained field.\n"
+                 "# TYPE fieldgrip_trained_scenes gauge\nfieldgrip_trained_scenes %zu\n",
+            g->trained_scenes);
+  sb_printf(&sb, "# HELP fieldgrip_training_steps_total Training steps taken since start, over "
+                 "all jobs.\n# TYPE fieldgrip_training_steps_total counter\n"
+                 "fieldgrip_training_steps_total %llu\n", atomic_load(&training_steps));
+  sb_printf(&sb, "# HELP fieldgrip_training_samples_per_second Samples per second of the last "
+                 "training step measured (0 before any).\n"
+                 "# TYPE fieldgrip_training_samples_per_second gauge\n"
+                 "fieldgrip_training_samples_per_second %.6g\n",
+            atomic_load(&training_samples_per_s));
   if (sb.failed) {
     free(sb.buf);
     return NULL;

@@ -18,10 +18,21 @@ void fg_metrics_observe_request(int idx, int status, double seconds);
 void fg_metrics_add_frames_ingested(unsigned n);
 void fg_metrics_count_reload(int ok);
 
+/* Training: steps taken by every job since start, and the samples per second of the last
+ * step measured. */
+void fg_metrics_add_training_steps(unsigned n);
+void fg_metrics_set_training_samples_per_s(double samples_per_s);
+
+/* Job states, in the order of the gauge's labels (jobs.h uses the same order). */
+#define FG_METRICS_JOB_STATES 5
+
 /* Gauges the renderer asks for at scrape time. */
 typedef struct fg_metrics_gauges {
   size_t scenes;
   size_t frames;
+  size_t trained_scenes;                /* scenes holding a trained field */
+  size_t jobs[FG_METRICS_JOB_STATES];   /* jobs known, by state (queued, running, done,
+                                           failed, cancelled) */
 } fg_metrics_gauges;
 
 /* Renders the text exposition format into a malloc'd NUL-terminated buffer the caller owns;

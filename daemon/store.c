@@ -5,6 +5,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
+#include "field/checkpoint.h"
 
 #include <jansson.h>
 
@@ -16,8 +17,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
+
+struct fg_field_ref {
+  fg_field *field; /* owned */
+  atomic_int refs;
+};
 
 struct fg_scene {
   fg_store *store;
@@ -35,6 +42,13 @@ struct fg_scene {
   int next_index;
   int feature_dim;
   int deleted;
+  /* the trained field */
+  fg_field_ref *field;     /* NULL when untrained */
+  int partial;
+  int64_t checkpoint_bytes;
+  char *checkpoint_error;  /* malloc'd; NULL when none */
+  char last_job_id[FG_JOB_ID_MAX];
+  char last_job_state[16];
 };
 
 struct fg_store {
@@ -140,6 +154,8 @@ static int read_scene_json(fg_scene *s) {
 
 static void scene_free(fg_scene *s) {
   if (!s) return;
+  fg_field_ref_release(s->field);
+  free(s->checkpoint_error);
   pthread_mutex_destroy(&s->lock);
   free(s->frames);
   free(s->indices);
@@ -147,6 +163,8 @@ static void scene_free(fg_scene *s) {
   free(s->frames_dir);
   free(s);
 }
+
+void fg_scene_ref(fg_scene *s) { atomic_fetch_add(&s->refs, 1); }
 
 void fg_scene_unref(fg_scene *s) {
   if (s && atomic_fetch_sub(&s->refs, 1) == 1) scene_free(s);
@@ -257,6 +275,160 @@ static int scene_load_frames(fg_scene *s) {
   return rc;
 }
 
+/* ---------------------------------------------------------------- the trained field */
+
+static int64_t file_size(const char *path) {
+  struct stat st;
+  return stat(path, &st) == 0 ? (int64_t)st.st_size : 0;
+}
+
+static fg_field_ref *field_ref_new(fg_field *f) {
+  fg_field_ref *r = calloc(1, sizeof *r);
+  if (!r) return NULL;
+  r->field = f;
+  atomic_init(&r->refs, 1);
+  return r;
+}
+
+void fg_field_ref_release(fg_field_ref *r) {
+  if (r && atomic_fetch_sub(&r->refs, 1) == 1) {
+    fg_field_free(r->field);
+    free(r);
+  }
+}
+
+const fg_field *fg_field_ref_field(const fg_field_ref *r) { return r->field; }
+
+fg_field_ref *fg_scene_field_acquire(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  fg_field_ref *r = s->field;
+  if (r) atomic_fetch_add(&r->refs, 1);
+  pthread_mutex_unlock(&s->lock);
+  return r;
+}
+
+/* Loads the field at start-up (see fg_store_open). Never fails the scene: a checkpoint that
+ * does not load leaves it untrained with the reason. */
+static void scene_load_field(fg_scene *s) {
+  char *final = fg_path_join(s->dir, "field.fgc");
+  char *next = fg_path_join(s->dir, "field.next.fgc");
+  if (!final || !next) goto out;
+  int have_final = access(final, F_OK) == 0, have_next = access(next, F_OK) == 0;
+  const char *path = have_final ? final : have_next ? next : NULL;
+  if (!path) goto out;
+  fg_field *f = NULL;
+  int rc = fg_checkpoint_load(path, &f);
+  if (rc != 0) {
+    char msg[600];
+    snprintf(msg, sizeof msg, "%s: %s", have_final ? "field.fgc" : "field.next.fgc",
+             fg_error_detail());
+    fg_error("scene %s: the trained field does not load, so the scene is untrained until it "
+             "is trained again (the file is left as it is%s): %s", s->name,
+             have_final && have_next ? ", and so is field.next.fgc" : "", msg);
+    s->checkpoint_error = strdup(msg);
+    goto out;
+  }
+  /* field.fgc loaded: an unfinished training's field.next.fgc has nothing more to give. */
+  if (have_final && have_next) {
+    if (unlink(next) == 0)
+      fg_info("scene %s: removed field.next.fgc, the checkpoint of a training the daemon did "
+              "not finish; field.fgc stays the scene's field", s->name);
+    else
+      fg_warn("scene %s: cannot remove the leftover %s: %s", s->name, next, strerror(errno));
+  }
+  s->field = field_ref_new(f);
+  if (!s->field) {
+    fg_field_free(f);
+    s->checkpoint_error = strdup("out of memory loading the field");
+    goto out;
+  }
+  s->checkpoint_bytes = file_size(path);
+  s->partial = !have_final;
+  if (s->partial)
+    fg_warn("scene %s: loaded field.next.fgc, the checkpoint of a training the daemon did not "
+            "finish (%lld steps); the scene reports \"partial\": true until it is trained again",
+            s->name, (long long)f->trained_steps);
+  else
+    fg_info("scene %s: trained field loaded (%lld steps, %lld bytes)", s->name,
+            (long long)f->trained_steps, (long long)s->checkpoint_bytes);
+out:
+  free(final);
+  free(next);
+}
+
+int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
+  char *final = fg_path_join(s->dir, "field.fgc");
+  fg_field_ref *r = field_ref_new(field);
+  if (!final || !r) {
+    free(final);
+    free(r);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  pthread_mutex_lock(&s->lock);
+  int rc = 0;
+  fg_field_ref *old = NULL;
+  if (s->deleted) {
+    unlink(next_path);
+    rc = fg_fail(FG_ENOENT, "scene %s was deleted", s->name);
+  } else if (rename(next_path, final) != 0) {
+    rc = fg_fail(FG_EIO, "cannot rename %s to %s: %s", next_path, final, strerror(errno));
+  } else {
+    fg_fsync_dir(s->dir);
+    old = s->field;
+    s->field = r;
+    s->partial = 0;
+    s->checkpoint_bytes = file_size(final);
+    free(s->checkpoint_error);
+    s->checkpoint_error = NULL;
+    r = NULL;
+  }
+  pthread_mutex_unlock(&s->lock);
+  if (r) {
+    r->field = NULL; /* stays the caller's */
+    free(r);
+  }
+  fg_field_ref_release(old);
+  free(final);
+  return rc;
+}
+
+void fg_scene_keep_partial(fg_scene *s) {
+  char *final = fg_path_join(s->dir, "field.fgc");
+  char *next = fg_path_join(s->dir, "field.next.fgc");
+  pthread_mutex_lock(&s->lock);
+  if (final && next && s->field && s->partial && !s->deleted && access(final, F_OK) != 0 &&
+      access(next, F_OK) == 0) {
+    if (rename(next, final) == 0) {
+      fg_fsync_dir(s->dir);
+      fg_info("scene %s: the partial field (field.next.fgc) is now field.fgc, so that the new "
+              "training cannot lose it", s->name);
+    } else {
+      fg_warn("scene %s: cannot rename field.next.fgc to field.fgc: %s", s->name,
+              strerror(errno));
+    }
+  }
+  pthread_mutex_unlock(&s->lock);
+  free(final);
+  free(next);
+}
+
+void fg_scene_set_last_job(fg_scene *s, const char *id, const char *state) {
+  pthread_mutex_lock(&s->lock);
+  snprintf(s->last_job_id, sizeof s->last_job_id, "%s", id ? id : "");
+  snprintf(s->last_job_state, sizeof s->last_job_state, "%s", state ? state : "");
+  pthread_mutex_unlock(&s->lock);
+}
+
+int fg_scene_deleted(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  int d = s->deleted;
+  pthread_mutex_unlock(&s->lock);
+  return d;
+}
+
+const char *fg_scene_dir(const fg_scene *s) { return s->dir; }
+const char *fg_scene_name(const fg_scene *s) { return s->name; }
+
 /* ---------------------------------------------------------------- the store */
 
 static int store_insert(fg_store *st, fg_scene *s) {
@@ -313,6 +485,7 @@ int fg_store_open(fg_store **out, const char *state_dir) {
       scene_free(s);
       continue;
     }
+    scene_load_field(s);
     rc = store_insert(st, s);
     if (rc != 0) scene_free(s);
     else fg_info("scene %s: %zu frames", s->name, s->n_frames);
@@ -416,6 +589,14 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->created_ms = s->created_ms;
   out->n_frames = s->n_frames;
   out->feature_dim = s->feature_dim;
+  out->trained = s->field != NULL;
+  out->partial = s->field && s->partial;
+  out->trained_steps = s->field ? s->field->field->trained_steps : 0;
+  out->checkpoint_bytes = s->field ? s->checkpoint_bytes : 0;
+  snprintf(out->checkpoint_error, sizeof out->checkpoint_error, "%s",
+           s->checkpoint_error ? s->checkpoint_error : "");
+  snprintf(out->last_job_id, sizeof out->last_job_id, "%s", s->last_job_id);
+  snprintf(out->last_job_state, sizeof out->last_job_state, "%s", s->last_job_state);
   pthread_mutex_unlock(&s->lock);
 }
 
@@ -448,6 +629,18 @@ void fg_store_totals(fg_store *st, size_t *scenes, size_t *frames) {
     pthread_mutex_unlock(&st->scenes[i]->lock);
   }
   pthread_mutex_unlock(&st->lock);
+}
+
+size_t fg_store_trained(fg_store *st) {
+  pthread_mutex_lock(&st->lock);
+  size_t n = 0;
+  for (size_t i = 0; i < st->n; i++) {
+    pthread_mutex_lock(&st->scenes[i]->lock);
+    n += st->scenes[i]->field != NULL;
+    pthread_mutex_unlock(&st->scenes[i]->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+  return n;
 }
 
 int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
@@ -607,6 +800,53 @@ int fg_scene_list_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *
   pthread_mutex_unlock(&s->lock);
   *frames = f;
   *indices = ix;
+  *n = k;
+  return 0;
+}
+
+void fg_scene_frames_free(fg_frame *frames, size_t n) {
+  for (size_t i = 0; frames && i < n; i++) fg_frame_clear(&frames[i]);
+  free(frames);
+}
+
+int fg_scene_load_frames(fg_scene *s, fg_frame **frames, size_t *n, int (*stop)(void *),
+                         void *stop_ud) {
+  *frames = NULL;
+  *n = 0;
+  pthread_mutex_lock(&s->lock);
+  size_t k = s->n_frames;
+  int *ix = malloc((k ? k : 1) * sizeof *ix);
+  if (ix && k) memcpy(ix, s->indices, k * sizeof *ix);
+  pthread_mutex_unlock(&s->lock);
+  fg_frame *f = calloc(k ? k : 1, sizeof *f);
+  if (!ix || !f) {
+    free(ix);
+    free(f);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  int rc = 0;
+  for (size_t i = 0; i < k && rc == 0; i++) {
+    if (stop && stop(stop_ud)) {
+      rc = fg_fail(FG_ECANCELED, "stopped while loading frames");
+      break;
+    }
+    char name[32];
+    snprintf(name, sizeof name, "%06d.fgf", ix[i]);
+    char *path = fg_path_join(s->frames_dir, name);
+    rc = path ? fg_frame_load(path, &f[i]) : fg_fail(FG_ENOMEM, "out of memory");
+    if (rc != 0 && path) {
+      char detail[512];
+      snprintf(detail, sizeof detail, "%s", fg_error_detail());
+      rc = fg_fail(rc, "frame %d (%s): %s", ix[i], path, detail);
+    }
+    free(path);
+  }
+  free(ix);
+  if (rc != 0) {
+    fg_scene_frames_free(f, k);
+    return rc;
+  }
+  *frames = f;
   *n = k;
   return 0;
 }

@@ -2,6 +2,9 @@
  *
  *   <state>/scenes/<name>/scene.json          parameters (atomic rewrite)
  *   <state>/scenes/<name>/frames/000012.fgf   one frame (lib/io/frame.h), never rewritten
+ *   <state>/scenes/<name>/field.fgc           the trained field (field/checkpoint.h)
+ *   <state>/scenes/<name>/field.next.fgc      a training's checkpoint before it is committed
+ *   <state>/scenes/<name>/last_job.json       the scene's last job (jobs.h)
  *
  * A frame is written completely to ".incoming-*" beside its final name, then renamed into
  * place under the scene's lock, so a crash at any moment leaves either no frame or a whole
@@ -13,10 +16,18 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "field/model.h"
 #include "io/frame.h"
 
 typedef struct fg_store fg_store;
 typedef struct fg_scene fg_scene;
+
+/* A trained field shared by reference count: the scene holds one reference, every render
+ * in flight another, so a training that installs a new field never pulls one from under a
+ * render. */
+typedef struct fg_field_ref fg_field_ref;
+
+#define FG_JOB_ID_MAX 40
 
 typedef struct fg_scene_params {
   double workspace_min[3], workspace_max[3]; /* metres, world frame */
@@ -32,11 +43,21 @@ typedef struct fg_scene_info {
   int64_t created_ms;
   size_t n_frames;
   int feature_dim; /* 0 while no frame has features */
+  int trained;     /* the scene holds a field */
+  int partial;     /* that field is the checkpoint of an interrupted training */
+  int64_t trained_steps;
+  int64_t checkpoint_bytes;        /* size of the field's checkpoint file; 0 when untrained */
+  char checkpoint_error[512];      /* why the checkpoint did not load; "" when it did */
+  char last_job_id[FG_JOB_ID_MAX]; /* "" when the scene never had a job */
+  char last_job_state[16];
 } fg_scene_info;
 
-/* Opens (creating if needed) the state dir and loads every scene's description and frame
- * headers. Scenes or frames that cannot be read are logged and left on disk untouched.
- * The caller owns *out (fg_store_close). */
+/* Opens (creating if needed) the state dir and loads every scene's description, frame
+ * headers and trained field. Scenes or frames that cannot be read are logged and left on
+ * disk untouched. A field.fgc that does not load is logged and left on disk; its scene is
+ * then untrained and reports the reason (checkpoint_error). A field.next.fgc left by a
+ * training the daemon did not finish is loaded as the field (partial) when there is no
+ * field.fgc, else removed. The caller owns *out (fg_store_close). */
 int fg_store_open(fg_store **out, const char *state_dir);
 void fg_store_close(fg_store *store);
 
@@ -56,6 +77,8 @@ int fg_store_sync_declared(fg_store *store, const struct fg_conf *conf);
 
 /* Returns a scene with a reference the caller drops with fg_scene_unref; NULL if absent. */
 fg_scene *fg_store_get(fg_store *store, const char *name);
+/* Takes another reference to a scene the caller holds one of. */
+void fg_scene_ref(fg_scene *scene);
 void fg_scene_unref(fg_scene *scene);
 
 /* Removes a scene and its data. FG_ENOENT if absent. Requests still holding the scene finish
@@ -67,6 +90,11 @@ int fg_store_list(fg_store *store, fg_scene_info **out, size_t *n);
 
 /* Totals for metrics. */
 void fg_store_totals(fg_store *store, size_t *scenes, size_t *frames);
+size_t fg_store_trained(fg_store *store);
+
+/* The scene's folder and name; constant for the scene's lifetime, owned by the scene. */
+const char *fg_scene_dir(const fg_scene *scene);
+const char *fg_scene_name(const fg_scene *scene);
 
 void fg_scene_get_info(fg_scene *scene, fg_scene_info *out);
 
@@ -80,5 +108,38 @@ int fg_scene_add_frames(fg_scene *scene, const fg_frame *frames, size_t n, int *
 /* Copies the headers of every frame (rgb and feat NULL) and their numbers, sorted by number,
  * into malloc'd arrays the caller frees. */
 int fg_scene_list_frames(fg_scene *scene, fg_frame **frames, int **indices, size_t *n);
+
+/* Loads every frame whole (pixels and features, CRC checked), sorted by number, into a
+ * malloc'd array; on success the caller owns it (fg_scene_frames_free). stop, when not NULL,
+ * is asked between frames and ends the load with FG_ECANCELED when it returns nonzero. */
+int fg_scene_load_frames(fg_scene *scene, fg_frame **frames, size_t *n, int (*stop)(void *),
+                         void *stop_ud);
+void fg_scene_frames_free(fg_frame *frames, size_t n);
+
+/* ---- the trained field ---- */
+
+/* The scene's field with a reference the caller drops with fg_field_ref_release; NULL when
+ * the scene is untrained. The field is read-only while shared. */
+fg_field_ref *fg_scene_field_acquire(fg_scene *scene);
+const fg_field *fg_field_ref_field(const fg_field_ref *ref);
+void fg_field_ref_release(fg_field_ref *ref);
+
+/* Commits a finished training: renames next_path (field's checkpoint, already written in the
+ * scene's folder) over field.fgc and makes field the scene's field for new renders (renders
+ * in flight finish with the old one). On success the scene owns field. FG_ENOENT when the
+ * scene was deleted meanwhile (next_path is removed; field stays the caller's), FG_EIO when
+ * the rename fails (field stays the caller's, field.fgc is untouched). */
+int fg_scene_commit_field(fg_scene *scene, fg_field *field, const char *next_path);
+
+/* When the scene's field was loaded from field.next.fgc (partial), renames that file to
+ * field.fgc, so that a training about to overwrite or remove field.next.fgc cannot lose it.
+ * The scene goes on reporting partial until a training commits. Logs what it does. */
+void fg_scene_keep_partial(fg_scene *scene);
+
+/* Records the scene's last job for its description (jobs.c keeps it current). */
+void fg_scene_set_last_job(fg_scene *scene, const char *id, const char *state);
+
+/* Whether the scene was deleted (a job holding it must not write into its folder). */
+int fg_scene_deleted(fg_scene *scene);
 
 #endif

@@ -1,0 +1,248 @@
+/* POST /v1/scenes/{s}/render: an image of the scene's trained field from a camera, as PNG.
+ * Runs on the offload pool; the PNG is encoded by a fieldgrip-decode child (decoder.h). */
+#include "api.h"
+#include "decoder.h"
+#include "json.h"
+
+#include "core/error.h"
+#include "core/pose.h"
+#include "field/model.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The largest render: FG_API_RENDER_MAX_SIDE pixels on either side. */
+#define FG_API_RENDER_MAX_SIDE 4096
+/* Rays rendered per call of fg_field_render_rays: bounds the memory of one render. */
+#define RENDER_CHUNK 65536
+
+static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",
+                                          "k1", "k2", "k3", "p1", "p2", "camera_angle_x",
+                                          "camera_angle_y"};
+#define N_CAMERA_KEYS (sizeof camera_keys / sizeof camera_keys[0])
+
+static int is_camera_key(const char *k) {
+  for (size_t i = 0; i < N_CAMERA_KEYS; i++)
+    if (strcmp(k, camera_keys[i]) == 0) return 1;
+  return 0;
+}
+
+/* Takes the pose keys (transform_matrix, pose, convention) of src into *matrix, *pose and
+ * *convention (borrowed) and its intrinsics into merged, refusing any other key and any key
+ * given twice. top_level skips "camera" and "output"; where names src in messages. */
+static int collect(json_t *src, const char *where, int top_level, json_t *merged,
+                   json_t **matrix, json_t **pose, json_t **convention) {
+  const char *key;
+  json_t *v;
+  json_object_foreach(src, key, v) {
+    if (top_level && (strcmp(key, "camera") == 0 || strcmp(key, "output") == 0)) continue;
+    json_t **slot = strcmp(key, "transform_matrix") == 0 ? matrix
+                    : strcmp(key, "pose") == 0           ? pose
+                    : strcmp(key, "convention") == 0     ? convention
+                                                         : NULL;
+    if (slot) {
+      if (*slot) return fg_fail(FG_EINVAL, "\"%s\" is given twice (in \"camera\" and at the top "
+                                "level); give it once", key);
+      *slot = v;
+      continue;
+    }
+    if (!is_camera_key(key))
+      return fg_fail(FG_EINVAL, "unknown key \"%s\" in %s; a render takes \"camera\" "
+                     "{transform_matrix or pose, fl_x, fl_y, cx, cy, w, h}, \"convention\" and "
+                     "\"output\"", key, where);
+    if (json_object_get(merged, key))
+      return fg_fail(FG_EINVAL, "\"%s\" is given twice (in \"camera\" and at the top level); "
+                     "give it once", key);
+    json_object_set(merged, key, v);
+  }
+  return 0;
+}
+
+typedef struct render_req {
+  double T_world_cam[16]; /* OpenGL convention */
+  fg_camera cam;          /* PINHOLE, w and h set */
+  int depth;              /* output depth, else rgb */
+} render_req;
+
+/* Parses the body; answers 400/501 itself and returns -1 when it cannot be rendered. */
+static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
+  json_t *camobj = json_object_get(body, "camera");
+  if (camobj && !json_is_object(camobj))
+    return fg_resp_error(resp, 400, "invalid_camera", "\"camera\" must be an object: "
+                         "{\"transform_matrix\": 4x4, \"fl_x\", \"fl_y\", \"cx\", \"cy\", \"w\", "
+                         "\"h\"}"), -1;
+  json_t *merged = json_object();
+  json_t *matrix = NULL, *pose = NULL, *convention = NULL;
+  int rc = camobj ? collect(camobj, "\"camera\"", 0, merged, &matrix, &pose, &convention) : 0;
+  if (rc == 0) rc = collect(body, "the body", 1, merged, &matrix, &pose, &convention);
+  if (rc != 0) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail()), -1;
+  }
+  const char *output = "rgb";
+  if (fg_json_string(body, "output", &output) < 0) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail()), -1;
+  }
+  if (strcmp(output, "heatmap") == 0) {
+    json_decref(merged);
+    return fg_resp_error(resp, 501, "not_implemented", "output \"heatmap\" (a render coloured "
+                         "by a text or embedding query) is not implemented in this version; "
+                         "\"rgb\" and \"depth\" are"), -1;
+  }
+  if (strcmp(output, "rgb") != 0 && strcmp(output, "depth") != 0) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_request", "\"output\" must be \"rgb\" (8-bit sRGB "
+                         "PNG) or \"depth\" (16-bit PNG of z-depth in millimetres), got \"%s\"",
+                         output), -1;
+  }
+  r->depth = strcmp(output, "depth") == 0;
+
+  if (matrix && pose) rc = fg_fail(FG_EINVAL, "give either \"transform_matrix\" or \"pose\"");
+  else if (!matrix && !pose)
+    rc = fg_fail(FG_EINVAL, "the camera needs \"transform_matrix\" (4x4 camera-to-world, "
+                 "row-major) or \"pose\" {\"position\", \"quaternion\"}");
+  else rc = fg_json_pose(matrix ? matrix : pose, r->T_world_cam,
+                         matrix ? "transform_matrix" : "pose");
+  if (rc != 0) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;
+  }
+  fg_convention conv = FG_CONV_OPENGL;
+  if (convention && (!json_is_string(convention) ||
+                     fg_convention_parse(json_string_value(convention), &conv) != 0)) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_request", "\"convention\" must be \"opengl\" or "
+                         "\"opencv\""), -1;
+  }
+  if (conv == FG_CONV_OPENCV) fg_pose_flip_yz(r->T_world_cam);
+
+  fg_transforms_frame tf;
+  memset(&tf, 0, sizeof tf);
+  tf.file_path = "camera";
+  rc = fg_json_camera(merged, 1, &tf);
+  json_decref(merged);
+  if (rc == 0 && !tf.has_size)
+    rc = fg_fail(FG_EINVAL, "the camera needs \"w\" and \"h\": the size of the image to render, "
+                 "in pixels");
+  if (rc == 0 && (tf.cam.w > FG_API_RENDER_MAX_SIDE || tf.cam.h > FG_API_RENDER_MAX_SIDE))
+    rc = fg_fail(FG_EINVAL, "a render is at most %dx%d pixels; %dx%d asked", FG_API_RENDER_MAX_SIDE,
+                 FG_API_RENDER_MAX_SIDE, tf.cam.w, tf.cam.h);
+  if (rc == 0) rc = fg_transforms_complete_camera(&tf, tf.cam.w, tf.cam.h);
+  if (rc == 0 && fg_camera_is_distorted(&tf.cam))
+    rc = fg_fail(FG_EINVAL, "renders use a pinhole camera; leave out the distortion "
+                 "coefficients k1 k2 k3 p1 p2");
+  if (rc != 0) return fg_resp_error(resp, 400, "invalid_camera", "%s", fg_error_detail()), -1;
+  r->cam = tf.cam;
+  return 0;
+}
+
+/* Renders the image into out: uint8 RGB [h][w][3], or uint16 z-depth in millimetres [h][w]
+ * (0 where the opacity is below 0.5, saturating at 65535). */
+static int render_image(const fg_field *f, const render_req *r, const float bg[3], int n_threads,
+                        void *out) {
+  const fg_camera *c = &r->cam;
+  const double *T = r->T_world_cam;
+  int64_t n = (int64_t)c->w * c->h;
+  int64_t chunk = n < RENDER_CHUNK ? n : RENDER_CHUNK;
+  float *o = malloc((size_t)chunk * 3 * sizeof *o), *d = malloc((size_t)chunk * 3 * sizeof *d);
+  float *rgb = malloc((size_t)chunk * 3 * sizeof *rgb);
+  float *depth = malloc((size_t)chunk * sizeof *depth), *alpha = malloc((size_t)chunk * sizeof *alpha);
+  float *cos_axis = malloc((size_t)chunk * sizeof *cos_axis);
+  int rc = (o && d && rgb && depth && alpha && cos_axis) ? 0 : fg_fail(FG_ENOMEM, "out of memory");
+  for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
+    int64_t m = n - start < chunk ? n - start : chunk;
+    for (int64_t i = 0; i < m; i++) {
+      int64_t p = start + i;
+      double u = (double)(p % c->w) + 0.5, v = (double)(p / c->w) + 0.5;
+      /* OpenGL camera: +x right, +y up, looking along -z. */
+      double x = (u - c->cx) / c->fl_x, y = -(v - c->cy) / c->fl_y, z = -1.0;
+      double len = sqrt(x * x + y * y + z * z);
+      x /= len, y /= len, z /= len;
+      for (int k = 0; k < 3; k++) {
+        d[3 * i + k] = (float)(T[4 * k] * x + T[4 * k + 1] * y + T[4 * k + 2] * z);
+        o[3 * i + k] = (float)T[4 * k + 3];
+      }
+      cos_axis[i] = (float)(1.0 / len); /* the ray's cosine to the optical axis */
+    }
+    rc = fg_field_render_rays(f, o, d, m, bg, r->depth ? NULL : rgb, r->depth ? depth : NULL,
+                              r->depth ? alpha : NULL, NULL, n_threads);
+    if (rc != 0) break;
+    for (int64_t i = 0; i < m; i++) {
+      int64_t p = start + i;
+      if (r->depth) {
+        uint16_t mm = 0;
+        if (alpha[i] >= 0.5f) {
+          double z_m = (double)depth[i] / (double)alpha[i] * (double)cos_axis[i];
+          double v = z_m * 1000.0;
+          mm = !(v > 0) ? 0 : v >= 65535.0 ? 65535 : (uint16_t)lround(v);
+        }
+        ((uint16_t *)out)[p] = mm;
+      } else {
+        for (int k = 0; k < 3; k++) {
+          float x = rgb[3 * i + k];
+          x = x > 0 ? (x < 1 ? x : 1) : 0; /* NaN goes to 0 */
+          ((uint8_t *)out)[3 * p + k] = (uint8_t)lrintf(x * 255.0f);
+        }
+      }
+    }
+  }
+  free(o), free(d), free(rgb), free(depth), free(alpha), free(cos_axis);
+  return rc;
+}
+
+int fg_api_scene_render(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  fg_field_ref *ref = NULL;
+  void *pixels = NULL;
+  if (!body) goto out;
+  render_req r;
+  if (parse_render(body, &r, resp) != 0) goto out;
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  ref = fg_scene_field_acquire(s);
+  if (!ref) {
+    if (info.checkpoint_error[0])
+      fg_resp_error(resp, 409, "not_trained", "scene '%s' has no trained field: its checkpoint "
+                    "does not load (%s); POST /v1/scenes/%s/train to train it again, and wait "
+                    "until the job is done", info.name, info.checkpoint_error, info.name);
+    else
+      fg_resp_error(resp, 409, "not_trained", "scene '%s' is not trained yet; POST "
+                    "/v1/scenes/%s/train first, and wait until the job is done", info.name,
+                    info.name);
+    goto out;
+  }
+  size_t n = (size_t)r.cam.w * (size_t)r.cam.h;
+  pixels = malloc(n * (r.depth ? sizeof(uint16_t) : 3));
+  if (!pixels) {
+    fg_resp_error(resp, 500, "internal_error", "out of memory for a %dx%d render", r.cam.w,
+                  r.cam.h);
+    goto out;
+  }
+  float bg[3] = {(float)info.params.background[0], (float)info.params.background[1],
+                 (float)info.params.background[2]};
+  if (render_image(fg_field_ref_field(ref), &r, bg, fg_conf_threads(req->conf), pixels) != 0) {
+    fg_resp_error(resp, 500, "internal_error", "render failed: %s", fg_error_detail());
+    goto out;
+  }
+  fg_field_ref_release(ref);
+  ref = NULL;
+  uint8_t *png = NULL;
+  size_t png_len = 0;
+  if (fg_decoder_encode_png(req->app->decoder, pixels, r.cam.w, r.cam.h, r.depth ? 1 : 3,
+                            r.depth ? 16 : 8, &png, &png_len) != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot encode the PNG: %s", fg_error_detail());
+    goto out;
+  }
+  fg_resp_take(resp, 200, "image/png", (char *)png, png_len);
+out:
+  fg_field_ref_release(ref);
+  free(pixels);
+  json_decref(body);
+  fg_scene_unref(s);
+  return 0;
+}

@@ -1,0 +1,283 @@
+/* Training jobs over HTTP: start a training, list, describe and cancel jobs, and follow one
+ * as Server-Sent Events. */
+#include "api.h"
+#include "jobs.h"
+#include "json.h"
+
+#include "core/error.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+/* ---------------------------------------------------------------- POST .../train */
+
+/* Reads key as a whole number in [lo, hi]: 1 present, 0 absent (or null), FG_EINVAL. */
+static int json_whole(json_t *obj, const char *key, long long lo, long long hi, long long *out) {
+  json_t *v = json_object_get(obj, key);
+  if (!v || json_is_null(v)) return 0;
+  if (!json_is_integer(v) || json_integer_value(v) < lo || json_integer_value(v) > hi)
+    return fg_fail(FG_EINVAL, "\"%s\" must be a whole number from %lld to %lld", key, lo, hi);
+  *out = json_integer_value(v);
+  return 1;
+}
+
+/* The seed: a JSON integer 0..2^63-1, or a decimal string 0..2^64-1 (JSON parsers, this
+ * one included, hold integers in 64-bit signed numbers). */
+static int json_seed(json_t *obj, uint64_t *out) {
+  json_t *v = json_object_get(obj, "seed");
+  if (!v || json_is_null(v)) return 0;
+  if (json_is_integer(v) && json_integer_value(v) >= 0) {
+    *out = (uint64_t)json_integer_value(v);
+    return 1;
+  }
+  if (json_is_string(v)) {
+    const char *s = json_string_value(v);
+    char *end;
+    errno = 0;
+    unsigned long long x = strtoull(s, &end, 10);
+    if (*s >= '0' && *s <= '9' && *end == '\0' && errno == 0) {
+      *out = (uint64_t)x;
+      return 1;
+    }
+  }
+  return fg_fail(FG_EINVAL, "\"seed\" must be a whole number from 0 to 2^63-1, or a string of "
+                 "decimal digits up to 2^64-1");
+}
+
+/* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
+static int parse_train(json_t *body, const fg_conf *conf, fg_train_params *p) {
+  static const char *const keys[] = {"steps", "seed", "max_seconds", "holdout_every"};
+  const char *key;
+  json_t *val;
+  json_object_foreach(body, key, val) {
+    int known = 0;
+    for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++) known |= strcmp(key, keys[i]) == 0;
+    if (!known)
+      return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds "
+                     "and holdout_every", key);
+  }
+  memset(p, 0, sizeof *p);
+  p->steps = conf->train_steps;
+  long long x = 0;
+  int rc = json_whole(body, "steps", 1, FG_TRAIN_MAX_STEPS, &x);
+  FG_TRY(rc);
+  if (rc) p->steps = x;
+  FG_TRY(json_seed(body, &p->seed));
+  double ms;
+  rc = fg_json_number(body, "max_seconds", &ms);
+  FG_TRY(rc);
+  if (rc && !(ms > 0))
+    return fg_fail(FG_EINVAL, "\"max_seconds\" must be a positive number of seconds (leave it "
+                   "out for no limit)");
+  if (rc) p->max_seconds = ms;
+  rc = json_whole(body, "holdout_every", 0, 1000000, &x);
+  FG_TRY(rc);
+  if (rc) p->holdout_every = (int)x;
+  return 0;
+}
+
+int fg_api_train_start(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  /* An empty body takes every default. */
+  json_t *body = req->body_len == 0 ? json_object() : fg_api_body_object(req, resp);
+  if (!body) goto out;
+  fg_train_params p;
+  if (parse_train(body, req->conf, &p) != 0) {
+    fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
+    goto out;
+  }
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  if (info.n_frames == 0) {
+    fg_resp_error(resp, 409, "no_frames", "scene '%s' has no frames to train on; add them with "
+                  "POST /v1/scenes/%s/frames or POST /v1/scenes/%s/import first", info.name,
+                  info.name, info.name);
+    goto out;
+  }
+  if (p.holdout_every > 0) {
+    size_t k = (size_t)p.holdout_every;
+    size_t held = (info.n_frames + k - 1) / k;
+    if (held >= info.n_frames) {
+      fg_resp_error(resp, 400, "invalid_request", "holdout_every %d holds out all %zu frames "
+                    "of scene '%s'; use a larger value (or 0) so that some frames train",
+                    p.holdout_every, info.n_frames, info.name);
+      goto out;
+    }
+  }
+  fg_job_info job;
+  int rc = fg_jobs_submit(req->app->jobs, s, &p, &job);
+  if (rc == FG_EBUSY) {
+    fg_resp_error(resp, 409, "training_in_progress", "%s", fg_error_detail());
+  } else if (rc == FG_ENOENT) {
+    fg_resp_error(resp, 404, "scene_not_found", "%s", fg_error_detail());
+  } else if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot queue the training: %s",
+                  fg_error_detail());
+  } else {
+    snprintf(resp->location, sizeof resp->location, "/v1/jobs/%s", job.id);
+    fg_resp_json(resp, 202, json_pack("{s:s,s:s}", "job", job.id, "state",
+                                      fg_job_state_name(job.state)));
+  }
+out:
+  json_decref(body);
+  fg_scene_unref(s);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- jobs */
+
+int fg_api_jobs_list(fg_req *req, fg_resp *resp) {
+  fg_job_info *v;
+  size_t n;
+  if (fg_jobs_list(req->app->jobs, &v, &n) != 0)
+    return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  json_t *arr = json_array();
+  for (size_t i = 0; arr && i < n; i++) json_array_append_new(arr, fg_job_info_json(&v[i]));
+  free(v);
+  fg_resp_json(resp, 200, json_pack("{s:o}", "jobs", arr));
+  return 0;
+}
+
+static int job_not_found(fg_resp *resp, const char *id) {
+  return fg_resp_error(resp, 404, "job_not_found", "no job '%s'; GET /v1/jobs lists them (a "
+                       "scene's last job is kept across restarts, older ones are not)", id);
+}
+
+int fg_api_job_get(fg_req *req, fg_resp *resp) {
+  fg_job *j = fg_jobs_get(req->app->jobs, req->params[0]);
+  if (!j) return job_not_found(resp, req->params[0]);
+  fg_job_info info;
+  fg_job_get_info(j, &info);
+  fg_job_unref(j);
+  fg_resp_json(resp, 200, fg_job_info_json(&info));
+  return 0;
+}
+
+int fg_api_job_cancel(fg_req *req, fg_resp *resp) {
+  fg_job_info info;
+  int rc = fg_jobs_cancel(req->app->jobs, req->params[0], &info);
+  if (rc == FG_ENOENT) return job_not_found(resp, req->params[0]);
+  if (rc == FG_EBUSY) return fg_resp_error(resp, 409, "job_finished", "%s", fg_error_detail());
+  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  fg_resp_json(resp, 200, fg_job_info_json(&info));
+  return 0;
+}
+
+/* ---------------------------------------------------------------- GET /v1/jobs/{id}/events */
+
+/* Seconds between progress events at most, and between keep-alive comments (which also let
+ * the server notice a client that went away). */
+#define SSE_MIN_INTERVAL 0.25
+#define SSE_KEEPALIVE 15.0
+
+static atomic_int n_streams;
+
+typedef struct sse_stream {
+  fg_job *job;           /* a reference */
+  uint64_t sent_version; /* of the last progress event */
+  double last_sent;      /* CLOCK_MONOTONIC seconds of the last event or comment; 0: none */
+  int final_sent;
+  char *pending;         /* bytes of the current event not yet handed over */
+  size_t pending_len, pending_off;
+} sse_stream;
+
+static double sse_now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* One event: "event: NAME\ndata: JSON\n\n" (compact JSON has no newline). */
+static void sse_event(sse_stream *st, const char *name, const fg_job_info *info) {
+  json_t *o = fg_job_info_json(info);
+  char *data = o ? json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(15)) : NULL;
+  json_decref(o);
+  free(st->pending);
+  st->pending = NULL;
+  st->pending_len = st->pending_off = 0;
+  if (!data) return;
+  int n = asprintf(&st->pending, "event: %s\ndata: %s\n\n", name, data);
+  free(data);
+  if (n < 0) st->pending = NULL;
+  else st->pending_len = (size_t)n;
+}
+
+static long sse_read(void *ctx, char *buf, size_t max, int closing) {
+  sse_stream *st = ctx;
+  if (st->pending_off == st->pending_len) {
+    if (st->final_sent || closing) return -1;
+    fg_job_info info;
+    fg_job_get_info(st->job, &info);
+    double now = sse_now();
+    if (fg_job_state_finished(info.state)) {
+      sse_event(st, fg_job_state_name(info.state), &info);
+      st->final_sent = 1;
+    } else if (st->last_sent == 0 ||
+               (info.version != st->sent_version && now - st->last_sent >= SSE_MIN_INTERVAL)) {
+      sse_event(st, "progress", &info);
+      st->sent_version = info.version;
+    } else if (now - st->last_sent >= SSE_KEEPALIVE) {
+      free(st->pending);
+      st->pending = strdup(": keep-alive\n\n");
+      st->pending_len = st->pending ? strlen(st->pending) : 0;
+      st->pending_off = 0;
+    } else {
+      return 0;
+    }
+    st->last_sent = now;
+    if (!st->pending) return -1; /* out of memory: end the stream */
+  }
+  size_t n = st->pending_len - st->pending_off;
+  if (n > max) n = max;
+  memcpy(buf, st->pending + st->pending_off, n);
+  st->pending_off += n;
+  return (long)n;
+}
+
+static int sse_ready(void *ctx, double now) {
+  sse_stream *st = ctx;
+  if (st->pending_off < st->pending_len || st->final_sent) return 1;
+  uint64_t version;
+  fg_job_state state;
+  fg_job_peek(st->job, &version, &state);
+  return fg_job_state_finished(state) ||
+         (version != st->sent_version && now - st->last_sent >= SSE_MIN_INTERVAL) ||
+         now - st->last_sent >= SSE_KEEPALIVE;
+}
+
+static void sse_free(void *ctx) {
+  sse_stream *st = ctx;
+  fg_job_unref(st->job);
+  free(st->pending);
+  free(st);
+  atomic_fetch_sub(&n_streams, 1);
+}
+
+static const fg_stream_ops sse_ops = {sse_read, sse_ready, sse_free};
+
+int fg_api_job_events(fg_req *req, fg_resp *resp) {
+  fg_job *j = fg_jobs_get(req->app->jobs, req->params[0]);
+  if (!j) return job_not_found(resp, req->params[0]);
+  if (atomic_fetch_add(&n_streams, 1) >= FG_API_MAX_EVENT_STREAMS) {
+    atomic_fetch_sub(&n_streams, 1);
+    fg_job_unref(j);
+    return fg_resp_error(resp, 503, "too_many_streams", "%d event streams are open, the most "
+                         "this server keeps; close one, or poll GET /v1/jobs/%s instead",
+                         FG_API_MAX_EVENT_STREAMS, req->params[0]);
+  }
+  sse_stream *st = calloc(1, sizeof *st);
+  if (!st) {
+    atomic_fetch_sub(&n_streams, 1);
+    fg_job_unref(j);
+    return fg_resp_error(resp, 500, "internal_error", "out of memory");
+  }
+  st->job = j;
+  fg_resp_stream(resp, 200, "text/event-stream; charset=utf-8", &sse_ops, st);
+  return 0;
+}

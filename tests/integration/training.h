@@ -1,0 +1,47 @@
+/* Helpers for the training and rendering integration tests: a scenegen data set, a scene
+ * imported from it, jobs started and waited for, renders and their PNG headers. Like the
+ * harness, every helper asserts instead of returning an error. */
+#ifndef FG_IT_TRAINING_H
+#define FG_IT_TRAINING_H
+
+#include "harness.h"
+
+/* Runs fieldgrip-scenegen (its path as the test's argv[2]) with --out dir --views views
+ * --width w --height h --dim dim --holdout 0 and asserts that it succeeds. */
+void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim);
+
+/* Writes a configuration with import_dirs = imports, [train] threads = 2, steps = 20. */
+void t_write_config(const char *imports);
+
+/* Creates scene name over scenegen's tabletop workspace and imports the data set in dir;
+ * asserts n frames came in. */
+void t_scene_from_dataset(const char *name, const char *dir, int n);
+
+/* POST /v1/scenes/{scene}/train with body (JSON text); asserts 202, a Location header
+ * naming the job and "state": "queued"; returns the job id (caller frees). */
+char *t_train(const char *scene, const char *body);
+
+/* GET /v1/jobs/{id}; asserts 200 and returns the job object (caller decrefs). */
+json_t *t_job(const char *id);
+
+/* Polls the job until it has finished (done, failed or cancelled) and asserts that it ended
+ * in state; returns it (caller decrefs). A hang guard of timeout_s, not a timing assertion. */
+json_t *t_wait_job(const char *id, const char *state, double timeout_s);
+
+/* Polls until the job runs and has taken at least min_step steps. */
+void t_wait_running(const char *id, int min_step, double timeout_s);
+
+/* A camera JSON object text (transform_matrix, fl_x, fl_y, cx, cy, w, h) at eye looking at
+ * target, OpenGL convention; caller frees. */
+char *t_camera(const double eye[3], const double target[3], double fl, int w, int h);
+
+/* POST /v1/scenes/{scene}/render with body; the caller frees the reply. */
+h_resp *t_render(const char *scene, const char *body);
+
+/* Asserts r is a 200 image/png whose signature is PNG's and returns its IHDR fields. */
+void t_png_header(const h_resp *r, int *w, int *h, int *bit_depth, int *colour_type);
+
+/* Seconds on the monotonic clock. */
+double t_now(void);
+
+#endif
