@@ -56,7 +56,7 @@ static const char *const section_names[SEC_COUNT] = {
 enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB };
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB };
-enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE };
+enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION };
 enum { K_MODEL };
 /* [gripper.modbus] takes the first eight of these (gripper_modbus_keys); the rest are
  * [robot] only. */
@@ -71,7 +71,8 @@ enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", NULL};
-static const char *const train_keys[] = {"steps", "threads", "max_image_side", NULL};
+static const char *const train_keys[] = {"steps", "threads", "max_image_side", "half_precision",
+                                         NULL};
 static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
                                          "baud",      "parity",   "unit_id",        "timeout_ms",
@@ -91,6 +92,7 @@ static const char *const *const section_keys[SEC_COUNT] = {
 static const char *const transport_names[] = {"none", "tcp", "rtu", NULL};
 static const char *const encoding_names[] = {"int16", "float32", NULL};
 static const char *const gripper_model_names[] = {"panda", "robotiq-2f85", NULL};
+static const char *const bool_names[] = {"false", "true", NULL};
 
 /* Per-scene parse bookkeeping, parallel to fg_conf.scenes. */
 typedef struct scene_meta {
@@ -746,6 +748,7 @@ static int conf_handler(void *user, const char *section, const char *name, const
   case SEC_TRAIN:
     if (k == K_STEPS) return parse_int(st, name, v, 1, 10000000, &c->train_steps);
     if (k == K_THREADS) return parse_int(st, name, v, 0, 1024, &c->train_threads);
+    if (k == K_HALF_PRECISION) return parse_enum(st, name, v, bool_names, &c->half_precision);
     return parse_int(st, name, v, 16, 16384, &c->max_image_side);
   case SEC_GRIPPER:
     if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;

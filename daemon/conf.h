@@ -61,6 +61,7 @@ typedef struct fg_conf {
   int train_steps;       /* 1..10000000, default 2000 */
   int train_threads;     /* 0 = all cores, else 1..1024 */
   int max_image_side;    /* 16..16384, default 400 */
+  int half_precision;    /* 1: checkpoints keep hash tables in float16; default 0 */
   /* [gripper] */
   fg_gripper_model gripper_model;
   /* [robot], [gripper.modbus] */

@@ -531,7 +531,7 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
   fg_scene *scene = j->scene;
   const char *id = j->info.id;
   const fg_conf *conf = fg_app_conf_acquire(app);
-  int n_threads = fg_conf_threads(conf);
+  const int n_threads = fg_conf_threads(conf), half = conf->half_precision;
   fg_app_conf_release(app, conf);
   lower_priority(n_threads);
   /* This training writes and removes field.next.fgc: if the scene's field came from that file
@@ -630,7 +630,7 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
     j->info.version++;
     pthread_mutex_unlock(&j->lock);
     if (mono_s() - last_ckpt >= FG_TRAIN_CHECKPOINT_SECONDS) {
-      if (fg_checkpoint_save(field, next_path, 0) == 0) {
+      if (fg_checkpoint_save(field, next_path, half) == 0) {
         fg_debug("job %s: partial checkpoint at step %lld", id, (long long)step);
       } else {
         fg_warn("job %s: cannot write the partial checkpoint %s: %s", id, next_path,
@@ -664,7 +664,7 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
     pthread_mutex_unlock(&j->lock);
   }
   if (should_stop(&rc_ud)) goto stopped;
-  if (fg_checkpoint_save(field, next_path, 0) != 0) {
+  if (fg_checkpoint_save(field, next_path, half) != 0) {
     job_fail(j, "cannot save the trained field: %s", fg_error_detail());
     goto out;
   }
@@ -712,7 +712,7 @@ stopped:
      * "running" on disk and the next start reports it interrupted. */
     keep_partial = 1;
     if (field && t && field->trained_steps > 0) {
-      if (fg_checkpoint_save(field, next_path, 0) == 0)
+      if (fg_checkpoint_save(field, next_path, half) == 0)
         fg_info("job %s: interrupted by the shutdown after %lld steps; its field is kept as "
                 "field.next.fgc", id, (long long)field->trained_steps);
       else

@@ -2,7 +2,8 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#   (no names: all five; train takes about 6 minutes, throughput about 3)
+#                           [busy]
+#   (no names: all six; train takes about 6 minutes, throughput about 3)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
@@ -18,6 +19,8 @@
 #           same model (tests/bench/peer_field.py, Debian's python3-torch) on the same
 #           threads in the same run (targets: >= 10x PyTorch, >= 1 M RGB samples/s), and the
 #           peak memory with 512-d features (target <= 3 GB)
+#   busy    GET /v1/health and GET /v1/scenes under wrk -t2 -c32 while the daemon trains
+#           lego on every core: p99 latency (target <= 50 ms). Needs wrk
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -33,7 +36,7 @@ fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -228,6 +231,44 @@ bench_throughput() {
   echo "bench=throughput threads=2 rgb_samples_per_s=$c0 pytorch_rgb_samples_per_s=$p0 ratio_rgb=$ratio0 feat512_samples_per_s=$c512 pytorch_feat512_samples_per_s=$p512 ratio_feat512=$ratio512 peak_rss_mb_feat512=$rss target_min_ratio=10 target_min_rgb_samples_per_s=1000000 target_max_rss_mb_feat512=3072 pass=$pass"
 }
 
+# wrk_p99 URL: "requests_per_s p99_ms" of wrk -t2 -c32 against URL.
+wrk_p99() {
+  local out
+  out=$(wrk -t2 -c32 -d"$wrk_duration" --latency "$1")
+  printf '%s\n' "$out" | awk '/^Requests\/sec:/ { printf "%.0f ", $2 }'
+  to_ms "$(printf '%s\n' "$out" | awk '$1 == "99%" { print $2 }')"
+}
+
+bench_busy() {
+  local lego=$data/lego job state health scenes pass
+  if ! command -v wrk >/dev/null 2>&1; then
+    echo "bench=busy error=wrk_not_installed hint=apt-get_install_wrk pass=no"
+    failed=1; return
+  fi
+  start_daemon busy
+  curl -sf -X POST "$base/v1/scenes" -H 'Content-Type: application/json' \
+    -d '{"name":"lego","workspace":{"min":[-1.5,-1.5,-1.5],"max":[1.5,1.5,1.5]}}' >/dev/null
+  curl -sf -X POST "$base/v1/scenes/lego/import" -H 'Content-Type: application/json' \
+    -d "{\"path\":\"$(realpath "$lego")\",\"transforms\":\"transforms_train.json\"}" >/dev/null
+  job=$(curl -sf -X POST "$base/v1/scenes/lego/train" -H 'Content-Type: application/json' \
+    -d '{"steps":100000,"max_seconds":120}' | sed -n 's/.*"job" *: *"\([^"]*\)".*/\1/p')
+  for _ in $(seq 1 100); do
+    state=$(curl -sf "$base/v1/jobs/$job" | sed -n 's/.*"state" *: *"\([a-z]*\)".*/\1/p')
+    [ "$state" = running ] && break
+    sleep 0.1
+  done
+  sleep 3 # past the first steps
+  health=$(wrk_p99 "$base/v1/health")
+  scenes=$(wrk_p99 "$base/v1/scenes")
+  state=$(curl -sf "$base/v1/jobs/$job" | sed -n 's/.*"state" *: *"\([a-z]*\)".*/\1/p')
+  curl -sf -X DELETE "$base/v1/jobs/$job" >/dev/null || true
+  stop_daemon
+  pass=$(awk -v a="${health#* }" -v b="${scenes#* }" -v s="$state" \
+    'BEGIN { print (a <= 50 && b <= 50 && s == "running") ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=busy training=$state health_requests_per_s=${health% *} health_p99_ms=${health#* } scenes_requests_per_s=${scenes% *} scenes_p99_ms=${scenes#* } target_max_p99_ms=50 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -235,7 +276,8 @@ for b in "${benches[@]}"; do
     memory) bench_memory ;;
     train) bench_train ;;
     throughput) bench_throughput ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput)" >&2; exit 2 ;;
+    busy) bench_busy ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

@@ -74,6 +74,7 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_EQ(c->train_steps, 2000);
   ASSERT_EQ(c->train_threads, 0);
   ASSERT_EQ(c->max_image_side, 400);
+  ASSERT_EQ(c->half_precision, 0);
   ASSERT_EQ(c->gripper_model, FG_GRIPPER_PANDA);
 
   const fg_conf_modbus *r = &c->robot;
@@ -232,6 +233,7 @@ static void test_values(void) {
       "steps=10000000\n"
       "threads = 1024\n"
       "max_image_side = 16\n"
+      "half_precision = true\n"
       "[gripper]\n"
       "model = robotiq-2f85\n"
       "[robot]\n"
@@ -261,6 +263,7 @@ static void test_values(void) {
   ASSERT_EQ(c->train_steps, 10000000);
   ASSERT_EQ(c->train_threads, 1024);
   ASSERT_EQ(c->max_image_side, 16);
+  ASSERT_EQ(c->half_precision, 1);
   ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F85);
   ASSERT_EQ(c->robot.transport, FG_TRANSPORT_RTU);
   ASSERT_STREQ(c->robot.device, "/dev/ttyS3");
@@ -436,6 +439,7 @@ static void test_errors(void) {
   EXPECT_ERROR("[train]\nthreads = 1.5\n", 2, "[train] threads:", "from 0 to 1024");
   EXPECT_ERROR("[train]\nthreads = -1\n", 2, "[train] threads:", NULL);
   EXPECT_ERROR("[train]\nmax_image_side = 15\n", 2, "[train] max_image_side:", "16 to 16384");
+  EXPECT_ERROR("[train]\nhalf_precision = yes\n", 2, "[train] half_precision:", "true");
   EXPECT_ERROR("[http]\nmax_upload_mb = 0\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[http]\nmax_upload_mb = 4097\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[robot]\nport = 0\n", 2, "[robot] port:", "1 to 65535");
