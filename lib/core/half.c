@@ -55,7 +55,29 @@ uint16_t fg_float_to_half(float f) {
   return (uint16_t)(sign | mant);
 }
 
+/* F16C converts 8 halves per instruction, to the same floats as the scalar code (NaNs stay
+ * NaN, though F16C quiets a signalling one); CLIP converts its F16 weight matrices with this on every
+ * call, so it is worth the dispatch. */
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+
+__attribute__((target("avx,f16c"))) static void half_to_float_f16c(const uint16_t *src,
+                                                                    float *dst, size_t n) {
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8)
+    _mm256_storeu_ps(dst + i, _mm256_cvtph_ps(_mm_loadu_si128((const __m128i *)(src + i))));
+  for (; i < n; i++) dst[i] = fg_half_to_float(src[i]);
+}
+#endif
+
 void fg_half_to_float_n(const uint16_t *src, float *dst, size_t n) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  /* Every x86 CPU with AVX2 has F16C (clang does not know "f16c" as a feature name). */
+  if (__builtin_cpu_supports("avx2")) {
+    half_to_float_f16c(src, dst, n);
+    return;
+  }
+#endif
   for (size_t i = 0; i < n; i++) dst[i] = fg_half_to_float(src[i]);
 }
 
