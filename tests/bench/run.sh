@@ -2,7 +2,7 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy]
+#                           [busy] [clip]
 #   (no names: all six; train takes about 6 minutes, throughput about 3)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
@@ -21,6 +21,13 @@
 #           peak memory with 512-d features (target <= 3 GB)
 #   busy    GET /v1/health and GET /v1/scenes under wrk -t2 -c32 while the daemon trains
 #           lego on every core: p99 latency (target <= 50 ms). Needs wrk
+#   clip    CLIP with random weights of ViT-B/16 size (written by gen_clip, about 600 MB in
+#           the temp dir): dense MaskCLIP images/s at 224x224 and at a 640x360 frame (224x398),
+#           text embeddings/s, against OpenBLAS SGEMM 2048^3 and a PyTorch CPU run of the
+#           same model and weights (tests/bench/peer_clip.py) on the same threads in the same
+#           run (targets: dense >= 1.2x PyTorch, >= 50% of SGEMM), and peak memory over the
+#           weights with F32 and with F16 weights (target <= 300 MB). BENCH_CLIP_SECONDS
+#           (default 10) sets each figure's measuring time
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -36,7 +43,7 @@ fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -269,6 +276,36 @@ bench_busy() {
   echo "bench=busy training=$state health_requests_per_s=${health% *} health_p99_ms=${health#* } scenes_requests_per_s=${scenes% *} scenes_p99_ms=${scenes#* } target_max_p99_ms=50 pass=$pass"
 }
 
+bench_clip() {
+  local secs=${BENCH_CLIP_SECONDS:-10} f32=$tmp/vitb16_f32.safetensors f16=$tmp/vitb16_f16.safetensors
+  local c h p k cr pr ratio224 ratio640 pass
+  "$build/tests/clip/gen_clip" "$f32" --preset vit-b-16 --dtype f32 >/dev/null
+  c=$("$build/tests/bench/bench_clip" "$f32" --threads 2 --seconds "$secs" | grep '^bench=clip ')
+  echo "$c"
+  if ! /usr/bin/python3 -c 'import torch' 2>/dev/null; then
+    echo "bench=clip_vs_pytorch error=no_pytorch hint=apt-get_install_python3-torch pass=no"
+    failed=1; return
+  fi
+  p=$(/usr/bin/python3 "$src/tests/bench/peer_clip.py" "$f32" --threads 2 --seconds "$secs")
+  echo "$p"
+  rm -f "$f32"
+  "$build/tests/clip/gen_clip" "$f16" --preset vit-b-16 --dtype f16 >/dev/null
+  h=$("$build/tests/bench/bench_clip" "$f16" --threads 2 --seconds "$((secs / 2 + 1))" | grep '^bench=clip ')
+  echo "$h"
+  rm -f "$f16"
+  # peer lines: "peer=torch case=dense224 images_per_s=1.93 ..."
+  pcase() { printf '%s\n' "$p" | grep "case=$1 " | tr ' ' '\n' | sed -n "s/^$2=//p" | head -n 1; }
+  ratio224=$(awk -v a="$(field dense224_images_per_s "$c")" -v b="$(pcase dense224 images_per_s)" 'BEGIN { printf "%.2f", a / b }')
+  ratio640=$(awk -v a="$(field dense640x360_images_per_s "$c")" -v b="$(pcase dense640x360 images_per_s)" 'BEGIN { printf "%.2f", a / b }')
+  k=$(awk -v a="$(field text77_per_s "$c")" -v b="$(pcase text77 texts_per_s)" 'BEGIN { printf "%.2f", a / b }')
+  pass=$(awk -v r1="$ratio224" -v r2="$ratio640" -v s1="$(field dense224_of_sgemm "$c")" \
+    -v s2="$(field dense640x360_of_sgemm "$c")" -v m1="$(field peak_over_weights_mb "$c")" \
+    -v m2="$(field peak_over_weights_mb "$h")" \
+    'BEGIN { print (r1 >= 1.2 && r2 >= 1.2 && s1 >= 0.5 && s2 >= 0.5 && m1 <= 300 && m2 <= 300) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=clip_summary threads=2 ratio_dense224=$ratio224 ratio_dense640x360=$ratio640 ratio_text77=$k of_sgemm_dense224=$(field dense224_of_sgemm "$c") of_sgemm_dense640x360=$(field dense640x360_of_sgemm "$c") f32_peak_over_weights_mb=$(field peak_over_weights_mb "$c") f16_peak_over_weights_mb=$(field peak_over_weights_mb "$h") f16_dense224_images_per_s=$(field dense224_images_per_s "$h") target_min_ratio=1.2 target_min_of_sgemm=0.5 target_max_over_weights_mb=300 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -277,7 +314,8 @@ for b in "${benches[@]}"; do
     train) bench_train ;;
     throughput) bench_throughput ;;
     busy) bench_busy ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy)" >&2; exit 2 ;;
+    clip) bench_clip ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
