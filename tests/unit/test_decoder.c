@@ -376,9 +376,12 @@ static void test_impostors(void) {
   char v2[64], junk[64];
   snprintf(v2, sizeof v2, "%s/v2", dir);
   snprintf(junk, sizeof junk, "%s/junk", dir);
-  /* A reply header of version 2: "FGDR", 2, then 24 zero bytes. */
-  write_script(v2, "printf 'FGDR\\002\\000\\000\\000'; head -c 24 /dev/zero");
-  write_script(junk, "printf 'HTTP/1.1 200 OK\\r\\nContent-Length: 0\\r\\n\\r\\n'");
+  /* Each script waits for the first byte of its request: one that answered and exited at once
+   * could be gone before the request is written, which is the "died while idle" case.
+   * v2: a reply header of version 2: "FGDR", 2, then 24 zero bytes. */
+  write_script(v2, "head -c 1 >/dev/null; printf 'FGDR\\002\\000\\000\\000'; head -c 24 /dev/zero");
+  write_script(junk,
+               "head -c 1 >/dev/null; printf 'HTTP/1.1 200 OK\\r\\nContent-Length: 0\\r\\n\\r\\n'");
   fg_decoder *d;
   fg_image img;
   ASSERT_OK(fg_decoder_new(&d, v2, 1, 30));
