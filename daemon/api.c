@@ -1,5 +1,6 @@
 #include "api.h"
 
+#include "clip_svc.h"
 #include "jobs.h"
 #include "json.h"
 #include "metrics.h"
@@ -27,6 +28,8 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/scenes/{}/train", "/v1/scenes/{s}/train", fg_api_train_start, 0},
   {"POST", "/v1/scenes/{}/render", "/v1/scenes/{s}/render", fg_api_scene_render,
    FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/jobs", "/v1/jobs", fg_api_jobs_list, 0},
   {"GET", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_get, 0},
   {"DELETE", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_cancel, 0},
@@ -154,6 +157,9 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   fg_store_totals(req->app->store, &g.scenes, &g.frames);
   g.trained_scenes = fg_store_trained(req->app->store);
   if (req->app->jobs) fg_jobs_count(req->app->jobs, g.jobs);
+  fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;
+  g.clip_loaded = m != NULL;
+  fg_clip_model_release(m);
   size_t len;
   char *text = fg_metrics_render(&g, &len);
   if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");

@@ -18,6 +18,7 @@ typedef struct fg_app {
   int threads;       /* [train] threads at start-up, resolved (>= 1): sizes the decoder pool */
   struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
   struct fg_jobs *jobs;       /* trainings (jobs.h) */
+  struct fg_clip_svc *clip;   /* the CLIP model of [clip] (clip_svc.h) */
 } fg_app;
 
 /* Installs conf as the current configuration (taking ownership); requests already running
@@ -54,6 +55,8 @@ int fg_api_job_get(fg_req *req, fg_resp *resp);
 int fg_api_job_cancel(fg_req *req, fg_resp *resp);
 int fg_api_job_events(fg_req *req, fg_resp *resp);
 int fg_api_scene_render(fg_req *req, fg_resp *resp);
+int fg_api_embed_text(fg_req *req, fg_resp *resp);
+int fg_api_embed_image(fg_req *req, fg_resp *resp);
 
 /* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
 #define FG_API_MAX_EVENT_STREAMS 64
@@ -64,6 +67,11 @@ json_t *fg_api_body_object(fg_req *req, fg_resp *resp);
 /* Brings info's last job state up to date from the job registry (the scene's own copy lags
  * behind a job that is finishing). */
 void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info);
+
+/* The CLIP model with a reference (fg_clip_model_release), or NULL after answering 409
+ * clip_not_configured with a message that says how to configure it. */
+struct fg_clip_model;
+struct fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp);
 
 /* The scene named by the first path parameter with a reference, or NULL after answering 404. */
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);

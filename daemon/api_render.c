@@ -3,6 +3,7 @@
 #include "api.h"
 #include "decoder.h"
 #include "json.h"
+#include "query.h"
 
 #include "core/error.h"
 #include "core/pose.h"
@@ -31,13 +32,16 @@ static int is_camera_key(const char *k) {
 
 /* Takes the pose keys (transform_matrix, pose, convention) of src into *matrix, *pose and
  * *convention (borrowed) and its intrinsics into merged, refusing any other key and any key
- * given twice. top_level skips "camera" and "output"; where names src in messages. */
+ * given twice. top_level skips "camera", "output" and the query keys (query.h); where names
+ * src in messages. */
 static int collect(json_t *src, const char *where, int top_level, json_t *merged,
                    json_t **matrix, json_t **pose, json_t **convention) {
   const char *key;
   json_t *v;
   json_object_foreach(src, key, v) {
-    if (top_level && (strcmp(key, "camera") == 0 || strcmp(key, "output") == 0)) continue;
+    if (top_level && (strcmp(key, "camera") == 0 || strcmp(key, "output") == 0 ||
+                      fg_query_is_key(key)))
+      continue;
     json_t **slot = strcmp(key, "transform_matrix") == 0 ? matrix
                     : strcmp(key, "pose") == 0           ? pose
                     : strcmp(key, "convention") == 0     ? convention
@@ -50,8 +54,9 @@ static int collect(json_t *src, const char *where, int top_level, json_t *merged
     }
     if (!is_camera_key(key))
       return fg_fail(FG_EINVAL, "unknown key \"%s\" in %s; a render takes \"camera\" "
-                     "{transform_matrix or pose, fl_x, fl_y, cx, cy, w, h}, \"convention\" and "
-                     "\"output\"", key, where);
+                     "{transform_matrix or pose, fl_x, fl_y, cx, cy, w, h}, \"convention\", "
+                     "\"output\" and, for \"heatmap\", a query (\"text\" or \"embedding\", ...)",
+                     key, where);
     if (json_object_get(merged, key))
       return fg_fail(FG_EINVAL, "\"%s\" is given twice (in \"camera\" and at the top level); "
                      "give it once", key);
@@ -64,9 +69,11 @@ typedef struct render_req {
   double T_world_cam[16]; /* OpenGL convention */
   fg_camera cam;          /* PINHOLE, w and h set */
   int depth;              /* output depth, else rgb */
+  int heatmap;            /* output heatmap: the body also holds a query (query.h) */
 } render_req;
 
-/* Parses the body; answers 400/501 itself and returns -1 when it cannot be rendered. */
+/* Parses the body but its query; answers 400 itself and returns -1 when it cannot be
+ * rendered. */
 static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
   json_t *camobj = json_object_get(body, "camera");
   if (camobj && !json_is_object(camobj))
@@ -86,19 +93,21 @@ static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
     json_decref(merged);
     return fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail()), -1;
   }
-  if (strcmp(output, "heatmap") == 0) {
-    json_decref(merged);
-    return fg_resp_error(resp, 501, "not_implemented", "output \"heatmap\" (a render coloured "
-                         "by a text or embedding query) is not implemented in this version; "
-                         "\"rgb\" and \"depth\" are"), -1;
-  }
-  if (strcmp(output, "rgb") != 0 && strcmp(output, "depth") != 0) {
+  if (strcmp(output, "rgb") != 0 && strcmp(output, "depth") != 0 &&
+      strcmp(output, "heatmap") != 0) {
     json_decref(merged);
     return fg_resp_error(resp, 400, "invalid_request", "\"output\" must be \"rgb\" (8-bit sRGB "
-                         "PNG) or \"depth\" (16-bit PNG of z-depth in millimetres), got \"%s\"",
-                         output), -1;
+                         "PNG), \"depth\" (16-bit PNG of z-depth in millimetres) or \"heatmap\" "
+                         "(with a query), got \"%s\"", output), -1;
   }
   r->depth = strcmp(output, "depth") == 0;
+  r->heatmap = strcmp(output, "heatmap") == 0;
+  if (!r->heatmap && fg_query_present(body)) {
+    json_decref(merged);
+    return fg_resp_error(resp, 400, "invalid_request", "the query keys (\"text\", "
+                         "\"embedding\", \"negatives\", \"negative_embeddings\", "
+                         "\"temperature\") go with \"output\": \"heatmap\" only"), -1;
+  }
 
   if (matrix && pose) rc = fg_fail(FG_EINVAL, "give either \"transform_matrix\" or \"pose\"");
   else if (!matrix && !pose)
@@ -204,6 +213,18 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   if (parse_render(body, &r, resp) != 0) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
+  if (r.heatmap) {
+    /* The query is checked now (dimensions against the trained field's, else the frames');
+     * the render itself comes with heatmaps. */
+    fg_query q;
+    int dim = info.field_feature_dim ? info.field_feature_dim : info.feature_dim;
+    if (fg_query_parse(req, resp, body, dim, &q) != 0) goto out;
+    fg_query_clear(&q);
+    fg_resp_error(resp, 501, "not_implemented", "output \"heatmap\" (a render coloured by a "
+                  "text or embedding query) is not implemented in this version; the query is "
+                  "valid, and \"rgb\" and \"depth\" renders are");
+    goto out;
+  }
   ref = fg_scene_field_acquire(s);
   if (!ref) {
     if (info.checkpoint_error[0])

@@ -55,7 +55,7 @@ static const char *const section_names[SEC_COUNT] = {
 
 enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB };
 enum { K_DIR, K_IMPORT_DIRS };
-enum { K_WEIGHTS, K_VOCAB };
+enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
 enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION };
 enum { K_MODEL };
 /* [gripper.modbus] takes the first eight of these (gripper_modbus_keys); the rest are
@@ -70,7 +70,7 @@ enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
 static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
-static const char *const clip_keys[] = {"weights", "vocab", NULL};
+static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps", "threads", "max_image_side", "half_precision",
                                          NULL};
 static const char *const gripper_keys[] = {"model", NULL};
@@ -744,6 +744,7 @@ static int conf_handler(void *user, const char *section, const char *name, const
     if (k == K_DIR) return set_path(st, name, &c->state_dir, v);
     return set_import_dirs(st, name, v);
   case SEC_CLIP:
+    if (k == K_CLIP_THREADS) return parse_int(st, name, v, 0, 1024, &c->clip_threads);
     return set_path(st, name, k == K_WEIGHTS ? &c->clip_weights : &c->clip_vocab, v);
   case SEC_TRAIN:
     if (k == K_STEPS) return parse_int(st, name, v, 1, 10000000, &c->train_steps);
@@ -805,6 +806,8 @@ static void check_scene(conf_parse *st, const fg_conf_scene *s, const scene_meta
 static void check_final(conf_parse *st) {
   fg_conf *c = st->conf;
   if (st->sec_line[SEC_CLIP]) {
+    c->clip_weights_line = st->key_line[SEC_CLIP][K_WEIGHTS];
+    c->clip_vocab_line = st->key_line[SEC_CLIP][K_VOCAB];
     if (!c->clip_weights)
       fail_at(st, st->sec_line[SEC_CLIP], "clip", "weights",
               "missing; [clip] needs both weights and vocab (or remove the section)");

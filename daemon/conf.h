@@ -55,8 +55,11 @@ typedef struct fg_conf {
   char **import_dirs;    /* absolute paths */
   size_t n_import_dirs;
   /* [clip] */
-  char *clip_weights;    /* NULL when [clip] is absent */
+  char *clip_weights;    /* NULL when [clip] is absent; absolute */
   char *clip_vocab;
+  int clip_threads;      /* 0 = fg_conf_threads(), else 1..1024 */
+  int clip_weights_line; /* lines of the weights and vocab keys, for messages about the files */
+  int clip_vocab_line;   /* (0 with built-in defaults) */
   /* [train] */
   int train_steps;       /* 1..10000000, default 2000 */
   int train_threads;     /* 0 = all cores, else 1..1024 */

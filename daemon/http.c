@@ -119,6 +119,16 @@ const char *fg_req_header(const fg_req *req, const char *name) {
   return MHD_lookup_connection_value((struct MHD_Connection *)req->mhd_conn, MHD_HEADER_KIND, name);
 }
 
+const char *fg_req_query(const fg_req *req, const char *name) {
+  const char *v = MHD_lookup_connection_value((struct MHD_Connection *)req->mhd_conn,
+                                              MHD_GET_ARGUMENT_KIND, name);
+  if (v) return v;
+  /* libmicrohttpd keeps "?name" without '=' as a key with a NULL value */
+  return MHD_lookup_connection_value_n((struct MHD_Connection *)req->mhd_conn,
+                                       MHD_GET_ARGUMENT_KIND, name, strlen(name), NULL,
+                                       NULL) == MHD_YES ? "" : NULL;
+}
+
 const fg_part *fg_req_part(const fg_req *req, const char *name) {
   for (int i = 0; i < req->n_parts; i++)
     if (strcmp(req->parts[i].name, name) == 0) return &req->parts[i];

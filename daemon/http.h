@@ -92,6 +92,10 @@ typedef struct fg_route {
 /* Looks up a request header (case-insensitive); NULL if absent. */
 const char *fg_req_header(const fg_req *req, const char *name);
 
+/* Looks up a query-string argument ("?output=pooled"); NULL if absent, "" when given without
+ * a value. */
+const char *fg_req_query(const fg_req *req, const char *name);
+
 /* Finds a multipart part by name; NULL if absent. */
 const fg_part *fg_req_part(const fg_req *req, const char *name);
 

@@ -7,6 +7,8 @@
 #include "jobs.h"
 
 #include "api.h"
+#include "clip_features.h"
+#include "clip_svc.h"
 #include "metrics.h"
 
 #include "core/error.h"
@@ -178,6 +180,12 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   json_object_set_new(o, "holdout_every", json_integer(j->params.holdout_every));
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
+  json_object_set_new(o, "phase", j->phase[0] ? json_string(j->phase) : json_null());
+  json_object_set_new(o, "features",
+                      j->features_total
+                        ? json_pack("{s:i,s:i,s:i}", "total", j->features_total, "done",
+                                    j->features_done, "cached", j->features_cached)
+                        : json_null());
   json_object_set_new(o, "created", time_or_null(j->created_ms));
   json_object_set_new(o, "started", time_or_null(j->started_ms));
   json_object_set_new(o, "finished", time_or_null(j->finished_ms));
@@ -232,6 +240,12 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   j->params.holdout_every = (int)jint(o, "holdout_every");
   j->n_frames = (int)jint(o, "frames");
   j->n_heldout = (int)jint(o, "heldout_frames");
+  const char *phase = json_string_value(json_object_get(o, "phase"));
+  if (phase) snprintf(j->phase, sizeof j->phase, "%s", phase);
+  json_t *feats = json_object_get(o, "features");
+  j->features_total = (int)jint(feats, "total");
+  j->features_done = (int)jint(feats, "done");
+  j->features_cached = (int)jint(feats, "cached");
   j->created_ms = jint(o, "created_ms");
   j->started_ms = jint(o, "started_ms");
   j->finished_ms = jint(o, "finished_ms");
@@ -516,6 +530,25 @@ static void job_fail(fg_job *j, const char *fmt, ...) {
   fg_warn("job %s: failed: %s", j->info.id, msg);
 }
 
+/* Records the phase the job is in. */
+static void set_phase(fg_job *j, const char *phase) {
+  pthread_mutex_lock(&j->lock);
+  snprintf(j->info.phase, sizeof j->info.phase, "%s", phase);
+  j->info.version++;
+  pthread_mutex_unlock(&j->lock);
+}
+
+/* Progress of the CLIP features phase (clip_features.h). */
+static void on_features(void *ud, const fg_clip_features_progress *p) {
+  run_ctx *r = ud;
+  pthread_mutex_lock(&r->job->lock);
+  r->job->info.features_done = (int)p->done;
+  r->job->info.features_cached = (int)p->cached;
+  r->job->info.elapsed_s = mono_s() - r->job->started_mono;
+  r->job->info.version++;
+  pthread_mutex_unlock(&r->job->lock);
+}
+
 /* Total pixels of the frames the trainer holds out (frames i with i % k == 0). */
 static double heldout_pixels(const fg_frame *frames, size_t n, int k) {
   double px = 0;
@@ -533,12 +566,17 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
   const fg_conf *conf = fg_app_conf_acquire(app);
   const int n_threads = fg_conf_threads(conf), half = conf->half_precision;
   fg_app_conf_release(app, conf);
-  lower_priority(n_threads);
+  /* The CLIP model this job starts with serves it to the end, whatever a reload brings. Its
+   * team may be larger than training's: lower every thread either may use. */
+  fg_clip_model *clip = app->clip ? fg_clip_svc_acquire(app->clip) : NULL;
+  lower_priority(clip && fg_clip_model_threads(clip) > n_threads ? fg_clip_model_threads(clip)
+                                                                  : n_threads);
   /* This training writes and removes field.next.fgc: if the scene's field came from that file
    * (an interrupted training), make it field.fgc first so that nothing can lose it. */
   fg_scene_keep_partial(scene);
 
   fg_frame *frames = NULL;
+  int *indices = NULL;
   size_t n = 0;
   fg_field *field = NULL;
   fg_trainer *t = NULL;
@@ -549,7 +587,8 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
     goto out;
   }
 
-  int rc = fg_scene_load_frames(scene, &frames, &n, should_stop, &rc_ud);
+  set_phase(j, "loading");
+  int rc = fg_scene_load_frames(scene, &frames, &indices, &n, should_stop, &rc_ud);
   if (rc == FG_ECANCELED) goto stopped;
   if (rc != 0) {
     job_fail(j, "cannot load the scene's frames: %s", fg_error_detail());
@@ -560,12 +599,42 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
              j->info.scene);
     goto out;
   }
+  /* ---- CLIP features for the frames that have none ---- */
+  size_t need = clip ? fg_clip_features_needed(frames, n) : 0;
+  if (need) {
+    pthread_mutex_lock(&j->lock);
+    snprintf(j->info.phase, sizeof j->info.phase, "features");
+    j->info.features_total = (int)need;
+    j->info.features_done = j->info.features_cached = 0;
+    j->info.version++;
+    pthread_mutex_unlock(&j->lock);
+    double t0 = mono_s();
+    rc = fg_clip_features_attach(clip, fg_scene_dir(scene), frames, indices, n, should_stop,
+                                 on_features, &rc_ud);
+    if (rc == FG_ECANCELED) goto stopped;
+    if (rc != 0) {
+      job_fail(j, "cannot give the frames CLIP features: %s", fg_error_detail());
+      goto out;
+    }
+    pthread_mutex_lock(&j->lock);
+    int cached = j->info.features_cached;
+    pthread_mutex_unlock(&j->lock);
+    fg_info("job %s: CLIP features of %zu frames (model %s): %zu computed, %d from the cache, "
+            "in %.1f s", id, need, fg_clip_model_info(clip)->fingerprint, need - (size_t)cached,
+            cached, mono_s() - t0);
+  }
+  fg_clip_model_release(clip);
+  clip = NULL;
+  int feature_dim = 0; /* the store keeps one D per scene; CLIP's E equals it (checked) */
+  for (size_t i = 0; i < n && !feature_dim; i++) feature_dim = frames[i].feat_d;
+
+  set_phase(j, "training");
   fg_scene_info si;
   fg_scene_get_info(scene, &si);
   fg_train_params p = j->info.params;
   fg_field_config cfg;
   if (fg_field_config_for_workspace(&cfg, si.params.workspace_min, si.params.workspace_max,
-                                    FIELD_SCALE, si.feature_dim) != 0 ||
+                                    FIELD_SCALE, feature_dim) != 0 ||
       fg_field_new(&field, &cfg, p.seed) != 0) {
     job_fail(j, "cannot set up the field: %s", fg_error_detail());
     goto out;
@@ -664,6 +733,7 @@ static void run_training(fg_jobs *jobs, fg_job *j) {
     pthread_mutex_unlock(&j->lock);
   }
   if (should_stop(&rc_ud)) goto stopped;
+  set_phase(j, "saving");
   if (fg_checkpoint_save(field, next_path, half) != 0) {
     job_fail(j, "cannot save the trained field: %s", fg_error_detail());
     goto out;
@@ -732,6 +802,8 @@ out:
   fg_trainer_free(t);
   fg_field_free(field);
   fg_scene_frames_free(frames, n);
+  free(indices);
+  fg_clip_model_release(clip);
   free(next_path);
 }
 

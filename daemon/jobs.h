@@ -1,8 +1,9 @@
 /* Jobs: trainings of scenes' feature fields, queued FIFO and run one at a time by one worker
  * thread, so that a training uses every core it is given and never competes with another.
  *
- * A job is created queued by fg_jobs_submit, runs (loads the scene's frames, trains a new
- * field from its seed, evaluates held-out PSNR, checkpoints), and ends done, failed or
+ * A job is created queued by fg_jobs_submit, runs (loads the scene's frames, gives the frames
+ * without uploaded features CLIP features when [clip] is configured (clip_features.h), trains
+ * a new field from its seed, evaluates held-out PSNR, checkpoints), and ends done, failed or
  * cancelled. Its progress is a fg_job_info that HTTP handlers copy under the job's lock; every
  * change bumps `version`, so a Server-Sent Events stream knows when to send.
  *
@@ -77,6 +78,11 @@ typedef struct fg_job_info {
   double eta_s;          /* seconds to go; NaN when unknown */
   double samples_per_s;  /* over the last step; NaN before the first step */
   int64_t created_ms, started_ms, finished_ms;
+  char phase[16];        /* "loading" (frames), "features" (CLIP), "training", "saving";
+                            "" until it runs; a finished job keeps its last */
+  int features_total;    /* frames that need CLIP features; 0 when there was no such phase */
+  int features_done;     /* of those, the ones that have them */
+  int features_cached;   /* of done, the ones read from the scene's cache */
   char error[512];       /* "" unless failed */
   uint64_t version;      /* +1 for every change */
 } fg_job_info;

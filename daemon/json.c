@@ -188,7 +188,9 @@ json_t *fg_json_scene(const fg_scene_info *info) {
                         info->params.voxel_size, "background",
                         fg_json_from_vec(info->params.background, 3), "frames",
                         (json_int_t)info->n_frames, "feature_dim",
-                        info->feature_dim ? json_integer(info->feature_dim) : json_null(),
+                        info->feature_dim         ? json_integer(info->feature_dim)
+                        : info->field_feature_dim ? json_integer(info->field_feature_dim)
+                                                  : json_null(),
                         "trained", info->trained, "last_job", last_job, "created", created,
                         "declared_in_config", info->declared_in_config);
   if (!o) return NULL;

@@ -1,5 +1,6 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
+#include "clip_svc.h"
 #include "conf.h"
 #include "decoder.h"
 #include "http.h"
@@ -140,6 +141,20 @@ static void reload(fg_app *app, const options *o) {
     replace_str(&conf->state_dir, cur->state_dir);
   }
   fg_app_conf_release(app, cur);
+  /* CLIP: new files are loaded now, while the old model serves; if they do not load, the old
+   * model stays (requests in flight keep theirs either way). */
+  fg_clip_model *had = fg_clip_svc_acquire(app->clip);
+  int clip_changed = 0;
+  if (fg_clip_svc_configure(app->clip, conf, &clip_changed) != 0) {
+    fg_error("reload: %s; %s", fg_error_detail(),
+             had ? "the CLIP model loaded before stays in use"
+                 : "there is no CLIP model until the files load (the [clip] endpoints answer "
+                   "409)");
+    fg_metrics_count_clip_load(0);
+  } else if (clip_changed && conf->clip_weights) {
+    fg_metrics_count_clip_load(1);
+  }
+  fg_clip_model_release(had);
   fg_app_set_conf(app, conf);
   const fg_conf *now = fg_app_conf_acquire(app);
   fg_store_sync_declared(app->store, now);
@@ -176,8 +191,19 @@ int main(int argc, char **argv) {
   fg_app app = {0};
   pthread_mutex_init(&app.conf_lock, NULL);
   app.threads = fg_conf_threads(conf);
+  /* The CLIP model loads once, here or at a reload; files that do not load stop the start
+   * like a bad configuration does. */
+  if (fg_clip_svc_new(&app.clip) != 0 || fg_clip_svc_configure(app.clip, conf, NULL) != 0) {
+    fg_error("%s", fg_error_detail());
+    fg_clip_svc_free(app.clip);
+    fg_conf_free(conf);
+    pthread_mutex_destroy(&app.conf_lock);
+    return 2;
+  }
+  if (conf->clip_weights) fg_metrics_count_clip_load(1);
   if (fg_store_open(&app.store, conf->state_dir) != 0) {
     fg_error("cannot open the state dir %s: %s", conf->state_dir, fg_error_detail());
+    fg_clip_svc_free(app.clip);
     fg_conf_free(conf);
     return 1;
   }
@@ -189,6 +215,7 @@ int main(int argc, char **argv) {
   if (fg_decoder_new(&app.decoder, NULL, app.threads, FG_DECODER_IDLE_SECONDS) != 0) {
     fg_error("cannot set up the image decoder: %s", fg_error_detail());
     fg_store_close(app.store);
+    fg_clip_svc_free(app.clip);
     fg_app_clear_conf(&app);
     return 1;
   }
@@ -199,6 +226,7 @@ int main(int argc, char **argv) {
     fg_error("cannot set up training: %s", fg_error_detail());
     fg_decoder_free(app.decoder);
     fg_store_close(app.store);
+    fg_clip_svc_free(app.clip);
     fg_app_clear_conf(&app);
     return 1;
   }
@@ -222,6 +250,7 @@ int main(int argc, char **argv) {
     fg_jobs_free(app.jobs);
     fg_decoder_free(app.decoder);
     fg_store_close(app.store);
+    fg_clip_svc_free(app.clip);
     fg_app_clear_conf(&app);
     return 1;
   }
@@ -256,6 +285,7 @@ int main(int argc, char **argv) {
   fg_jobs_free(app.jobs); /* a running training stops after its step and keeps its field */
   fg_decoder_free(app.decoder);
   fg_store_close(app.store);
+  fg_clip_svc_free(app.clip);
   fg_app_clear_conf(&app);
   pthread_mutex_destroy(&app.conf_lock);
   fg_info("stopped");

@@ -33,6 +33,9 @@ static atomic_ullong frames_ingested;
 static atomic_ullong reloads_ok, reloads_failed;
 static atomic_ullong training_steps;
 static _Atomic double training_samples_per_s;
+static atomic_ullong clip_embeddings[FG_METRICS_CLIP_KINDS];
+static atomic_ullong clip_frames_computed, clip_frames_cached;
+static atomic_ullong clip_loads_ok, clip_loads_failed;
 
 void fg_metrics_set_route(int idx, const char *method, const char *route) {
   if (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) return;
@@ -63,6 +66,19 @@ void fg_metrics_count_reload(int ok) { atomic_fetch_add(ok ? &reloads_ok : &relo
 void fg_metrics_add_training_steps(unsigned n) { atomic_fetch_add(&training_steps, n); }
 
 void fg_metrics_set_training_samples_per_s(double v) { atomic_store(&training_samples_per_s, v); }
+
+void fg_metrics_add_clip_embeddings(fg_metrics_clip_kind kind, unsigned n) {
+  if (kind >= 0 && kind < FG_METRICS_CLIP_KINDS) atomic_fetch_add(&clip_embeddings[kind], n);
+}
+
+void fg_metrics_add_clip_feature_frames(unsigned computed, unsigned cached) {
+  atomic_fetch_add(&clip_frames_computed, computed);
+  atomic_fetch_add(&clip_frames_cached, cached);
+}
+
+void fg_metrics_count_clip_load(int ok) {
+  atomic_fetch_add(ok ? &clip_loads_ok : &clip_loads_failed, 1);
+}
 
 typedef struct {
   char *buf;
@@ -171,6 +187,29 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "# TYPE fieldgrip_training_samples_per_second gauge\n"
                  "fieldgrip_training_samples_per_second %.6g\n",
             atomic_load(&training_samples_per_s));
+  sb_printf(&sb, "# HELP fieldgrip_clip_model_loaded Whether a CLIP model ([clip]) is being "
+                 "served.\n# TYPE fieldgrip_clip_model_loaded gauge\n"
+                 "fieldgrip_clip_model_loaded %d\n", g->clip_loaded ? 1 : 0);
+  sb_printf(&sb, "# HELP fieldgrip_clip_loads_total Loads of the [clip] weights and vocabulary "
+                 "at start-up and reloads, by result.\n# TYPE fieldgrip_clip_loads_total counter\n"
+                 "fieldgrip_clip_loads_total{result=\"ok\"} %llu\n"
+                 "fieldgrip_clip_loads_total{result=\"failed\"} %llu\n",
+            atomic_load(&clip_loads_ok), atomic_load(&clip_loads_failed));
+  sb_printf(&sb, "# HELP fieldgrip_clip_embeddings_total CLIP embeddings computed for POST "
+                 "/v1/embed/text (one per text) and /v1/embed/image, by kind.\n"
+                 "# TYPE fieldgrip_clip_embeddings_total counter\n"
+                 "fieldgrip_clip_embeddings_total{kind=\"text\"} %llu\n"
+                 "fieldgrip_clip_embeddings_total{kind=\"image_dense\"} %llu\n"
+                 "fieldgrip_clip_embeddings_total{kind=\"image_pooled\"} %llu\n",
+            atomic_load(&clip_embeddings[FG_METRICS_CLIP_TEXT]),
+            atomic_load(&clip_embeddings[FG_METRICS_CLIP_IMAGE_DENSE]),
+            atomic_load(&clip_embeddings[FG_METRICS_CLIP_IMAGE_POOLED]));
+  sb_printf(&sb, "# HELP fieldgrip_clip_feature_frames_total Frames whose CLIP features a "
+                 "training computed, or read from the scene's cache.\n"
+                 "# TYPE fieldgrip_clip_feature_frames_total counter\n"
+                 "fieldgrip_clip_feature_frames_total{source=\"computed\"} %llu\n"
+                 "fieldgrip_clip_feature_frames_total{source=\"cached\"} %llu\n",
+            atomic_load(&clip_frames_computed), atomic_load(&clip_frames_cached));
   if (sb.failed) {
     free(sb.buf);
     return NULL;

@@ -23,6 +23,18 @@ void fg_metrics_count_reload(int ok);
 void fg_metrics_add_training_steps(unsigned n);
 void fg_metrics_set_training_samples_per_s(double samples_per_s);
 
+/* CLIP: embeddings computed over HTTP, by kind; frames whose features a training computed
+ * with CLIP or read from its cache; loads of the [clip] files at start-up and reloads. */
+typedef enum {
+  FG_METRICS_CLIP_TEXT = 0,
+  FG_METRICS_CLIP_IMAGE_DENSE,
+  FG_METRICS_CLIP_IMAGE_POOLED,
+  FG_METRICS_CLIP_KINDS
+} fg_metrics_clip_kind;
+void fg_metrics_add_clip_embeddings(fg_metrics_clip_kind kind, unsigned n);
+void fg_metrics_add_clip_feature_frames(unsigned computed, unsigned cached);
+void fg_metrics_count_clip_load(int ok);
+
 /* Job states, in the order of the gauge's labels (jobs.h uses the same order). */
 #define FG_METRICS_JOB_STATES 5
 
@@ -31,6 +43,7 @@ typedef struct fg_metrics_gauges {
   size_t scenes;
   size_t frames;
   size_t trained_scenes;                /* scenes holding a trained field */
+  int clip_loaded;                      /* a CLIP model is being served */
   size_t jobs[FG_METRICS_JOB_STATES];   /* jobs known, by state (queued, running, done,
                                            failed, cancelled) */
 } fg_metrics_gauges;

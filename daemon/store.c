@@ -589,6 +589,7 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->created_ms = s->created_ms;
   out->n_frames = s->n_frames;
   out->feature_dim = s->feature_dim;
+  out->field_feature_dim = s->field ? s->field->field->cfg.feature_dim : 0;
   out->trained = s->field != NULL;
   out->partial = s->field && s->partial;
   out->trained_steps = s->field ? s->field->field->trained_steps : 0;
@@ -809,9 +810,10 @@ void fg_scene_frames_free(fg_frame *frames, size_t n) {
   free(frames);
 }
 
-int fg_scene_load_frames(fg_scene *s, fg_frame **frames, size_t *n, int (*stop)(void *),
-                         void *stop_ud) {
+int fg_scene_load_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *n,
+                         int (*stop)(void *), void *stop_ud) {
   *frames = NULL;
+  if (indices) *indices = NULL;
   *n = 0;
   pthread_mutex_lock(&s->lock);
   size_t k = s->n_frames;
@@ -841,11 +843,13 @@ int fg_scene_load_frames(fg_scene *s, fg_frame **frames, size_t *n, int (*stop)(
     }
     free(path);
   }
-  free(ix);
   if (rc != 0) {
+    free(ix);
     fg_scene_frames_free(f, k);
     return rc;
   }
+  if (indices) *indices = ix;
+  else free(ix);
   *frames = f;
   *n = k;
   return 0;

@@ -5,6 +5,9 @@
  *   <state>/scenes/<name>/field.fgc           the trained field (field/checkpoint.h)
  *   <state>/scenes/<name>/field.next.fgc      a training's checkpoint before it is committed
  *   <state>/scenes/<name>/last_job.json       the scene's last job (jobs.h)
+ *   <state>/scenes/<name>/clip/000012.<fingerprint>.npy
+ *                                             CLIP features of frame 12 computed by a training
+ *                                             (clip_features.h), keyed by the model
  *
  * A frame is written completely to ".incoming-*" beside its final name, then renamed into
  * place under the scene's lock, so a crash at any moment leaves either no frame or a whole
@@ -42,7 +45,9 @@ typedef struct fg_scene_info {
   int declared_in_config;
   int64_t created_ms;
   size_t n_frames;
-  int feature_dim; /* 0 while no frame has features */
+  int feature_dim; /* D of the frames' uploaded features; 0 while no frame has any */
+  int field_feature_dim; /* D of the trained field (uploaded or CLIP features); 0 when
+                            untrained or trained on colour only */
   int trained;     /* the scene holds a field */
   int partial;     /* that field is the checkpoint of an interrupted training */
   int64_t trained_steps;
@@ -110,10 +115,12 @@ int fg_scene_add_frames(fg_scene *scene, const fg_frame *frames, size_t n, int *
 int fg_scene_list_frames(fg_scene *scene, fg_frame **frames, int **indices, size_t *n);
 
 /* Loads every frame whole (pixels and features, CRC checked), sorted by number, into a
- * malloc'd array; on success the caller owns it (fg_scene_frames_free). stop, when not NULL,
- * is asked between frames and ends the load with FG_ECANCELED when it returns nonzero. */
-int fg_scene_load_frames(fg_scene *scene, fg_frame **frames, size_t *n, int (*stop)(void *),
-                         void *stop_ud);
+ * malloc'd array; on success the caller owns it (fg_scene_frames_free) and, when indices is
+ * not NULL, the malloc'd array of the frames' numbers in *indices (free). stop, when not
+ * NULL, is asked between frames and ends the load with FG_ECANCELED when it returns
+ * nonzero. */
+int fg_scene_load_frames(fg_scene *scene, fg_frame **frames, int **indices, size_t *n,
+                         int (*stop)(void *), void *stop_ud);
 void fg_scene_frames_free(fg_frame *frames, size_t n);
 
 /* ---- the trained field ---- */

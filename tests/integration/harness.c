@@ -840,3 +840,18 @@ void h_assert_json_equal_at(const char *file, int line, json_t *a, json_t *b) {
     exit(1);
   }
 }
+
+double h_metric(const char *series) {
+  h_resp *r = h_get("/metrics");
+  h_assert_status_at(__FILE__, __LINE__, r, 200);
+  size_t n = strlen(series);
+  for (const char *p = r->body; (p = strstr(p, series)) != NULL; p += n) {
+    if ((p != r->body && p[-1] != '\n') || p[n] != ' ') continue;
+    double v = strtod(p + n + 1, NULL);
+    h_resp_free(r);
+    return v;
+  }
+  char *body = h_fmt("%s", r->body);
+  h_resp_free(r);
+  FG_TEST_FAIL("no series %s in /metrics:\n%s", series, body);
+}

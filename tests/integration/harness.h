@@ -150,6 +150,11 @@ void h_raw_abandon(const void *req, size_t len);
 void h_multipart_build(const h_part *parts, int n_parts, const char *boundary, uint8_t **out,
                        size_t *out_len);
 
+/* GET /metrics (asserting 200) and the value of one series, named with its labels exactly as
+ * the exposition writes it: "fieldgrip_clip_loads_total{result=\"ok\"}". Fails the test when
+ * the series is absent. */
+double h_metric(const char *series);
+
 /* ---------------------------------------------------------------------------------------- */
 /* Assertions on replies                                                                      */
 

@@ -140,8 +140,17 @@ static void test_errors(void) {
       "\"h\": 48}, \"output\": \"normals\"}", good);
   BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"convention\": \"directx\"}", good);
-  BAD(501, "not_implemented", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
+  /* heatmap: the query is checked (D = 8 here, no [clip]), the render is still to come */
+  BAD(400, "invalid_query", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"output\": \"heatmap\"}", good);
+  BAD(400, "invalid_query", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
+      "\"h\": 48}, \"output\": \"heatmap\", \"embedding\": [1, 0, 0]}", good);
+  BAD(409, "clip_not_configured", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, "
+      "\"w\": 64, \"h\": 48}, \"output\": \"heatmap\", \"text\": \"a mug\"}", good);
+  BAD(501, "not_implemented", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
+      "\"h\": 48}, \"output\": \"heatmap\", \"embedding\": [1, 0, 0, 0, 0, 0, 0, 2]}", good);
+  BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
+      "\"h\": 48}, \"output\": \"rgb\", \"embedding\": [1, 0, 0, 0, 0, 0, 0, 2]}", good);
   BAD(400, "invalid_request", "[]");
 #undef BAD
   h_resp *r = render_camera("nope", g_camera, NULL);

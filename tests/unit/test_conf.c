@@ -318,7 +318,8 @@ static void test_paths(void) {
                           "import_dirs = scans:/srv//abs/:../other::/missing/later/../mnt:\n"
                           "[clip]\n"
                           "weights = w.safetensors\n"
-                          "vocab = ../share/vocab.txt.gz\n");
+                          "vocab = ../share/vocab.txt.gz\n"
+                          "threads = 3\n");
   /* load through a relative path from another working directory */
   char cwd[PATH_MAX];
   ASSERT(getcwd(cwd, sizeof cwd) != NULL);
@@ -345,6 +346,7 @@ static void test_paths(void) {
   ASSERT_STREQ(c->clip_weights, want); /* existence is checked when CLIP loads, not here */
   snprintf(want, sizeof want, "%s/share/vocab.txt.gz", tmp_root);
   ASSERT_STREQ(c->clip_vocab, want);
+  ASSERT_EQ(c->clip_threads, 3);
   fg_conf_free(c);
   free(path);
 
@@ -518,6 +520,11 @@ static void test_errors(void) {
   EXPECT_ERROR("[train]\n[clip]\nweights = /w\n[http]\n", 2, "[clip] vocab:", "both");
   EXPECT_ERROR("[clip] ; empty\n", 1, "[clip] weights:", "both");
   EXPECT_ERROR("[clip]\nweights =\n", 2, "[clip] weights:", "expected a path");
+  EXPECT_ERROR("[clip]\nweights = /w\nvocab = /v\nthreads = -1\n", 4, "[clip] threads:", "0");
+  EXPECT_ERROR("[clip]\nweights = /w\nvocab = /v\nthreads = two\n", 4, "[clip] threads:",
+               "integer");
+  EXPECT_ERROR("[clip]\nweights = /w\nvocab = /v\nmodel = b16\n", 4, "[clip] model:",
+               "unknown key");
 
   /* transport needs */
   EXPECT_ERROR("[robot]\ntransport = tcp\nport = 502\nhost =\n", 4, "[robot] host:",

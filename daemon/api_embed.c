@@ -1,0 +1,252 @@
+/* POST /v1/embed/text and POST /v1/embed/image: CLIP's text and image embeddings over HTTP,
+ * from the model of [clip] (clip_svc.h). Both run on the offload pool. */
+#include "api.h"
+#include "clip_svc.h"
+#include "decoder.h"
+#include "json.h"
+#include "metrics.h"
+
+#include "core/error.h"
+#include "io/image.h"
+#include "io/npy.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp) {
+  fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;
+  if (m) return m;
+  char why[1024] = "";
+  if (req->app->clip) fg_clip_svc_unavailable(req->app->clip, why, sizeof why);
+  if (why[0])
+    fg_resp_error(resp, 409, "clip_not_configured", "this server has no CLIP model: the [clip] "
+                  "files of its configuration did not load (%s); fix them and reload the "
+                  "configuration (SIGHUP, or systemctl reload fieldgripd)", why);
+  else
+    fg_resp_error(resp, 409, "clip_not_configured", "this server has no CLIP model: add a "
+                  "[clip] section with weights = /path/to/clip.safetensors and vocab = "
+                  "/path/to/bpe_simple_vocab_16e6.txt.gz to its configuration file and reload "
+                  "it (SIGHUP, or systemctl reload fieldgripd)");
+  return NULL;
+}
+
+/* An array of n floats as JSON numbers; NULL on allocation failure. */
+static json_t *float_array(const float *v, int n) {
+  json_t *a = json_array();
+  for (int i = 0; a && i < n; i++) {
+    if (json_array_append_new(a, json_real((double)v[i])) != 0) {
+      json_decref(a);
+      return NULL;
+    }
+  }
+  return a;
+}
+
+/* Reads an optional boolean key: 1 present, 0 absent (or null), FG_EINVAL otherwise. */
+static int json_flag(json_t *body, const char *key, int *out) {
+  json_t *v = json_object_get(body, key);
+  if (!v || json_is_null(v)) return 0;
+  if (!json_is_boolean(v)) return fg_fail(FG_EINVAL, "\"%s\" must be true or false", key);
+  *out = json_is_true(v);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- POST /v1/embed/text */
+
+/* Collects the texts of the body: "text" a string or an array of 1..FG_CLIP_MAX_TEXTS
+ * strings. texts (borrowed from body) has room for FG_CLIP_MAX_TEXTS. Answers 400 itself. */
+static int collect_texts(json_t *body, const char **texts, int *n, fg_resp *resp) {
+  json_t *t = json_object_get(body, "text");
+  if (!t || json_is_null(t))
+    return fg_resp_error(resp, 400, "invalid_request", "the body needs \"text\": a string or "
+                         "a list of up to %d strings, e.g. {\"text\": [\"a mug\", \"a "
+                         "spoon\"]}", FG_CLIP_MAX_TEXTS), -1;
+  if (json_is_string(t)) {
+    texts[0] = json_string_value(t);
+    *n = 1;
+    return 0;
+  }
+  if (!json_is_array(t))
+    return fg_resp_error(resp, 400, "invalid_request", "\"text\" must be a string or a list of "
+                         "strings"), -1;
+  size_t k = json_array_size(t);
+  if (k == 0)
+    return fg_resp_error(resp, 400, "invalid_request", "\"text\" is an empty list; give 1 to "
+                         "%d strings", FG_CLIP_MAX_TEXTS), -1;
+  if (k > FG_CLIP_MAX_TEXTS)
+    return fg_resp_error(resp, 400, "too_many_texts", "\"text\" has %zu strings; one request "
+                         "takes at most %d (send several requests)", k, FG_CLIP_MAX_TEXTS), -1;
+  for (size_t i = 0; i < k; i++) {
+    json_t *s = json_array_get(t, i);
+    if (!json_is_string(s))
+      return fg_resp_error(resp, 400, "invalid_request", "text[%zu] is not a string; \"text\" "
+                           "must be a list of strings", i), -1;
+    texts[i] = json_string_value(s);
+  }
+  *n = (int)k;
+  return 0;
+}
+
+int fg_api_embed_text(fg_req *req, fg_resp *resp) {
+  fg_clip_model *m = fg_api_clip_model(req, resp);
+  if (!m) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  float *emb = NULL;
+  if (!body) goto out;
+  const char *key;
+  json_t *val;
+  json_object_foreach(body, key, val) {
+    if (strcmp(key, "text") && strcmp(key, "truncate") && strcmp(key, "normalize")) {
+      fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; the body takes \"text\" "
+                    "and, optionally, \"truncate\" and \"normalize\" (true or false)", key);
+      goto out;
+    }
+  }
+  int truncate = 0, normalize = 0;
+  if (json_flag(body, "truncate", &truncate) < 0 || json_flag(body, "normalize", &normalize) < 0) {
+    fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
+    goto out;
+  }
+  const char *texts[FG_CLIP_MAX_TEXTS];
+  int n = 0;
+  if (collect_texts(body, texts, &n, resp) != 0) goto out;
+
+  const fg_clip_info *info = fg_clip_model_info(m);
+  const int E = info->embed_dim;
+  emb = malloc((size_t)n * (size_t)E * sizeof *emb);
+  if (!emb) {
+    fg_resp_error(resp, 500, "internal_error", "out of memory");
+    goto out;
+  }
+  int bad = -1;
+  int rc = fg_clip_model_embed_texts(m, texts, n, truncate, normalize, emb, &bad);
+  if (rc == FG_ERANGE) {
+    fg_resp_error(resp, 400, "text_too_long", "text[%d]: %s; shorten it, or send \"truncate\": "
+                  "true to embed its first %d tokens", bad, fg_error_detail(),
+                  info->context_length - 2);
+    goto out;
+  }
+  if (rc == FG_EINVAL && bad >= 0) {
+    fg_resp_error(resp, 400, "invalid_text", "text[%d]: %s", bad, fg_error_detail());
+    goto out;
+  }
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot embed the texts: %s", fg_error_detail());
+    goto out;
+  }
+  fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_TEXT, (unsigned)n);
+  json_t *rows = json_array();
+  for (int i = 0; rows && i < n; i++) {
+    json_t *row = float_array(emb + (size_t)i * E, E);
+    if (!row || json_array_append_new(rows, row) != 0) {
+      json_decref(rows);
+      rows = NULL;
+    }
+  }
+  json_t *model = fg_clip_model_json(m);
+  if (!rows || !model) {
+    json_decref(rows);
+    json_decref(model);
+    fg_resp_error(resp, 500, "internal_error", "out of memory building the reply");
+    goto out;
+  }
+  fg_resp_json(resp, 200, json_pack("{s:o,s:i,s:b,s:o}", "embeddings", rows, "dim", E,
+                                    "normalized", normalize, "model", model));
+out:
+  free(emb);
+  json_decref(body);
+  fg_clip_model_release(m);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- POST /v1/embed/image */
+
+int fg_api_embed_image(fg_req *req, fg_resp *resp) {
+  fg_clip_model *m = fg_api_clip_model(req, resp);
+  if (!m) return 0;
+  fg_image img = {0};
+  float *dense = NULL;
+  const char *output = fg_req_query(req, "output");
+  int pooled = 0;
+  if (output && strcmp(output, "pooled") == 0) {
+    pooled = 1;
+  } else if (output && strcmp(output, "dense") != 0) {
+    fg_resp_error(resp, 400, "invalid_request", "?output= must be \"dense\" (the default: "
+                  "MaskCLIP features [h, w, E] as .npy) or \"pooled\" (the image embedding as "
+                  "JSON), got \"%.40s\"", output);
+    goto out;
+  }
+  if (req->body_len == 0) {
+    fg_resp_error(resp, 400, "invalid_request", "the body is empty; send the image file itself "
+                  "as the body (PNG, JPEG, OpenEXR or TIFF), e.g. curl --data-binary @photo.png "
+                  "-H 'Content-Type: image/png'");
+    goto out;
+  }
+  if (!fg_image_sniff(req->body, req->body_len)) {
+    fg_resp_error(resp, 415, "unsupported_media_type", "the body is not PNG, JPEG, OpenEXR or "
+                  "TIFF data; send the image file itself as the body (curl --data-binary "
+                  "@photo.png), not a form (curl -F)");
+    goto out;
+  }
+  /* Transparent pixels are composited on white, the default background of scenes. */
+  static const float white[3] = {1, 1, 1};
+  int rc = fg_decoder_decode(req->app->decoder, req->body, req->body_len, white, &img);
+  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM) {
+    fg_resp_error(resp, 500, "internal_error", "cannot decode the image: %s", fg_error_detail());
+    goto out;
+  }
+  if (rc != 0) {
+    fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
+    goto out;
+  }
+  const fg_clip_info *info = fg_clip_model_info(m);
+  const int E = info->embed_dim;
+  if (pooled) {
+    float *v = malloc((size_t)E * sizeof *v);
+    rc = v ? fg_clip_model_pooled(m, img.rgb, img.w, img.h, v)
+           : fg_fail(FG_ENOMEM, "out of memory");
+    json_t *arr = rc == 0 ? float_array(v, E) : NULL;
+    free(v);
+    json_t *model = rc == 0 ? fg_clip_model_json(m) : NULL;
+    if (rc == 0 && arr && model) {
+      fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_IMAGE_POOLED, 1);
+      fg_resp_json(resp, 200, json_pack("{s:o,s:i,s:o}", "embedding", arr, "dim", E, "model",
+                                        model));
+    } else {
+      json_decref(arr);
+      json_decref(model);
+      if (rc == FG_EINVAL || rc == FG_ERANGE)
+        fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
+      else
+        fg_resp_error(resp, 500, "internal_error", "cannot embed the image: %s",
+                      rc ? fg_error_detail() : "out of memory");
+    }
+    goto out;
+  }
+  int hp, wp;
+  rc = fg_clip_model_dense(m, img.rgb, img.w, img.h, &dense, &hp, &wp);
+  if (rc == FG_EINVAL || rc == FG_ERANGE) {
+    fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
+    goto out;
+  }
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot compute the features: %s",
+                  fg_error_detail());
+    goto out;
+  }
+  const size_t shape[3] = {(size_t)hp, (size_t)wp, (size_t)E};
+  uint8_t *npy = NULL;
+  size_t npy_len = 0;
+  if (fg_npy_encode(FG_DTYPE_F32, 3, shape, dense, &npy, &npy_len) != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot encode the features: %s",
+                  fg_error_detail());
+    goto out;
+  }
+  fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_IMAGE_DENSE, 1);
+  fg_resp_take(resp, 200, "application/x-npy", (char *)npy, npy_len);
+out:
+  free(dense);
+  fg_image_release(&img);
+  fg_clip_model_release(m);
+  return 0;
+}

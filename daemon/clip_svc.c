@@ -1,0 +1,395 @@
+/* The CLIP model the daemon serves: loading, reference counts, reloads; see clip_svc.h. */
+#include "clip_svc.h"
+
+#include "api.h"
+
+#include "core/error.h"
+#include "core/log.h"
+#include "io/image.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+/* What identifies a file's contents without reading it. */
+typedef struct file_id {
+  dev_t dev;
+  ino_t ino;
+  off_t size;
+  struct timespec mtime;
+} file_id;
+
+struct fg_clip_model {
+  atomic_int refs;
+  fg_clip *clip;       /* owned */
+  fg_tokenizer *tok;   /* owned */
+  char *weights_path;  /* owned, as configured */
+  char *vocab_path;    /* owned */
+  file_id weights_id, vocab_id;
+  int threads;
+};
+
+struct fg_clip_svc {
+  pthread_mutex_t lock; /* guards current and last_error */
+  fg_clip_model *current;
+  char last_error[1024];
+};
+
+/* ---------------------------------------------------------------- models */
+
+static void model_free(fg_clip_model *m) {
+  if (!m) return;
+  fg_clip_free(m->clip);
+  fg_tokenizer_free(m->tok);
+  free(m->weights_path);
+  free(m->vocab_path);
+  free(m);
+}
+
+void fg_clip_model_release(fg_clip_model *m) {
+  if (m && atomic_fetch_sub(&m->refs, 1) == 1) model_free(m);
+}
+
+fg_clip *fg_clip_model_clip(const fg_clip_model *m) { return m->clip; }
+const fg_tokenizer *fg_clip_model_tokenizer(const fg_clip_model *m) { return m->tok; }
+const fg_clip_info *fg_clip_model_info(const fg_clip_model *m) { return fg_clip_get_info(m->clip); }
+int fg_clip_model_threads(const fg_clip_model *m) { return m->threads; }
+
+static int stat_id(const char *path, file_id *id) {
+  struct stat st;
+  if (stat(path, &st) != 0) return -1;
+  id->dev = st.st_dev;
+  id->ino = st.st_ino;
+  id->size = st.st_size;
+  id->mtime = st.st_mtim;
+  return 0;
+}
+
+static int same_id(const file_id *a, const file_id *b) {
+  return a->dev == b->dev && a->ino == b->ino && a->size == b->size &&
+         a->mtime.tv_sec == b->mtime.tv_sec && a->mtime.tv_nsec == b->mtime.tv_nsec;
+}
+
+/* "FILE:LINE: [clip] KEY" of a configuration, for messages about its files. */
+static void where(const fg_conf *conf, int line, const char *key, char *buf, size_t n) {
+  if (conf->path && line > 0) snprintf(buf, n, "%s:%d: [clip] %s", conf->path, line, key);
+  else if (conf->path) snprintf(buf, n, "%s: [clip] %s", conf->path, key);
+  else snprintf(buf, n, "[clip] %s", key);
+}
+
+/* detail without a leading "path: " (the message names the path once already). */
+static const char *after_path(const char *detail, const char *path) {
+  size_t n = strlen(path);
+  return strncmp(detail, path, n) == 0 && detail[n] == ':' && detail[n + 1] == ' '
+           ? detail + n + 2
+           : detail;
+}
+
+/* The thread count [clip] asks for. */
+static int clip_threads(const fg_conf *conf) {
+  return conf->clip_threads > 0 ? conf->clip_threads : fg_conf_threads(conf);
+}
+
+/* Loads conf's [clip] files into a new model (one reference, the caller's). */
+static int model_load(const fg_conf *conf, fg_clip_model **out) {
+  *out = NULL;
+  char at[PATH_MAX + 64];
+  fg_clip_model *m = calloc(1, sizeof *m);
+  if (!m) return fg_fail(FG_ENOMEM, "out of memory");
+  atomic_init(&m->refs, 1);
+  m->weights_path = strdup(conf->clip_weights);
+  m->vocab_path = strdup(conf->clip_vocab);
+  m->threads = clip_threads(conf);
+  if (!m->weights_path || !m->vocab_path) {
+    model_free(m);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  /* Identify the files before reading them: a file replaced while it loads then looks
+   * changed at the next reload, never the other way round. */
+  where(conf, conf->clip_weights_line, "weights", at, sizeof at);
+  int rc = 0;
+  if (stat_id(m->weights_path, &m->weights_id) != 0) {
+    rc = fg_fail(errno == ENOENT ? FG_ENOENT : FG_EIO, "%s: cannot load %s: %s", at,
+                 m->weights_path, strerror(errno));
+  } else if ((rc = fg_clip_load(&m->clip, m->weights_path)) != 0) {
+    char why[768];
+    snprintf(why, sizeof why, "%s", after_path(fg_error_detail(), m->weights_path));
+    rc = fg_fail(rc, "%s: cannot load %s: %s", at, m->weights_path, why);
+  }
+  if (rc != 0) {
+    model_free(m);
+    return rc;
+  }
+  where(conf, conf->clip_vocab_line, "vocab", at, sizeof at);
+  if (stat_id(m->vocab_path, &m->vocab_id) != 0) {
+    rc = fg_fail(errno == ENOENT ? FG_ENOENT : FG_EIO, "%s: cannot load %s: %s", at,
+                 m->vocab_path, strerror(errno));
+  } else if ((rc = fg_tokenizer_load(&m->tok, m->vocab_path)) != 0) {
+    char why[768];
+    snprintf(why, sizeof why, "%s", after_path(fg_error_detail(), m->vocab_path));
+    rc = fg_fail(rc, "%s: cannot load %s: %s", at, m->vocab_path, why);
+  } else {
+    /* Every id the tokenizer can write must index the weights' token embedding. */
+    const fg_clip_info *info = fg_clip_get_info(m->clip);
+    int nv = fg_tokenizer_vocab_size(m->tok);
+    if (nv > info->vocab_size)
+      rc = fg_fail(FG_EFORMAT, "%s: %s has %d tokens but the token embedding of %s has %d "
+                   "rows; use the vocabulary the weights were trained with", at, m->vocab_path,
+                   nv, m->weights_path, info->vocab_size);
+  }
+  if (rc != 0) {
+    model_free(m);
+    return rc;
+  }
+  fg_clip_set_threads(m->clip, m->threads);
+  *out = m;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- the service */
+
+int fg_clip_svc_new(fg_clip_svc **out) {
+  *out = NULL;
+  fg_clip_svc *svc = calloc(1, sizeof *svc);
+  if (!svc) return fg_fail(FG_ENOMEM, "out of memory");
+  pthread_mutex_init(&svc->lock, NULL);
+  *out = svc;
+  return 0;
+}
+
+void fg_clip_svc_free(fg_clip_svc *svc) {
+  if (!svc) return;
+  fg_clip_model_release(svc->current);
+  pthread_mutex_destroy(&svc->lock);
+  free(svc);
+}
+
+fg_clip_model *fg_clip_svc_acquire(fg_clip_svc *svc) {
+  pthread_mutex_lock(&svc->lock);
+  fg_clip_model *m = svc->current;
+  if (m) atomic_fetch_add(&m->refs, 1);
+  pthread_mutex_unlock(&svc->lock);
+  return m;
+}
+
+void fg_clip_svc_unavailable(fg_clip_svc *svc, char *msg, size_t n) {
+  pthread_mutex_lock(&svc->lock);
+  snprintf(msg, n, "%s", svc->last_error);
+  pthread_mutex_unlock(&svc->lock);
+}
+
+/* Whether m still matches conf: same paths, unchanged files, same threads. */
+static int model_current(const fg_clip_model *m, const fg_conf *conf) {
+  file_id w, v;
+  return strcmp(m->weights_path, conf->clip_weights) == 0 &&
+         strcmp(m->vocab_path, conf->clip_vocab) == 0 && m->threads == clip_threads(conf) &&
+         stat_id(m->weights_path, &w) == 0 && same_id(&w, &m->weights_id) &&
+         stat_id(m->vocab_path, &v) == 0 && same_id(&v, &m->vocab_id);
+}
+
+static void install(fg_clip_svc *svc, fg_clip_model *m) {
+  pthread_mutex_lock(&svc->lock);
+  fg_clip_model *old = svc->current;
+  svc->current = m;
+  svc->last_error[0] = '\0';
+  pthread_mutex_unlock(&svc->lock);
+  fg_clip_model_release(old);
+}
+
+int fg_clip_svc_configure(fg_clip_svc *svc, const fg_conf *conf, int *changed) {
+  if (changed) *changed = 0;
+  pthread_mutex_lock(&svc->lock);
+  fg_clip_model *cur = svc->current; /* only this thread replaces it: safe to read on */
+  pthread_mutex_unlock(&svc->lock);
+  if (!conf->clip_weights || !conf->clip_vocab) {
+    if (cur) {
+      install(svc, NULL);
+      fg_info("[clip] is gone from the configuration: the CLIP model is unloaded (requests "
+              "already running finish with it)");
+      if (changed) *changed = 1;
+    } else {
+      pthread_mutex_lock(&svc->lock);
+      svc->last_error[0] = '\0';
+      pthread_mutex_unlock(&svc->lock);
+    }
+    return 0;
+  }
+  if (cur && model_current(cur, conf)) return 0;
+
+  fg_clip_model *m = NULL;
+  int rc = model_load(conf, &m);
+  if (rc != 0) {
+    pthread_mutex_lock(&svc->lock);
+    snprintf(svc->last_error, sizeof svc->last_error, "%s", fg_error_detail());
+    pthread_mutex_unlock(&svc->lock);
+    return rc;
+  }
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  const char *same = cur && strcmp(fg_clip_get_info(cur->clip)->fingerprint,
+                                   info->fingerprint) == 0 ? " (the same weights as before)" : "";
+  fg_info("CLIP model loaded from %s%s: fingerprint %s, %s, embedding %d, image %d/%d, %d "
+          "threads; vocabulary %s", m->weights_path, same, info->fingerprint, info->dtype,
+          info->embed_dim, info->image_size, info->patch_size, m->threads, m->vocab_path);
+  install(svc, m);
+  if (changed) *changed = 1;
+  return 0;
+}
+
+json_t *fg_clip_model_json(const fg_clip_model *m) {
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  return json_pack("{s:s,s:s,s:i,s:i,s:i,s:i,s:s}", "fingerprint", info->fingerprint, "dtype",
+                   info->dtype, "embed_dim", info->embed_dim, "image_size", info->image_size,
+                   "patch_size", info->patch_size, "context_length", info->context_length,
+                   "naming", info->naming ? "hf" : "openai");
+}
+
+/* ---------------------------------------------------------------- computing */
+
+int fg_l2_normalize(float *v, int n) {
+  double ss = 0;
+  for (int i = 0; i < n; i++) ss += (double)v[i] * (double)v[i];
+  double norm = sqrt(ss);
+  if (!(norm > 0) || !isfinite(norm)) return fg_fail(FG_EINVAL, "the vector has norm %g", norm);
+  for (int i = 0; i < n; i++) v[i] = (float)((double)v[i] / norm);
+  return 0;
+}
+
+/* Whether s holds nothing but ASCII whitespace. */
+static int blank(const char *s) {
+  for (; *s; s++)
+    if (*s != ' ' && *s != '\t' && *s != '\n' && *s != '\r' && *s != '\f' && *s != '\v') return 0;
+  return 1;
+}
+
+int fg_clip_model_embed_texts(fg_clip_model *m, const char *const *texts, int n, int truncate,
+                              int normalize, float *out, int *bad) {
+  if (bad) *bad = -1;
+  if (n < 1 || n > FG_CLIP_MAX_TEXTS)
+    return fg_fail(FG_EINVAL, "give 1 to %d texts, not %d", FG_CLIP_MAX_TEXTS, n);
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  const int ctx = info->context_length, E = info->embed_dim;
+  int32_t *ids = malloc((size_t)n * (size_t)ctx * sizeof *ids);
+  if (!ids) return fg_fail(FG_ENOMEM, "out of memory");
+  int rc = 0;
+  for (int i = 0; i < n && rc == 0; i++) {
+    size_t len = strlen(texts[i]);
+    if (blank(texts[i]))
+      rc = fg_fail(FG_EINVAL, "the text is empty; give the words to embed");
+    else if (len > FG_CLIP_MAX_TEXT_BYTES)
+      rc = fg_fail(FG_EINVAL, "the text is %zu bytes long; the limit is %d (and CLIP reads "
+                   "only the first %d tokens)", len, FG_CLIP_MAX_TEXT_BYTES, ctx - 2);
+    else
+      rc = fg_tokenizer_encode(m->tok, texts[i], ctx, truncate, ids + (size_t)i * ctx, NULL);
+    if (rc != 0 && bad) *bad = i;
+  }
+  if (rc == 0) rc = fg_clip_text(m->clip, ids, n, out);
+  for (int i = 0; rc == 0 && normalize && i < n; i++) {
+    if (fg_l2_normalize(out + (size_t)i * E, E) != 0) {
+      rc = fg_fail(FG_EINVAL, "its embedding has norm 0 and cannot be normalised");
+      if (bad) *bad = i;
+    }
+  }
+  free(ids);
+  return rc;
+}
+
+/* The size [H][W] F3RM's resize gives a w x h image (clip.h, fg_clip_preprocess), in 64
+ * bits: an extreme aspect ratio makes the long side huge. */
+static void resized(int S, int w, int h, int64_t *H, int64_t *W) {
+  if (w <= h) {
+    *W = S;
+    *H = (int64_t)((double)S * h / w);
+  } else {
+    *H = S;
+    *W = (int64_t)((double)S * w / h);
+  }
+}
+
+int fg_clip_model_grid(const fg_clip_model *m, int w, int h, int *hp, int *wp) {
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  if (w < 1 || h < 1) return fg_fail(FG_EINVAL, "the image is %dx%d pixels", w, h);
+  int64_t H, W;
+  resized(info->image_size, w, h, &H, &W);
+  int64_t gh = H / info->patch_size, gw = W / info->patch_size;
+  if (gh * gw > FG_CLIP_MAX_PATCHES)
+    return fg_fail(FG_ERANGE, "a %dx%d image becomes a %lldx%lld grid of CLIP patches, more "
+                   "than the %d this server computes; crop it to an aspect ratio nearer 1:1", w,
+                   h, (long long)gw, (long long)gh, FG_CLIP_MAX_PATCHES);
+  return fg_clip_dense_grid(m->clip, (int)H, (int)W, hp, wp);
+}
+
+/* The F3RM preprocessing of rgb [h][w][3] into a malloc'd [3][*H][*W]. */
+static int preprocess(fg_clip_model *m, const float *rgb, int w, int h, float **x, int *H,
+                      int *W) {
+  return fg_clip_preprocess(m->clip, rgb, w, h, 1, x, H, W);
+}
+
+int fg_clip_model_dense(fg_clip_model *m, const float *rgb, int w, int h, float **out, int *hp,
+                        int *wp) {
+  *out = NULL;
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  FG_TRY(fg_clip_model_grid(m, w, h, hp, wp)); /* before the resize allocates */
+  float *x = NULL;
+  int H, W;
+  FG_TRY(preprocess(m, rgb, w, h, &x, &H, &W));
+  int rc = fg_clip_dense_grid(m->clip, H, W, hp, wp);
+  float *f = NULL;
+  if (rc == 0) {
+    f = malloc((size_t)*hp * (size_t)*wp * (size_t)info->embed_dim * sizeof *f);
+    rc = f ? fg_clip_image_dense(m->clip, x, 1, H, W, f) : fg_fail(FG_ENOMEM, "out of memory");
+  }
+  free(x);
+  if (rc != 0) {
+    free(f);
+    return rc;
+  }
+  *out = f;
+  return 0;
+}
+
+/* Python's round() of x / 2 for a whole x >= 0: half to even. */
+static int half_even(int x) {
+  int q = x / 2;
+  return (x % 2 == 1 && q % 2 == 1) ? q + 1 : q;
+}
+
+int fg_clip_model_pooled(fg_clip_model *m, const float *rgb, int w, int h, float *out) {
+  const fg_clip_info *info = fg_clip_get_info(m->clip);
+  const int S = info->image_size;
+  int64_t H64, W64;
+  if (w < 1 || h < 1) return fg_fail(FG_EINVAL, "the image is %dx%d pixels", w, h);
+  resized(S, w, h, &H64, &W64);
+  if (H64 * W64 > (int64_t)FG_IMAGE_MAX_PIXELS)
+    return fg_fail(FG_ERANGE, "a %dx%d image resized to a short side of %d would be %lldx%lld "
+                   "pixels; crop it to an aspect ratio nearer 1:1", w, h, S, (long long)W64,
+                   (long long)H64);
+  float *x = NULL;
+  int H, W;
+  FG_TRY(preprocess(m, rgb, w, h, &x, &H, &W));
+  if (H < S || W < S) {
+    free(x);
+    return fg_fail(FG_EINVAL, "the preprocessed image is %dx%d, smaller than the %dx%d crop",
+                   W, H, S, S);
+  }
+  /* x [3][H][W] -> crop [3][S][S] at (top, left) */
+  float *crop = malloc((size_t)3 * S * S * sizeof *crop);
+  if (!crop) {
+    free(x);
+    return fg_fail(FG_ENOMEM, "out of memory");
+  }
+  int top = half_even(H - S), left = half_even(W - S);
+  for (int c = 0; c < 3; c++)
+    for (int y = 0; y < S; y++)
+      memcpy(crop + ((size_t)c * S + y) * S, x + ((size_t)c * H + top + y) * W + left,
+             (size_t)S * sizeof *crop);
+  free(x);
+  int rc = fg_clip_image_pooled(m->clip, crop, 1, out);
+  free(crop);
+  return rc;
+}

@@ -1,0 +1,52 @@
+/* Queries of SPEC.md "A query": what a heatmap or a query render looks for, resolved into
+ * unit vectors in the scene's feature space.
+ *
+ * The JSON keys, beside a request's own:
+ *   "text": "mug"                 embedded with CLIP's text encoder (needs [clip]), or
+ *   "embedding": [D numbers]      a feature-space vector given directly;
+ *   "negatives": ["object", ...]  texts (needs [clip]); default, when "text" is given,
+ *                                 ["object", "things", "stuff", "texture"]; [] for none;
+ *   "negative_embeddings": [[D]]  or vectors given directly (not both);
+ *   "temperature": 0.1            > 0, of the softmax between query and negatives.
+ * Every vector is scaled to unit L2 norm; one of norm 0 is refused. An "embedding" query
+ * has no negatives unless the request names some. */
+#ifndef FG_DAEMON_QUERY_H
+#define FG_DAEMON_QUERY_H
+
+#include <stddef.h>
+
+#include <jansson.h>
+
+#include "http.h"
+
+#define FG_QUERY_MAX_NEGATIVES 64
+#define FG_QUERY_DEFAULT_TEMPERATURE 0.1f
+
+typedef struct fg_query {
+  int dim;           /* D */
+  float *q;          /* [D], unit length; owned */
+  int n_neg;
+  float *neg;        /* [n_neg][D], unit length; owned; NULL when n_neg is 0 */
+  float temperature; /* > 0 */
+  int from_text;     /* q came from "text" */
+} fg_query;
+
+/* 1 when key is one of the query keys above (for handlers that refuse unknown keys). */
+int fg_query_is_key(const char *key);
+
+/* 1 when body holds any query key. */
+int fg_query_present(json_t *body);
+
+/* Resolves the query keys of body into *out. scene_dim is the scene's feature dimension when
+ * known (its trained field's, else its frames'), 0 otherwise: vectors of another D are
+ * refused. Texts are embedded through the CLIP model of req's app. Answers the request
+ * itself and returns -1 when the query cannot be used: 400 invalid_query (missing or
+ * malformed keys, vectors of the wrong D, non-finite or zero vectors), 400 text_too_long or
+ * invalid_text (a text CLIP cannot take), 409 clip_not_configured (texts without [clip]),
+ * 409 feature_dim_mismatch (CLIP's E is not the scene's D). On success the caller owns *out
+ * (fg_query_clear); on failure it holds nothing. */
+int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_query *out);
+
+void fg_query_clear(fg_query *q);
+
+#endif
