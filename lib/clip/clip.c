@@ -682,7 +682,6 @@ static int vision(fg_clip *c, const float *x, int n, int H, int W, int dense, fl
   const int p = in->patch_size, w = in->vision_width, E = in->embed_dim;
   const int g = in->image_size / p, K = 3 * p * p;
   int hp, wp;
-  if (n < 1) return fg_fail(FG_EINVAL, "no images given");
   FG_TRY(fg_clip_dense_grid(c, H, W, &hp, &wp));
   const int np = hp * wp, T = np + 1, rows = n * T, nt = threads_of(c);
   const int prev = blas_single_begin();
@@ -759,20 +758,41 @@ out:
   return rc;
 }
 
+/* Inputs run in batches of at most this many tokens (rows of every activation), which bounds
+ * the activations' memory (about 40 KB per token at width 768) whatever n a caller passes;
+ * the weights are converted once per batch. */
+#define BATCH_TOKENS 2048
+
+/* The number of inputs of T tokens each that one batch takes. */
+static int batch_of(int T) { return T >= BATCH_TOKENS ? 1 : BATCH_TOKENS / T; }
+
 int fg_clip_image_dense(fg_clip *c, const float *x, int n, int H, int W, float *out) {
-  return vision(c, x, n, H, W, 1, out);
+  int hp, wp;
+  FG_TRY(fg_clip_dense_grid(c, H, W, &hp, &wp));
+  if (n < 1) return fg_fail(FG_EINVAL, "no images given");
+  const int b = batch_of(hp * wp + 1);
+  for (int i = 0; i < n; i += b)
+    FG_TRY(vision(c, x + (size_t)i * 3 * H * W, n - i < b ? n - i : b, H, W, 1,
+                  out + (size_t)i * hp * wp * c->info.embed_dim));
+  return 0;
 }
 
 int fg_clip_image_pooled(fg_clip *c, const float *x, int n, float *out) {
-  return vision(c, x, n, c->info.image_size, c->info.image_size, 0, out);
+  const int S = c->info.image_size, p = c->info.patch_size;
+  if (n < 1) return fg_fail(FG_EINVAL, "no images given");
+  const int b = batch_of((S / p) * (S / p) + 1);
+  for (int i = 0; i < n; i += b)
+    FG_TRY(vision(c, x + (size_t)i * 3 * S * S, n - i < b ? n - i : b, S, S, 0,
+                  out + (size_t)i * c->info.embed_dim));
+  return 0;
 }
 
 /* ---- text encoder ----------------------------------------------------------------------- */
 
-int fg_clip_text(fg_clip *c, const int32_t *ids, int n, float *out) {
+/* Text embeddings of a batch of n sequences whose ids were checked. */
+static int text_batch(fg_clip *c, const int32_t *ids, int n, float *out) {
   const fg_clip_info *in = &c->info;
   const int ctx = in->context_length, w = in->text_width, E = in->embed_dim;
-  if (n < 1) return fg_fail(FG_EINVAL, "no texts given");
   /* The end-of-text row of each sequence (OpenAI: argmax of the ids, the first maximum). With
    * causal attention no token sees a later one, so only the first max(eot) + 1 positions
    * affect the result: the batch runs on that many. */
@@ -782,14 +802,8 @@ int fg_clip_text(fg_clip *c, const int32_t *ids, int n, float *out) {
   for (int q = 0; q < n; q++) {
     const int32_t *r = ids + (size_t)q * ctx;
     eot[q] = 0;
-    for (int t = 0; t < ctx; t++) {
-      if (r[t] < 0 || r[t] >= in->vocab_size) {
-        free(eot);
-        return fg_fail(FG_EINVAL, "token id %d at position %d of text %d is outside the "
-                       "vocabulary (0..%d)", r[t], t, q, in->vocab_size - 1);
-      }
+    for (int t = 0; t < ctx; t++)
       if (r[t] > r[eot[q]]) eot[q] = t;
-    }
     if (eot[q] + 1 > T) T = eot[q] + 1;
   }
   const int rows = n * T, nt = threads_of(c);
@@ -820,4 +834,17 @@ out:
   free(eot);
   blas_single_end(prev);
   return rc;
+}
+
+int fg_clip_text(fg_clip *c, const int32_t *ids, int n, float *out) {
+  if (n < 1) return fg_fail(FG_EINVAL, "no texts given");
+  const int ctx = c->info.context_length, V = c->info.vocab_size, b = batch_of(ctx);
+  for (size_t k = 0; k < (size_t)n * ctx; k++)
+    if (ids[k] < 0 || ids[k] >= V)
+      return fg_fail(FG_EINVAL, "token id %d at position %d of text %d is outside the "
+                     "vocabulary (0..%d)", ids[k], (int)(k % ctx), (int)(k / ctx), V - 1);
+  for (int i = 0; i < n; i += b)
+    FG_TRY(text_batch(c, ids + (size_t)i * ctx, n - i < b ? n - i : b,
+                      out + (size_t)i * c->info.embed_dim));
+  return 0;
 }

@@ -220,6 +220,22 @@ static void check_batch_and_threads(const char *path) {
     ASSERT(max_abs_diff(one, g_text.f + (size_t)q * E, (size_t)E) <= TOL);
   }
   free(one), free(x2), free(out2), free(second);
+
+  /* More inputs than one internal batch takes (2048 tokens: 26 texts of 77, 56 images of
+   * 36 tokens here): every one still gets its own answer. */
+  const int many = 60, ctx = in->context_length;
+  int32_t *ids = malloc((size_t)many * ctx * sizeof(int32_t));
+  float *temb = malloc((size_t)many * E * sizeof(float));
+  for (int q = 0; q < many; q++)
+    memcpy(ids + (size_t)q * ctx, g_ids.i + (size_t)(q % n) * ctx, (size_t)ctx * sizeof(int32_t));
+  ASSERT_OK(fg_clip_text(c, ids, many, temb));
+  for (int q = 0; q < many; q++)
+    ASSERT(max_abs_diff(temb + (size_t)q * E, g_text.f + (size_t)(q % n) * E, (size_t)E) <= TOL);
+  float *xs = malloc((size_t)many * px * sizeof(float)), *dn = malloc((size_t)many * per * sizeof(float));
+  for (int q = 0; q < many; q++) memcpy(xs + (size_t)q * px, g_dense_in.f, px * sizeof(float));
+  ASSERT_OK(fg_clip_image_dense(c, xs, many, H, W, dn));
+  for (int q = 0; q < many; q++) ASSERT(max_abs_diff(dn + (size_t)q * per, g_dense.f, per) <= TOL);
+  free(ids), free(temb), free(xs), free(dn);
   fg_clip_free(c);
 }
 
