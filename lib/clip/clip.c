@@ -20,12 +20,9 @@
 #include <string.h>
 #include <zlib.h>
 
+#include "core/blas.h"
 #include "core/error.h"
 #include "io/safetensors.h"
-
-/* OpenBLAS's own controls (not in cblas.h of every version). */
-void openblas_set_num_threads(int n);
-int openblas_get_num_threads(void);
 
 #define LN_EPS 1e-5f
 #define MAX_LAYERS 128
@@ -649,18 +646,6 @@ static void interp_pos(const float *pos, int g, int w, int hp, int wp, float *ou
   }
 }
 
-/* OpenBLAS runs single-threaded inside the calls (see gemm); its setting is process-wide,
- * so it is put back afterwards. */
-static int blas_single_begin(void) {
-  const int prev = openblas_get_num_threads();
-  if (prev != 1) openblas_set_num_threads(1);
-  return prev;
-}
-
-static void blas_single_end(int prev) {
-  if (prev != 1) openblas_set_num_threads(prev);
-}
-
 static int threads_of(const fg_clip *c) { return c->threads > 0 ? c->threads : omp_get_max_threads(); }
 
 int fg_clip_dense_grid(const fg_clip *c, int H, int W, int *hp, int *wp) {
@@ -684,7 +669,7 @@ static int vision(fg_clip *c, const float *x, int n, int H, int W, int dense, fl
   int hp, wp;
   FG_TRY(fg_clip_dense_grid(c, H, W, &hp, &wp));
   const int np = hp * wp, T = np + 1, rows = n * T, nt = threads_of(c);
-  const int prev = blas_single_begin();
+  const int prev = fg_blas_single_begin();
   acts a = {0};
   float *xs = malloc((size_t)rows * w * sizeof(float));
   float *cols = malloc((size_t)n * np * K * sizeof(float));
@@ -754,7 +739,7 @@ static int vision(fg_clip *c, const float *x, int n, int H, int W, int dense, fl
 out:
   acts_free(&a);
   free(xs), free(cols), free(pos);
-  blas_single_end(prev);
+  fg_blas_single_end(prev);
   return rc;
 }
 
@@ -807,7 +792,7 @@ static int text_batch(fg_clip *c, const int32_t *ids, int n, float *out) {
     if (eot[q] + 1 > T) T = eot[q] + 1;
   }
   const int rows = n * T, nt = threads_of(c);
-  const int prev = blas_single_begin();
+  const int prev = fg_blas_single_begin();
   acts a = {0};
   float *xs = malloc((size_t)rows * w * sizeof(float));
   int rc = xs ? acts_alloc(&a, c, n, T, w, nt) : fg_fail(FG_ENOMEM, "out of memory");
@@ -832,7 +817,7 @@ out:
   acts_free(&a);
   free(xs);
   free(eot);
-  blas_single_end(prev);
+  fg_blas_single_end(prev);
   return rc;
 }
 

@@ -28,6 +28,7 @@
  * order, so no sum depends on which thread ran what. */
 #include "field/mlp.h"
 
+#include "core/blas.h"
 #include "core/error.h"
 
 #include <cblas.h>
@@ -223,19 +224,6 @@ static void blas_wgrad(int n, const float *D, int N, const float *A, int K, floa
                        int accumulate) {
   cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, N, K, n, 1.0f, D, N, A, K,
               accumulate ? 1.0f : 0.0f, P, K);
-}
-
-/* Debian's OpenBLAS is the pthread build: its thread count is process-wide and it knows
- * nothing of OpenMP, so SGEMMs issued from several OpenMP threads must each run on one
- * OpenBLAS thread. */
-static int blas_single_begin(void) {
-  const int prev = openblas_get_num_threads();
-  if (prev != 1) openblas_set_num_threads(1);
-  return prev;
-}
-
-static void blas_single_end(int prev) {
-  if (prev != 1) openblas_set_num_threads(prev);
 }
 
 /* ---- per-chunk layer operations: AVX-512 -----------------------------------------------
@@ -564,7 +552,7 @@ void fg_mlp_forward(const fg_mlp_config *cfg, const float *W, const float *in, i
   const plan p = make_plan(B);
   const int L = cfg->n_hidden_layers, H = cfg->n_hidden, avx = use_avx512();
   const int nt = resolve_threads(n_threads);
-  const int blas = needs_blas(cfg, avx, 1) ? blas_single_begin() : 1;
+  const int blas = needs_blas(cfg, avx, 1) ? fg_blas_single_begin() : 1;
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && p.n_chunks > 1)
   for (int c = 0; c < p.n_chunks; c++) {
     const int r0 = c * p.chunk, n = B - r0 < p.chunk ? B - r0 : p.chunk;
@@ -576,7 +564,7 @@ void fg_mlp_forward(const fg_mlp_config *cfg, const float *W, const float *in, i
       a = o;
     }
   }
-  blas_single_end(blas);
+  fg_blas_single_end(blas);
 }
 
 void fg_mlp_backward(const fg_mlp_config *cfg, const float *W, const float *in,
@@ -589,7 +577,7 @@ void fg_mlp_backward(const fg_mlp_config *cfg, const float *W, const float *in,
   const size_t n_params = fg_mlp_n_params(cfg);
   const size_t delta_floats = L > 0 ? (size_t)p.chunk * H : 0;
   float *parts = scratch, *deltas = scratch + (size_t)p.n_groups * n_params;
-  const int blas = needs_blas(cfg, avx, 0) ? blas_single_begin() : 1;
+  const int blas = needs_blas(cfg, avx, 0) ? fg_blas_single_begin() : 1;
 
 #pragma omp parallel num_threads(nt) if (nt > 1 && p.n_groups > 1)
   {
@@ -627,5 +615,5 @@ void fg_mlp_backward(const fg_mlp_config *cfg, const float *W, const float *in,
       dW[i] = s;
     }
   }
-  blas_single_end(blas);
+  fg_blas_single_end(blas);
 }
