@@ -4,6 +4,7 @@
 #include "jobs.h"
 #include "json.h"
 #include "metrics.h"
+#include "query.h"
 
 #include "config.h"
 #include "core/error.h"
@@ -27,6 +28,8 @@ const fg_route fg_api_routes[] = {
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/train", "/v1/scenes/{s}/train", fg_api_train_start, 0},
   {"POST", "/v1/scenes/{}/render", "/v1/scenes/{s}/render", fg_api_scene_render,
+   FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/scenes/{}/heatmap", "/v1/scenes/{s}/heatmap", fg_api_scene_heatmap,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image, FG_ROUTE_OFFLOAD},
@@ -144,6 +147,33 @@ fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
   return s;
 }
 
+fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp) {
+  fg_field_ref *ref = fg_scene_field_acquire(s);
+  if (ref) return ref;
+  if (info->checkpoint_error[0])
+    fg_resp_error(resp, 409, "not_trained", "scene '%s' has no trained field: its checkpoint "
+                  "does not load (%s); POST /v1/scenes/%s/train to train it again, and wait "
+                  "until the job is done", info->name, info->checkpoint_error, info->name);
+  else
+    fg_resp_error(resp, 409, "not_trained", "scene '%s' is not trained yet; train it first: "
+                  "POST /v1/scenes/%s/train, and wait until the job is done", info->name,
+                  info->name);
+  return NULL;
+}
+
+int fg_api_query_fits(const fg_field *f, const fg_query *q, const char *name, fg_resp *resp) {
+  if (f->cfg.feature_dim == 0)
+    return fg_resp_error(resp, 409, "no_features", "scene '%s' was trained on colour only, "
+                         "without features, so a query has nothing to score; upload frames "
+                         "with \"features\" (.npy) or configure [clip], then train it again",
+                         name), -1;
+  if (f->cfg.feature_dim != q->dim)
+    return fg_resp_error(resp, 409, "feature_dim_mismatch", "scene '%s' was trained again "
+                         "meanwhile and its features now have D = %d, not %d; ask again with "
+                         "a query of that D", name, f->cfg.feature_dim, q->dim), -1;
+  return 0;
+}
+
 /* ---------------------------------------------------------------- health and metrics */
 
 int fg_api_health(fg_req *req, fg_resp *resp) {
@@ -156,6 +186,7 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   fg_metrics_gauges g = {0};
   fg_store_totals(req->app->store, &g.scenes, &g.frames);
   g.trained_scenes = fg_store_trained(req->app->store);
+  g.voxel_cache_bytes = fg_store_voxel_cache_bytes(req->app->store);
   if (req->app->jobs) fg_jobs_count(req->app->jobs, g.jobs);
   fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;
   g.clip_loaded = m != NULL;

@@ -55,6 +55,7 @@ int fg_api_job_get(fg_req *req, fg_resp *resp);
 int fg_api_job_cancel(fg_req *req, fg_resp *resp);
 int fg_api_job_events(fg_req *req, fg_resp *resp);
 int fg_api_scene_render(fg_req *req, fg_resp *resp);
+int fg_api_scene_heatmap(fg_req *req, fg_resp *resp);
 int fg_api_embed_text(fg_req *req, fg_resp *resp);
 int fg_api_embed_image(fg_req *req, fg_resp *resp);
 
@@ -75,5 +76,17 @@ struct fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp);
 
 /* The scene named by the first path parameter with a reference, or NULL after answering 404. */
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
+
+/* The scene's field with a reference (fg_field_ref_release), or NULL after answering 409
+ * not_trained with a message that says to train it first (and why its checkpoint did not
+ * load, when it did not). info is the scene's description. */
+fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp);
+
+/* 0 when query q (query.h) can score field f of scene `name`; else answers 409 no_features (a
+ * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was
+ * committed since q was checked) and returns -1. */
+struct fg_query;
+int fg_api_query_fits(const fg_field *f, const struct fg_query *q, const char *name,
+                      fg_resp *resp);
 
 #endif

@@ -3,6 +3,7 @@
 #include "api.h"
 #include "decoder.h"
 #include "json.h"
+#include "metrics.h"
 #include "query.h"
 
 #include "core/error.h"
@@ -18,6 +19,10 @@
 #define FG_API_RENDER_MAX_SIDE 4096
 /* Rays rendered per call of fg_field_render_rays: bounds the memory of one render. */
 #define RENDER_CHUNK 65536
+/* Rays of a heatmap render per call: its (chunk, D) features stay at 8 MB for D = 512. */
+#define HEATMAP_CHUNK 4096
+/* Pixels less opaque than this show the field's colour without a score. */
+#define HEATMAP_MIN_OPACITY 0.5f
 
 static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",
                                           "k1", "k2", "k3", "p1", "p2", "camera_angle_x",
@@ -148,12 +153,32 @@ static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
   return 0;
 }
 
+/* Rays of pixels start .. start + m - 1 (row-major) of r's camera: origins o (m,3), unit
+ * directions d (m,3) in the world frame, and each ray's cosine to the optical axis (m). */
+static void camera_rays(const render_req *r, int64_t start, int64_t m, float *o, float *d,
+                        float *cos_axis) {
+  const fg_camera *c = &r->cam;
+  const double *T = r->T_world_cam;
+  for (int64_t i = 0; i < m; i++) {
+    int64_t p = start + i;
+    double u = (double)(p % c->w) + 0.5, v = (double)(p / c->w) + 0.5;
+    /* OpenGL camera: +x right, +y up, looking along -z. */
+    double x = (u - c->cx) / c->fl_x, y = -(v - c->cy) / c->fl_y, z = -1.0;
+    double len = sqrt(x * x + y * y + z * z);
+    x /= len, y /= len, z /= len;
+    for (int k = 0; k < 3; k++) {
+      d[3 * i + k] = (float)(T[4 * k] * x + T[4 * k + 1] * y + T[4 * k + 2] * z);
+      o[3 * i + k] = (float)T[4 * k + 3];
+    }
+    if (cos_axis) cos_axis[i] = (float)(1.0 / len);
+  }
+}
+
 /* Renders the image into out: uint8 RGB [h][w][3], or uint16 z-depth in millimetres [h][w]
  * (0 where the opacity is below 0.5, saturating at 65535). */
 static int render_image(const fg_field *f, const render_req *r, const float bg[3], int n_threads,
                         void *out) {
   const fg_camera *c = &r->cam;
-  const double *T = r->T_world_cam;
   int64_t n = (int64_t)c->w * c->h;
   int64_t chunk = n < RENDER_CHUNK ? n : RENDER_CHUNK;
   float *o = malloc((size_t)chunk * 3 * sizeof *o), *d = malloc((size_t)chunk * 3 * sizeof *d);
@@ -163,19 +188,7 @@ static int render_image(const fg_field *f, const render_req *r, const float bg[3
   int rc = (o && d && rgb && depth && alpha && cos_axis) ? 0 : fg_fail(FG_ENOMEM, "out of memory");
   for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
     int64_t m = n - start < chunk ? n - start : chunk;
-    for (int64_t i = 0; i < m; i++) {
-      int64_t p = start + i;
-      double u = (double)(p % c->w) + 0.5, v = (double)(p / c->w) + 0.5;
-      /* OpenGL camera: +x right, +y up, looking along -z. */
-      double x = (u - c->cx) / c->fl_x, y = -(v - c->cy) / c->fl_y, z = -1.0;
-      double len = sqrt(x * x + y * y + z * z);
-      x /= len, y /= len, z /= len;
-      for (int k = 0; k < 3; k++) {
-        d[3 * i + k] = (float)(T[4 * k] * x + T[4 * k + 1] * y + T[4 * k + 2] * z);
-        o[3 * i + k] = (float)T[4 * k + 3];
-      }
-      cos_axis[i] = (float)(1.0 / len); /* the ray's cosine to the optical axis */
-    }
+    camera_rays(r, start, m, o, d, cos_axis);
     rc = fg_field_render_rays(f, o, d, m, bg, r->depth ? NULL : rgb, r->depth ? depth : NULL,
                               r->depth ? alpha : NULL, NULL, n_threads);
     if (rc != 0) break;
@@ -202,41 +215,56 @@ static int render_image(const fg_field *f, const render_req *r, const float bg[3
   return rc;
 }
 
+/* Renders colour and features of r's camera, scores every pixel's feature with query q
+ * (pixels of opacity below HEATMAP_MIN_OPACITY show no score) and blends the turbo map of
+ * the scores over the colour (fg_heatmap_blend, over the image's own score range) into out,
+ * uint8 RGB [h][w][3]. Features are rendered HEATMAP_CHUNK rays at a time, so a render's
+ * memory stays near 16 bytes a pixel whatever D. */
+static int render_heatmap(const fg_field *f, const render_req *r, const fg_query *q,
+                          const float bg[3], int n_threads, uint8_t *out) {
+  const fg_camera *c = &r->cam;
+  const int D = f->cfg.feature_dim;
+  int64_t n = (int64_t)c->w * c->h;
+  int64_t chunk = n < HEATMAP_CHUNK ? n : HEATMAP_CHUNK;
+  float *o = malloc((size_t)chunk * 3 * sizeof *o), *d = malloc((size_t)chunk * 3 * sizeof *d);
+  float *feat = malloc((size_t)chunk * (size_t)D * sizeof *feat); /* (chunk, D) */
+  float *alpha = malloc((size_t)chunk * sizeof *alpha);
+  float *rgb = malloc((size_t)n * 3 * sizeof *rgb);   /* (n, 3) */
+  float *scores = malloc((size_t)n * sizeof *scores); /* (n) */
+  int rc = (o && d && feat && alpha && rgb && scores) ? 0 : fg_fail(FG_ENOMEM, "out of memory");
+  for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
+    int64_t m = n - start < chunk ? n - start : chunk;
+    camera_rays(r, start, m, o, d, NULL);
+    rc = fg_field_render_rays(f, o, d, m, bg, rgb + 3 * start, NULL, alpha, feat, n_threads);
+    if (rc == 0)
+      rc = fg_query_score_features(q, feat, m, D, alpha, HEATMAP_MIN_OPACITY, scores + start,
+                                   n_threads);
+  }
+  if (rc == 0) fg_heatmap_blend(rgb, scores, n, NAN, NAN, out);
+  free(o), free(d), free(feat), free(alpha), free(rgb), free(scores);
+  return rc;
+}
+
 int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
   json_t *body = fg_api_body_object(req, resp);
   fg_field_ref *ref = NULL;
   void *pixels = NULL;
+  fg_query q = {0};
   if (!body) goto out;
   render_req r;
   if (parse_render(body, &r, resp) != 0) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
-  if (r.heatmap) {
-    /* The query is checked now (dimensions against the trained field's, else the frames');
-     * the render itself comes with heatmaps. */
-    fg_query q;
-    int dim = info.field_feature_dim ? info.field_feature_dim : info.feature_dim;
-    if (fg_query_parse(req, resp, body, dim, &q) != 0) goto out;
-    fg_query_clear(&q);
-    fg_resp_error(resp, 501, "not_implemented", "output \"heatmap\" (a render coloured by a "
-                  "text or embedding query) is not implemented in this version; the query is "
-                  "valid, and \"rgb\" and \"depth\" renders are");
+  /* The query is checked first, against the trained field's D, else the frames'. */
+  if (r.heatmap && fg_query_parse(req, resp, body, info.field_feature_dim ? info.field_feature_dim
+                                  : info.feature_dim, &q) != 0)
     goto out;
-  }
-  ref = fg_scene_field_acquire(s);
-  if (!ref) {
-    if (info.checkpoint_error[0])
-      fg_resp_error(resp, 409, "not_trained", "scene '%s' has no trained field: its checkpoint "
-                    "does not load (%s); POST /v1/scenes/%s/train to train it again, and wait "
-                    "until the job is done", info.name, info.checkpoint_error, info.name);
-    else
-      fg_resp_error(resp, 409, "not_trained", "scene '%s' is not trained yet; POST "
-                    "/v1/scenes/%s/train first, and wait until the job is done", info.name,
-                    info.name);
-    goto out;
-  }
+  ref = fg_api_scene_field(s, &info, resp);
+  if (!ref) goto out;
+  const fg_field *field = fg_field_ref_field(ref);
+  if (r.heatmap && fg_api_query_fits(field, &q, info.name, resp) != 0) goto out;
   size_t n = (size_t)r.cam.w * (size_t)r.cam.h;
   pixels = malloc(n * (r.depth ? sizeof(uint16_t) : 3));
   if (!pixels) {
@@ -246,10 +274,14 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   }
   float bg[3] = {(float)info.params.background[0], (float)info.params.background[1],
                  (float)info.params.background[2]};
-  if (render_image(fg_field_ref_field(ref), &r, bg, fg_conf_threads(req->conf), pixels) != 0) {
+  int threads = fg_conf_threads(req->conf);
+  int rc = r.heatmap ? render_heatmap(field, &r, &q, bg, threads, pixels)
+                     : render_image(field, &r, bg, threads, pixels);
+  if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "render failed: %s", fg_error_detail());
     goto out;
   }
+  if (r.heatmap) fg_metrics_count_heatmap(FG_METRICS_HEATMAP_RENDER);
   fg_field_ref_release(ref);
   ref = NULL;
   uint8_t *png = NULL;
@@ -261,6 +293,7 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   }
   fg_resp_take(resp, 200, "image/png", (char *)png, png_len);
 out:
+  fg_query_release(&q);
   fg_field_ref_release(ref);
   free(pixels);
   json_decref(body);

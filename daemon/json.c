@@ -203,6 +203,14 @@ json_t *fg_json_scene(const fg_scene_info *info) {
     if (!err) err = json_string("the checkpoint does not load (see the daemon's log)");
   }
   json_object_set_new(o, "checkpoint_error", err ? err : json_null());
+  const fg_voxcache_info *v = &info->voxel_cache;
+  json_object_set_new(o, "voxel_cache",
+                      json_pack("{s:b,s:b,s:I,s:I,s:I,s:o,s:o}", "built", v->built, "building",
+                                v->building, "bytes", (json_int_t)v->bytes, "voxels",
+                                (json_int_t)v->voxels, "kept", (json_int_t)v->kept,
+                                "voxel_size", v->built ? json_real(v->voxel_size) : json_null(),
+                                "build_seconds",
+                                v->built ? json_real(v->build_seconds) : json_null()));
   return o;
 }
 

@@ -236,7 +236,10 @@ int main(int argc, char **argv) {
   fg_http_config hc = {
     .listen = conf->listen,
     .poll_threads = poll_threads,
-    .offload_threads = poll_threads,
+    /* Two more than the polling threads: requests waiting for a scene's voxel features to be
+     * built (voxcache.h) sleep on an offload thread, and must not hold every one of them
+     * while other scenes' heatmaps and renders wait. */
+    .offload_threads = poll_threads + 2,
     .routes = fg_api_routes,
     .n_routes = fg_api_n_routes,
     .app = &app,

@@ -36,6 +36,8 @@ static _Atomic double training_samples_per_s;
 static atomic_ullong clip_embeddings[FG_METRICS_CLIP_KINDS];
 static atomic_ullong clip_frames_computed, clip_frames_cached;
 static atomic_ullong clip_loads_ok, clip_loads_failed;
+static atomic_ullong heatmaps[FG_METRICS_HEATMAP_KINDS];
+static atomic_ullong voxel_builds, voxel_build_us;
 
 void fg_metrics_set_route(int idx, const char *method, const char *route) {
   if (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) return;
@@ -78,6 +80,15 @@ void fg_metrics_add_clip_feature_frames(unsigned computed, unsigned cached) {
 
 void fg_metrics_count_clip_load(int ok) {
   atomic_fetch_add(ok ? &clip_loads_ok : &clip_loads_failed, 1);
+}
+
+void fg_metrics_count_heatmap(fg_metrics_heatmap_kind kind) {
+  if (kind >= 0 && kind < FG_METRICS_HEATMAP_KINDS) atomic_fetch_add(&heatmaps[kind], 1);
+}
+
+void fg_metrics_add_voxel_build(double seconds) {
+  atomic_fetch_add(&voxel_builds, 1);
+  atomic_fetch_add(&voxel_build_us, (unsigned long long)(seconds > 0 ? seconds * 1e6 : 0));
 }
 
 typedef struct {
@@ -210,6 +221,29 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "fieldgrip_clip_feature_frames_total{source=\"computed\"} %llu\n"
                  "fieldgrip_clip_feature_frames_total{source=\"cached\"} %llu\n",
             atomic_load(&clip_frames_computed), atomic_load(&clip_frames_cached));
+  sb_printf(&sb, "# HELP fieldgrip_heatmaps_total Heatmaps served: POST "
+                 "/v1/scenes/{s}/heatmap by format, and renders with output heatmap.\n"
+                 "# TYPE fieldgrip_heatmaps_total counter\n"
+                 "fieldgrip_heatmaps_total{format=\"json\"} %llu\n"
+                 "fieldgrip_heatmaps_total{format=\"npy\"} %llu\n"
+                 "fieldgrip_heatmaps_total{format=\"ply\"} %llu\n"
+                 "fieldgrip_heatmaps_total{format=\"render\"} %llu\n",
+            atomic_load(&heatmaps[FG_METRICS_HEATMAP_JSON]),
+            atomic_load(&heatmaps[FG_METRICS_HEATMAP_NPY]),
+            atomic_load(&heatmaps[FG_METRICS_HEATMAP_PLY]),
+            atomic_load(&heatmaps[FG_METRICS_HEATMAP_RENDER]));
+  sb_printf(&sb, "# HELP fieldgrip_voxel_cache_builds_total Voxel feature caches built (the "
+                 "trained field sampled on the workspace grid).\n"
+                 "# TYPE fieldgrip_voxel_cache_builds_total counter\n"
+                 "fieldgrip_voxel_cache_builds_total %llu\n"
+                 "# HELP fieldgrip_voxel_cache_build_seconds_total Wall time spent building voxel "
+                 "feature caches.\n# TYPE fieldgrip_voxel_cache_build_seconds_total counter\n"
+                 "fieldgrip_voxel_cache_build_seconds_total %.6f\n"
+                 "# HELP fieldgrip_voxel_cache_bytes Heap bytes of the voxel feature caches "
+                 "held, over all scenes.\n# TYPE fieldgrip_voxel_cache_bytes gauge\n"
+                 "fieldgrip_voxel_cache_bytes %zu\n",
+            atomic_load(&voxel_builds), (double)atomic_load(&voxel_build_us) / 1e6,
+            g->voxel_cache_bytes);
   if (sb.failed) {
     free(sb.buf);
     return NULL;

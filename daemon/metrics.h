@@ -35,6 +35,18 @@ void fg_metrics_add_clip_embeddings(fg_metrics_clip_kind kind, unsigned n);
 void fg_metrics_add_clip_feature_frames(unsigned computed, unsigned cached);
 void fg_metrics_count_clip_load(int ok);
 
+/* Heatmaps: served by format (POST /v1/scenes/{s}/heatmap) and as renders; builds of voxel
+ * feature caches and the seconds they took. */
+typedef enum {
+  FG_METRICS_HEATMAP_JSON = 0,
+  FG_METRICS_HEATMAP_NPY,
+  FG_METRICS_HEATMAP_PLY,
+  FG_METRICS_HEATMAP_RENDER,
+  FG_METRICS_HEATMAP_KINDS
+} fg_metrics_heatmap_kind;
+void fg_metrics_count_heatmap(fg_metrics_heatmap_kind kind);
+void fg_metrics_add_voxel_build(double seconds);
+
 /* Job states, in the order of the gauge's labels (jobs.h uses the same order). */
 #define FG_METRICS_JOB_STATES 5
 
@@ -44,6 +56,7 @@ typedef struct fg_metrics_gauges {
   size_t frames;
   size_t trained_scenes;                /* scenes holding a trained field */
   int clip_loaded;                      /* a CLIP model is being served */
+  size_t voxel_cache_bytes;             /* heap bytes of every voxel feature cache */
   size_t jobs[FG_METRICS_JOB_STATES];   /* jobs known, by state (queued, running, done,
                                            failed, cancelled) */
 } fg_metrics_gauges;

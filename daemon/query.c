@@ -17,8 +17,6 @@ static const char *const query_keys[] = {"text", "embedding", "negatives", "nega
                                          "temperature"};
 #define N_QUERY_KEYS (sizeof query_keys / sizeof query_keys[0])
 
-static const char *const default_negatives[] = {"object", "things", "stuff", "texture"};
-#define N_DEFAULT_NEGATIVES 4
 
 int fg_query_is_key(const char *key) {
   for (size_t i = 0; i < N_QUERY_KEYS; i++)
@@ -30,12 +28,6 @@ int fg_query_present(json_t *body) {
   for (size_t i = 0; i < N_QUERY_KEYS; i++)
     if (json_object_get(body, query_keys[i])) return 1;
   return 0;
-}
-
-void fg_query_clear(fg_query *q) {
-  free(q->q);
-  free(q->neg);
-  memset(q, 0, sizeof *q);
 }
 
 /* key of body, with JSON null read as absent. */
@@ -78,24 +70,26 @@ static int read_vector(json_t *v, int D, const char *what, float **out, int *n) 
   return 0;
 }
 
-/* Embeds the query's texts (text, when given, first, then the negatives) into
- * out->q / out->neg. Answers itself on failure. */
-static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *text,
+/* Embeds the query's positive texts (n_pos of them, first) and negatives into out->q (the
+ * mean of the positives' unit embeddings, renormalised) and out->neg. Answers itself on
+ * failure. */
+static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *const *pos, int n_pos,
                        const char *const *negs, int n_neg, fg_query *out) {
   const int E = fg_clip_model_info(m)->embed_dim;
-  const char *texts[1 + FG_QUERY_MAX_NEGATIVES];
+  const char *texts[FG_QUERY_MAX_TEXTS + FG_QUERY_MAX_NEGATIVES];
   int n = 0;
-  if (text) texts[n++] = text;
+  for (int i = 0; i < n_pos; i++) texts[n++] = pos[i];
   for (int i = 0; i < n_neg; i++) texts[n++] = negs[i];
   if (n == 0) return 0;
-  float *emb = malloc((size_t)n * (size_t)E * sizeof *emb);
+  float *emb = malloc((size_t)n * (size_t)E * sizeof *emb); /* [n][E] */
   if (!emb) return fg_resp_error(resp, 500, "internal_error", "out of memory"), -1;
   int bad = -1;
   int rc = fg_clip_model_embed_texts(m, texts, n, 0, 1, emb, &bad);
   if (rc != 0) {
     char name[32];
-    if (text && bad == 0) snprintf(name, sizeof name, "\"text\"");
-    else snprintf(name, sizeof name, "negatives[%d]", bad - (text ? 1 : 0));
+    if (bad >= 0 && bad < n_pos && n_pos == 1) snprintf(name, sizeof name, "\"text\"");
+    else if (bad >= 0 && bad < n_pos) snprintf(name, sizeof name, "text[%d]", bad);
+    else snprintf(name, sizeof name, "negatives[%d]", bad - n_pos);
     free(emb);
     if (rc == FG_ERANGE)
       return fg_resp_error(resp, 400, "text_too_long", "%s: %s; shorten it", name,
@@ -105,13 +99,21 @@ static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *text,
     return fg_resp_error(resp, 500, "internal_error", "cannot embed the query: %s",
                          fg_error_detail()), -1;
   }
-  if (text) {
-    out->q = malloc((size_t)E * sizeof *out->q);
+  if (n_pos) {
+    out->q = calloc((size_t)E, sizeof *out->q);
     if (!out->q) {
       free(emb);
       return fg_resp_error(resp, 500, "internal_error", "out of memory"), -1;
     }
-    memcpy(out->q, emb, (size_t)E * sizeof *emb);
+    /* Several texts: their unit embeddings averaged, then scaled back to unit length. */
+    for (int i = 0; i < n_pos; i++)
+      for (int k = 0; k < E; k++) out->q[k] += emb[(size_t)i * E + k];
+    if (fg_l2_normalize(out->q, E) != 0) {
+      free(emb);
+      return fg_resp_error(resp, 400, "invalid_query", "the texts of \"text\" cancel out: "
+                           "their embeddings' mean has length 0; give texts that describe "
+                           "the same thing"), -1;
+    }
   }
   if (n_neg) {
     out->neg = malloc((size_t)n_neg * (size_t)E * sizeof *out->neg);
@@ -119,7 +121,7 @@ static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *text,
       free(emb);
       return fg_resp_error(resp, 500, "internal_error", "out of memory"), -1;
     }
-    memcpy(out->neg, emb + (text ? E : 0), (size_t)n_neg * (size_t)E * sizeof *emb);
+    memcpy(out->neg, emb + (size_t)n_pos * E, (size_t)n_neg * (size_t)E * sizeof *emb);
     out->n_neg = n_neg;
   }
   free(emb);
@@ -127,7 +129,7 @@ static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *text,
 }
 
 static int invalid(fg_resp *resp, fg_query *out) {
-  fg_query_clear(out);
+  fg_query_release(out);
   return fg_resp_error(resp, 400, "invalid_query", "%s", fg_error_detail()), -1;
 }
 
@@ -145,9 +147,24 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
     return fg_fail(FG_EINVAL, "the query needs \"text\": \"a mug\" (embedded with CLIP, needs "
                    "[clip]) or \"embedding\": [D numbers] in the scene's feature space"),
            invalid(resp, out);
-  if (text && (!json_is_string(text) || json_string_length(text) == 0))
-    return fg_fail(FG_EINVAL, "\"text\" must be a non-empty string, e.g. \"text\": \"a mug\""),
-           invalid(resp, out);
+  const char *pos_texts[FG_QUERY_MAX_TEXTS];
+  int n_pos = 0;
+  if (text && json_is_string(text) && json_string_length(text) > 0) {
+    pos_texts[n_pos++] = json_string_value(text);
+  } else if (text && json_is_array(text) && json_array_size(text) >= 1 &&
+             json_array_size(text) <= FG_QUERY_MAX_TEXTS) {
+    for (size_t i = 0; i < json_array_size(text); i++) {
+      json_t *s = json_array_get(text, i);
+      if (!json_is_string(s) || json_string_length(s) == 0)
+        return fg_fail(FG_EINVAL, "text[%zu] must be a non-empty string", i),
+               invalid(resp, out);
+      pos_texts[n_pos++] = json_string_value(s);
+    }
+  } else if (text) {
+    return fg_fail(FG_EINVAL, "\"text\" must be a non-empty string, e.g. \"text\": \"a mug\", "
+                   "or a list of 1 to %d of them, averaged: [\"a mug\", \"a coffee cup\"]",
+                   FG_QUERY_MAX_TEXTS), invalid(resp, out);
+  }
   if (negs && nembs)
     return fg_fail(FG_EINVAL, "give either \"negatives\" (texts) or \"negative_embeddings\" "
                    "(vectors), not both"), invalid(resp, out);
@@ -174,7 +191,8 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
       neg_texts[n_neg_texts++] = json_string_value(s);
     }
   } else if (text && !nembs) {
-    for (int i = 0; i < N_DEFAULT_NEGATIVES; i++) neg_texts[n_neg_texts++] = default_negatives[i];
+    for (int i = 0; i < FG_QUERY_N_DEFAULT_NEGATIVES; i++)
+      neg_texts[n_neg_texts++] = fg_query_default_negatives[i];
   }
   if (nembs && (!json_is_array(nembs) || json_array_size(nembs) > FG_QUERY_MAX_NEGATIVES))
     return fg_fail(FG_EINVAL, "\"negative_embeddings\" must be a list of at most %d vectors "
@@ -192,13 +210,13 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
   if (text || n_neg_texts) {
     m = fg_api_clip_model(req, resp);
     if (!m) {
-      fg_query_clear(out);
+      fg_query_release(out);
       return -1;
     }
     int E = fg_clip_model_info(m)->embed_dim;
     if (scene_dim && E != scene_dim) {
       fg_clip_model_release(m);
-      fg_query_clear(out);
+      fg_query_release(out);
       return fg_resp_error(resp, 409, "feature_dim_mismatch", "the scene's features have D = "
                            "%d but the CLIP model's embeddings have %d numbers, so texts cannot "
                            "query it; give \"embedding\" (and \"negative_embeddings\") in the "
@@ -226,7 +244,7 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
       if (!out->neg) {
         free(v);
         fg_clip_model_release(m);
-        fg_query_clear(out);
+        fg_query_release(out);
         return fg_resp_error(resp, 500, "internal_error", "out of memory"), -1;
       }
     }
@@ -238,14 +256,12 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
 
   /* ---- texts through CLIP ---- */
   if (m) {
-    rc = embed_texts(resp, m, text ? json_string_value(text) : NULL, neg_texts, n_neg_texts,
-                     out);
+    rc = embed_texts(resp, m, pos_texts, n_pos, neg_texts, n_neg_texts, out);
     fg_clip_model_release(m);
     if (rc != 0) {
-      fg_query_clear(out);
+      fg_query_release(out);
       return -1;
     }
   }
-  out->from_text = text != NULL;
   return 0;
 }

@@ -2,7 +2,9 @@
  * unit vectors in the scene's feature space.
  *
  * The JSON keys, beside a request's own:
- *   "text": "mug"                 embedded with CLIP's text encoder (needs [clip]), or
+ *   "text": "mug"                 embedded with CLIP's text encoder (needs [clip]); a list
+ *                                 ["mug", "coffee cup"] (1..FG_QUERY_MAX_TEXTS) is embedded
+ *                                 text by text, averaged and scaled back to unit length; or
  *   "embedding": [D numbers]      a feature-space vector given directly;
  *   "negatives": ["object", ...]  texts (needs [clip]); default, when "text" is given,
  *                                 ["object", "things", "stuff", "texture"]; [] for none;
@@ -18,18 +20,12 @@
 #include <jansson.h>
 
 #include "http.h"
+#include "query/heatmap.h"
 
-#define FG_QUERY_MAX_NEGATIVES 64
-#define FG_QUERY_DEFAULT_TEMPERATURE 0.1f
+#define FG_QUERY_MAX_TEXTS 16 /* positive texts of one query */
 
-typedef struct fg_query {
-  int dim;           /* D */
-  float *q;          /* [D], unit length; owned */
-  int n_neg;
-  float *neg;        /* [n_neg][D], unit length; owned; NULL when n_neg is 0 */
-  float temperature; /* > 0 */
-  int from_text;     /* q came from "text" */
-} fg_query;
+/* The resolved query is the library's (query/heatmap.h): unit q (D), n_neg unit negatives,
+ * temperature; FG_QUERY_MAX_NEGATIVES and FG_QUERY_DEFAULT_TEMPERATURE come from there. */
 
 /* 1 when key is one of the query keys above (for handlers that refuse unknown keys). */
 int fg_query_is_key(const char *key);
@@ -44,9 +40,8 @@ int fg_query_present(json_t *body);
  * malformed keys, vectors of the wrong D, non-finite or zero vectors), 400 text_too_long or
  * invalid_text (a text CLIP cannot take), 409 clip_not_configured (texts without [clip]),
  * 409 feature_dim_mismatch (CLIP's E is not the scene's D). On success the caller owns *out
- * (fg_query_clear); on failure it holds nothing. */
+ * (fg_query_release); on failure it holds nothing. */
 int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_query *out);
 
-void fg_query_clear(fg_query *q);
 
 #endif

@@ -1,6 +1,7 @@
 #include "store.h"
 
 #include "conf.h"
+#include "voxcache.h"
 
 #include "core/error.h"
 #include "core/fsutil.h"
@@ -22,7 +23,8 @@
 #include <unistd.h>
 
 struct fg_field_ref {
-  fg_field *field; /* owned */
+  fg_field *field;      /* owned */
+  fg_voxcache *voxels;  /* owned: the field's voxel features, built at the first heatmap */
   atomic_int refs;
 };
 
@@ -285,19 +287,33 @@ static int64_t file_size(const char *path) {
 static fg_field_ref *field_ref_new(fg_field *f) {
   fg_field_ref *r = calloc(1, sizeof *r);
   if (!r) return NULL;
+  if (fg_voxcache_new(&r->voxels) != 0) {
+    free(r);
+    return NULL;
+  }
   r->field = f;
   atomic_init(&r->refs, 1);
   return r;
 }
 
+/* Frees a ref that field_ref_new made, leaving its field to the caller. */
+static void field_ref_discard(fg_field_ref *r) {
+  if (!r) return;
+  fg_voxcache_free(r->voxels);
+  free(r);
+}
+
 void fg_field_ref_release(fg_field_ref *r) {
   if (r && atomic_fetch_sub(&r->refs, 1) == 1) {
+    fg_voxcache_free(r->voxels);
     fg_field_free(r->field);
     free(r);
   }
 }
 
 const fg_field *fg_field_ref_field(const fg_field_ref *r) { return r->field; }
+
+fg_voxcache *fg_field_ref_voxcache(fg_field_ref *r) { return r->voxels; }
 
 fg_field_ref *fg_scene_field_acquire(fg_scene *s) {
   pthread_mutex_lock(&s->lock);
@@ -361,7 +377,7 @@ int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
   fg_field_ref *r = field_ref_new(field);
   if (!final || !r) {
     free(final);
-    free(r);
+    field_ref_discard(r);
     return fg_fail(FG_ENOMEM, "out of memory");
   }
   pthread_mutex_lock(&s->lock);
@@ -383,10 +399,7 @@ int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
     r = NULL;
   }
   pthread_mutex_unlock(&s->lock);
-  if (r) {
-    r->field = NULL; /* stays the caller's */
-    free(r);
-  }
+  field_ref_discard(r); /* on failure; the field stays the caller's */
   fg_field_ref_release(old);
   free(final);
   return rc;
@@ -594,6 +607,7 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->partial = s->field && s->partial;
   out->trained_steps = s->field ? s->field->field->trained_steps : 0;
   out->checkpoint_bytes = s->field ? s->checkpoint_bytes : 0;
+  fg_voxcache_describe(s->field ? s->field->voxels : NULL, &out->voxel_cache);
   snprintf(out->checkpoint_error, sizeof out->checkpoint_error, "%s",
            s->checkpoint_error ? s->checkpoint_error : "");
   snprintf(out->last_job_id, sizeof out->last_job_id, "%s", s->last_job_id);
@@ -638,6 +652,20 @@ size_t fg_store_trained(fg_store *st) {
   for (size_t i = 0; i < st->n; i++) {
     pthread_mutex_lock(&st->scenes[i]->lock);
     n += st->scenes[i]->field != NULL;
+    pthread_mutex_unlock(&st->scenes[i]->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+  return n;
+}
+
+size_t fg_store_voxel_cache_bytes(fg_store *st) {
+  pthread_mutex_lock(&st->lock);
+  size_t n = 0;
+  for (size_t i = 0; i < st->n; i++) {
+    pthread_mutex_lock(&st->scenes[i]->lock);
+    fg_voxcache_info vi;
+    fg_voxcache_describe(st->scenes[i]->field ? st->scenes[i]->field->voxels : NULL, &vi);
+    n += vi.bytes;
     pthread_mutex_unlock(&st->scenes[i]->lock);
   }
   pthread_mutex_unlock(&st->lock);

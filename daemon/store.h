@@ -21,13 +21,15 @@
 
 #include "field/model.h"
 #include "io/frame.h"
+#include "voxcache.h"
 
 typedef struct fg_store fg_store;
 typedef struct fg_scene fg_scene;
 
 /* A trained field shared by reference count: the scene holds one reference, every render
  * in flight another, so a training that installs a new field never pulls one from under a
- * render. */
+ * render. Each carries the field's voxel feature cache (voxcache.h), which therefore goes
+ * with the field it was built from. */
 typedef struct fg_field_ref fg_field_ref;
 
 #define FG_JOB_ID_MAX 40
@@ -53,6 +55,7 @@ typedef struct fg_scene_info {
   int64_t trained_steps;
   int64_t checkpoint_bytes;        /* size of the field's checkpoint file; 0 when untrained */
   char checkpoint_error[512];      /* why the checkpoint did not load; "" when it did */
+  fg_voxcache_info voxel_cache;    /* the field's voxel features (all zero when untrained) */
   char last_job_id[FG_JOB_ID_MAX]; /* "" when the scene never had a job */
   char last_job_state[16];
 } fg_scene_info;
@@ -96,6 +99,8 @@ int fg_store_list(fg_store *store, fg_scene_info **out, size_t *n);
 /* Totals for metrics. */
 void fg_store_totals(fg_store *store, size_t *scenes, size_t *frames);
 size_t fg_store_trained(fg_store *store);
+/* Heap bytes of every scene's voxel feature cache (voxcache.h). */
+size_t fg_store_voxel_cache_bytes(fg_store *store);
 
 /* The scene's folder and name; constant for the scene's lifetime, owned by the scene. */
 const char *fg_scene_dir(const fg_scene *scene);
@@ -130,6 +135,8 @@ void fg_scene_frames_free(fg_frame *frames, size_t n);
 fg_field_ref *fg_scene_field_acquire(fg_scene *scene);
 const fg_field *fg_field_ref_field(const fg_field_ref *ref);
 void fg_field_ref_release(fg_field_ref *ref);
+/* The field's voxel feature cache (voxcache.h), owned by ref and living as long as it. */
+fg_voxcache *fg_field_ref_voxcache(fg_field_ref *ref);
 
 /* Commits a finished training: renames next_path (field's checkpoint, already written in the
  * scene's folder) over field.fgc and makes field the scene's field for new renders (renders

@@ -2,8 +2,8 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy] [clip]
-#   (no names: all six; train takes about 6 minutes, throughput about 3)
+#                           [busy] [clip] [heatmap]
+#   (no names: all of them; train takes about 6 minutes, throughput about 3)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
@@ -28,6 +28,14 @@
 #           run (targets: dense >= 1.2x PyTorch, >= 50% of SGEMM), and peak memory over the
 #           weights with F32 and with F16 weights (target <= 300 MB). BENCH_CLIP_SECONDS
 #           (default 10) sets each figure's measuring time
+#   heatmap  the SPEC.md tabletop workspace (0.70 x 0.90 x 0.35 m at 1 cm: 220,500 voxels)
+#           with 512-d features: a generated tabletop (fieldgrip-scenegen --dim 512) trained
+#           through the daemon for BENCH_HEATMAP_STEPS steps (default 200), then the first
+#           heatmap's seconds through HTTP (it builds the voxel feature cache; target <= 3 s),
+#           BENCH_HEATMAP_N (default 60) more json heatmaps of the mug's class embedding
+#           timed with curl: p50 and p90 ms (target p50 <= 50 ms), the reply's points, the
+#           same at alpha_threshold 0.01 (more points), and the cache's bytes from the
+#           scene's "voxel_cache"
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -37,13 +45,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,30p' "$0" >&2
+  sed -n '2,42p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -75,7 +83,8 @@ start_daemon() {
   mkdir -p "$dir/state"
   {
     echo "[state]"
-    if [ -d "$data" ]; then echo "import_dirs = $(realpath "$data")"; fi
+    # The shared data sets, and data sets generated into the temp dir.
+    if [ -d "$data" ]; then echo "import_dirs = $(realpath "$data"):$tmp"; else echo "import_dirs = $tmp"; fi
   } > "$dir/bench.conf"
   # The listening line is logged at level info, the default.
   "$daemon" --config "$dir/bench.conf" --listen 127.0.0.1:0 --state-dir "$dir/state" \
@@ -306,6 +315,82 @@ bench_clip() {
   echo "bench=clip_summary threads=2 ratio_dense224=$ratio224 ratio_dense640x360=$ratio640 ratio_text77=$k of_sgemm_dense224=$(field dense224_of_sgemm "$c") of_sgemm_dense640x360=$(field dense640x360_of_sgemm "$c") f32_peak_over_weights_mb=$(field peak_over_weights_mb "$c") f16_peak_over_weights_mb=$(field peak_over_weights_mb "$h") f16_dense224_images_per_s=$(field dense224_images_per_s "$h") target_min_ratio=1.2 target_min_of_sgemm=0.5 target_max_over_weights_mb=300 pass=$pass"
 }
 
+# class_embedding NAME < gt.json: the class's embedding as a JSON array (gt.json writes one
+# number per line).
+class_embedding() {
+  awk -v name="$1" '
+    $0 ~ "\"name\": \"" name "\"" { found = 1 }
+    found && /"embedding"/ { inside = 1; next }
+    inside && /\]/ { exit }
+    inside { gsub(/[ ,]/, ""); printf "%s%s", (n++ ? "," : "["), $0 }
+    END { print "]" }'
+}
+
+bench_heatmap() {
+  local set=$tmp/heatmap512 steps=${BENCH_HEATMAP_STEPS:-200} n=${BENCH_HEATMAP_N:-60}
+  local job state emb body first t times p50 p90 points bytes voxels pass i points_dense p50_dense
+  "$build/tests/scenegen/fieldgrip-scenegen" --out "$set" --dim 512 --views 40 --holdout 0 >/dev/null
+  start_daemon heatmap
+  # The default workspace is SPEC.md's tabletop.
+  curl -sf -X POST "$base/v1/scenes" -H 'Content-Type: application/json' \
+    -d '{"name":"tabletop"}' >/dev/null
+  curl -sf -X POST "$base/v1/scenes/tabletop/import" -H 'Content-Type: application/json' \
+    -d "{\"path\":\"$set\"}" >/dev/null
+  job=$(curl -sf -X POST "$base/v1/scenes/tabletop/train" -H 'Content-Type: application/json' \
+    -d "{\"steps\":$steps}" | sed -n 's/.*"job" *: *"\([^"]*\)".*/\1/p')
+  for _ in $(seq 1 6000); do
+    state=$(curl -sf "$base/v1/jobs/$job" | sed -n 's/.*"state" *: *"\([a-z]*\)".*/\1/p')
+    case $state in done|failed|cancelled) break ;; esac
+    sleep 0.2
+  done
+  if [ "$state" != done ]; then
+    stop_daemon
+    echo "bench=heatmap error=training_$state pass=no"
+    failed=1; return
+  fi
+  emb=$(class_embedding mug < "$set/gt.json")
+  body=$tmp/heatmap_query.json
+  printf '{"embedding": %s}' "$emb" > "$body"
+  first=$(curl -s -o "$tmp/heatmap_first.json" -w '%{http_code} %{time_total}' -X POST \
+    "$base/v1/scenes/tabletop/heatmap" -H 'Content-Type: application/json' --data-binary "@$body")
+  if [ "${first% *}" != 200 ]; then
+    stop_daemon
+    echo "bench=heatmap error=http_${first% *} pass=no"
+    cat "$tmp/heatmap_first.json" >&2; echo >&2
+    failed=1; return
+  fi
+  first=${first#* }
+  times=$tmp/heatmap_times
+  : > "$times"
+  for i in $(seq 1 "$n"); do
+    curl -s -o /dev/null -w '%{time_total}\n' -X POST "$base/v1/scenes/tabletop/heatmap" \
+      -H 'Content-Type: application/json' --data-binary "@$body" >> "$times"
+  done
+  points=$(json_int returned < "$tmp/heatmap_first.json")
+  # The same query at alpha_threshold 0.01: many more occupied voxels in the reply (the
+  # JSON's cost grows with them), whatever the training made of the scene.
+  printf '{"embedding": %s, "alpha_threshold": 0.01}' "$emb" > "$body.dense"
+  curl -s -o "$tmp/heatmap_dense.json" -X POST "$base/v1/scenes/tabletop/heatmap" \
+    -H 'Content-Type: application/json' --data-binary "@$body.dense"
+  points_dense=$(json_int returned < "$tmp/heatmap_dense.json")
+  : > "$times.dense"
+  for i in $(seq 1 "$n"); do
+    curl -s -o /dev/null -w '%{time_total}\n' -X POST "$base/v1/scenes/tabletop/heatmap" \
+      -H 'Content-Type: application/json' --data-binary "@$body.dense" >> "$times.dense"
+  done
+  t=$(curl -sf "$base/v1/scenes/tabletop")
+  bytes=$(printf '%s' "$t" | sed -n 's/.*"voxel_cache" *: *{[^}]*"bytes" *: *\([0-9]*\).*/\1/p')
+  voxels=$(printf '%s' "$t" | sed -n 's/.*"voxel_cache" *: *{[^}]*"voxels" *: *\([0-9]*\).*/\1/p')
+  stop_daemon
+  p50=$(sort -g "$times" | awk '{ v[NR] = $1 } END { printf "%.2f", v[int((NR + 1) / 2)] * 1000 }')
+  p90=$(sort -g "$times" | awk '{ v[NR] = $1 } END { printf "%.2f", v[int(NR * 0.9 + 0.5)] * 1000 }')
+  p50_dense=$(sort -g "$times.dense" | awk '{ v[NR] = $1 } END { printf "%.2f", v[int((NR + 1) / 2)] * 1000 }')
+  pass=$(awk -v f="$first" -v p="$p50" -v v="$voxels" \
+    'BEGIN { print (f <= 3 && p <= 50 && v == 220500) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=heatmap voxels=$voxels dim=512 train_steps=$steps first_heatmap_s=$(printf '%.3f' "$first") heatmaps=$n p50_ms=$p50 p90_ms=$p90 points=$points p50_ms_alpha_0.01=$p50_dense points_alpha_0.01=$points_dense cache_bytes=$bytes cache_mb=$(awk -v b="$bytes" 'BEGIN { printf "%.1f", b / 1048576 }') target_max_first_s=3 target_max_p50_ms=50 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -315,7 +400,8 @@ for b in "${benches[@]}"; do
     throughput) bench_throughput ;;
     busy) bench_busy ;;
     clip) bench_clip ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip)" >&2; exit 2 ;;
+    heatmap) bench_heatmap ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

@@ -3,7 +3,7 @@
  * are cached in the scene's folder, read back by the next training and recomputed after new
  * weights and a SIGHUP; a scene that mixes uploaded features of another D with frames CLIP
  * would fill fails its job; and the heatmap render checks its query (text, embedding,
- * negatives) before answering 501. */
+ * negatives) and renders, and so does a heatmap of a text query. */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -130,6 +130,21 @@ static void expect_query(const char *scene, const char *query, long status, cons
   free(body);
 }
 
+/* A valid query renders the camera's 32x24 view as an 8-bit RGB PNG. */
+static void expect_png(const char *scene, const char *query) {
+  char *body = h_fmt("{\"camera\": %s, \"output\": \"heatmap\", %s}", g_camera, query);
+  h_resp *r = t_render(scene, body);
+  if (r->status != 200) fprintf(stderr, "query: %s: %s\n", query, r->body);
+  int w, h, bits, type;
+  t_png_header(r, &w, &h, &bits, &type);
+  ASSERT_EQ(w, 32);
+  ASSERT_EQ(h, 24);
+  ASSERT_EQ(bits, 8);
+  ASSERT_EQ(type, 2);
+  h_resp_free(r);
+  free(body);
+}
+
 /* A JSON array of n numbers: e_k (a unit vector) when k >= 0, else all zeros. */
 static char *vec(int n, int k) {
   it_buf b = {0};
@@ -145,19 +160,28 @@ static void queries(void) {
   g_camera = t_camera(eye, target, 40, 32, 24);
   char *e24 = vec(g_E, 3), *e8 = vec(8, 0), *zero = vec(g_E, -1);
   char *q;
-  /* valid: text (default negatives through CLIP), embedding, both kinds of negatives */
-  expect_query("c", "\"text\": \"a mug\"", 501, "not_implemented");
-  expect_query("c", "\"text\": \"a mug\", \"negatives\": [], \"temperature\": 0.5", 501,
-               "not_implemented");
+  /* valid: text (default negatives through CLIP), several texts averaged, embedding, both
+   * kinds of negatives */
+  expect_png("c", "\"text\": \"a mug\"");
+  expect_png("c", "\"text\": [\"a mug\", \"a cup\"]");
+  expect_png("c", "\"text\": \"a mug\", \"negatives\": [], \"temperature\": 0.5");
   q = h_fmt("\"embedding\": %s", e24);
-  expect_query("c", q, 501, "not_implemented");
+  expect_png("c", q);
   free(q);
   q = h_fmt("\"embedding\": %s, \"negatives\": [\"a cup\"]", e24);
-  expect_query("c", q, 501, "not_implemented");
+  expect_png("c", q);
   free(q);
   q = h_fmt("\"text\": \"a mug\", \"negative_embeddings\": [%s, %s]", e24, e24);
-  expect_query("c", q, 501, "not_implemented");
+  expect_png("c", q);
   free(q);
+  /* the heatmap of texts: json with the scene's grid */
+  h_resp *r = h_post_json("/v1/scenes/c/heatmap", "{\"text\": [\"a mug\", \"a cup\"], "
+                          "\"alpha_threshold\": 0.001, \"max_points\": 3}");
+  ASSERT_STATUS(r, 200);
+  ASSERT(JINT(r->json, "returned") <= 3);
+  ASSERT(json_is_array(JGET(r->json, "points")));
+  ASSERT_NEAR(JNUM(r->json, "voxel_size"), 0.01, 1e-12);
+  h_resp_free(r);
   /* malformed */
   expect_query("c", "", 400, "invalid_query");
   q = h_fmt("\"embedding\": %s", e8); /* the scene's D is 24 */
@@ -189,7 +213,7 @@ static void queries(void) {
   /* scene m has uploaded 8-d features: texts cannot query it, 8-d embeddings can */
   expect_query("m", "\"text\": \"a mug\"", 409, "feature_dim_mismatch");
   q = h_fmt("\"embedding\": %s", e8);
-  expect_query("m", q, 501, "not_implemented");
+  expect_query("m", q, 409, "not_trained"); /* its training failed */
   free(q);
   free(e24);
   free(e8);

@@ -140,20 +140,28 @@ static void test_errors(void) {
       "\"h\": 48}, \"output\": \"normals\"}", good);
   BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"convention\": \"directx\"}", good);
-  /* heatmap: the query is checked (D = 8 here, no [clip]), the render is still to come */
+  /* heatmap: the query is checked (D = 8 here, no [clip]); test_heatmap renders them */
   BAD(400, "invalid_query", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"output\": \"heatmap\"}", good);
   BAD(400, "invalid_query", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"output\": \"heatmap\", \"embedding\": [1, 0, 0]}", good);
   BAD(409, "clip_not_configured", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, "
       "\"w\": 64, \"h\": 48}, \"output\": \"heatmap\", \"text\": \"a mug\"}", good);
-  BAD(501, "not_implemented", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
-      "\"h\": 48}, \"output\": \"heatmap\", \"embedding\": [1, 0, 0, 0, 0, 0, 0, 2]}", good);
   BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"output\": \"rgb\", \"embedding\": [1, 0, 0, 0, 0, 0, 0, 2]}", good);
   BAD(400, "invalid_request", "[]");
 #undef BAD
-  h_resp *r = render_camera("nope", g_camera, NULL);
+  /* A valid query renders an 8-bit RGB PNG of the camera's size. */
+  int w, h, bits, type;
+  h_resp *r = render_camera("sg", g_camera, "\"output\": \"heatmap\", \"embedding\": [1, 0, 0, 0, "
+                            "0, 0, 0, 2]");
+  t_png_header(r, &w, &h, &bits, &type);
+  ASSERT_EQ(w, 64);
+  ASSERT_EQ(h, 48);
+  ASSERT_EQ(bits, 8);
+  ASSERT_EQ(type, 2);
+  h_resp_free(r);
+  r = render_camera("nope", g_camera, NULL);
   ASSERT_HTTP_ERROR(r, 404, "scene_not_found");
   h_resp_free(r);
 }

@@ -1,0 +1,329 @@
+/* POST /v1/scenes/{s}/heatmap: a query (query.h) scored over the scene's workspace grid, from
+ * the voxel feature cache of its trained field (voxcache.h), as a JSON point list, a dense
+ * .npy grid or a coloured PLY point cloud. Runs on the offload pool: the first heatmap of a
+ * field builds its cache (seconds), later ones only score it. */
+#include "api.h"
+#include "json.h"
+#include "metrics.h"
+#include "query.h"
+#include "voxcache.h"
+
+#include "core/error.h"
+#include "core/log.h"
+
+#include <float.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const heatmap_keys[] = {"voxel_size", "alpha_threshold", "format", "min_score",
+                                           "max_points"};
+#define N_HEATMAP_KEYS (sizeof heatmap_keys / sizeof heatmap_keys[0])
+
+typedef enum { FORMAT_JSON = 0, FORMAT_NPY, FORMAT_PLY } heatmap_format;
+
+typedef struct heatmap_req {
+  heatmap_format format;
+  float alpha_threshold;
+  float min_score; /* -INFINITY: none */
+  size_t max_points; /* 0: none */
+} heatmap_req;
+
+/* Parses the keys of a heatmap request but its query into *r against the scene's parameters;
+ * answers 400 itself and returns -1 when they are wrong. */
+static int parse_heatmap(json_t *body, const fg_scene_params *params, heatmap_req *r,
+                         fg_resp *resp) {
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    int known = fg_query_is_key(key);
+    for (size_t i = 0; !known && i < N_HEATMAP_KEYS; i++) known = strcmp(key, heatmap_keys[i]) == 0;
+    if (!known)
+      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a heatmap takes a "
+                           "query (\"text\" or \"embedding\", \"negatives\" or "
+                           "\"negative_embeddings\", \"temperature\") and \"format\", "
+                           "\"alpha_threshold\", \"min_score\", \"max_points\", \"voxel_size\"",
+                           key), -1;
+  }
+  const char *format = "json";
+  if (fg_json_string(body, "format", &format) < 0 ||
+      (strcmp(format, "json") != 0 && strcmp(format, "npy") != 0 && strcmp(format, "ply") != 0))
+    return fg_resp_error(resp, 400, "invalid_request", "\"format\" must be \"json\" (occupied "
+                         "voxels and their scores), \"npy\" (dense float32 [nz, ny, nx], NaN "
+                         "where free) or \"ply\" (a point cloud coloured by score)"), -1;
+  r->format = strcmp(format, "npy") == 0 ? FORMAT_NPY
+              : strcmp(format, "ply") == 0 ? FORMAT_PLY
+                                           : FORMAT_JSON;
+  double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
+  int rc = fg_json_number(body, "alpha_threshold", &a);
+  /* Compared as the float it becomes: 0.001 must pass the library's 1e-3f floor. */
+  if (rc < 0 || !((float)a >= FG_QUERY_ALPHA_FLOOR && a <= 1))
+    return fg_resp_error(resp, 400, "invalid_request", "\"alpha_threshold\" must be a number in "
+                         "[%g, 1] (default %g): a voxel is occupied when its opacity alpha = 1 - "
+                         "exp(-sigma * voxel_size) reaches it", (double)FG_QUERY_ALPHA_FLOOR,
+                         (double)FG_QUERY_DEFAULT_ALPHA_THRESHOLD), -1;
+  r->alpha_threshold = (float)a;
+  double m = 0;
+  rc = fg_json_number(body, "min_score", &m);
+  if (rc < 0 || (rc > 0 && !(fabs(m) <= FLT_MAX)))
+    return fg_resp_error(resp, 400, "invalid_request", "\"min_score\" must be a number: points "
+                         "scoring below it are left out"), -1;
+  r->min_score = rc > 0 ? (float)m : -INFINITY;
+  json_t *mp = json_object_get(body, "max_points");
+  r->max_points = 0;
+  if (mp && !json_is_null(mp)) {
+    if (!json_is_integer(mp) || json_integer_value(mp) < 1)
+      return fg_resp_error(resp, 400, "invalid_request", "\"max_points\" must be a positive "
+                           "integer: the reply keeps that many best-scoring points"), -1;
+    r->max_points = (size_t)json_integer_value(mp);
+  }
+  if (r->format == FORMAT_NPY && (rc > 0 || r->max_points))
+    return fg_resp_error(resp, 400, "invalid_request", "\"min_score\" and \"max_points\" bound "
+                         "the point list of \"json\" and \"ply\"; \"npy\" is always the whole "
+                         "grid"), -1;
+  double vs = params->voxel_size;
+  rc = fg_json_number(body, "voxel_size", &vs);
+  if (rc < 0 || (rc > 0 && !(fabs(vs - params->voxel_size) <= 1e-9 * params->voxel_size)))
+    return fg_resp_error(resp, 400, "invalid_request", "\"voxel_size\" must be the scene's "
+                         "voxel size, %g m (or be left out): heatmaps are scored on the "
+                         "scene's voxel grid, whose features are cached; create the scene with "
+                         "another \"voxel_size\" for another grid", params->voxel_size), -1;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- the JSON reply */
+
+typedef struct jbuf {
+  char *p;
+  size_t n, cap;
+  int failed;
+} jbuf;
+
+static void jb_reserve(jbuf *b, size_t extra) {
+  if (b->failed || b->n + extra + 1 <= b->cap) return;
+  size_t cap = b->cap ? b->cap : 4096;
+  while (cap < b->n + extra + 1) cap *= 2;
+  char *p = realloc(b->p, cap);
+  if (!p) {
+    b->failed = 1;
+    return;
+  }
+  b->p = p;
+  b->cap = cap;
+}
+
+static void jb_add(jbuf *b, const char *s) {
+  size_t k = strlen(s);
+  jb_reserve(b, k);
+  if (b->failed) return;
+  memcpy(b->p + b->n, s, k + 1);
+  b->n += k;
+}
+
+/* x with six decimals, trailing zeros dropped ("0.105", "-1", "0.000001"); null when not
+ * finite. Fixed point keeps a reply of 10^5 points to a few milliseconds, where printf's %g
+ * takes ten times longer; micrometres and 1e-6 of a score are finer than the grid's truth. */
+static void jb_num(jbuf *b, double x) {
+  if (!isfinite(x) || fabs(x) > 9e12) {
+    jb_add(b, isfinite(x) ? (x > 0 ? "9e12" : "-9e12") : "null");
+    return;
+  }
+  char tmp[40], *e = tmp + sizeof tmp, *p = e;
+  long long v = llround(x * 1e6);
+  int neg = v < 0;
+  unsigned long long u = neg ? (unsigned long long)(-v) : (unsigned long long)v;
+  unsigned long long ip = u / 1000000ULL, fp = u % 1000000ULL;
+  int digits = 6;
+  while (digits > 0 && fp % 10 == 0) {
+    fp /= 10;
+    digits--;
+  }
+  for (int i = 0; i < digits; i++) {
+    *--p = (char)('0' + fp % 10);
+    fp /= 10;
+  }
+  if (digits) *--p = '.';
+  do {
+    *--p = (char)('0' + ip % 10);
+    ip /= 10;
+  } while (ip);
+  if (neg && (u != 0)) *--p = '-';
+  size_t k = (size_t)(e - p);
+  jb_reserve(b, k);
+  if (b->failed) return;
+  memcpy(b->p + b->n, p, k);
+  b->n += k;
+  b->p[b->n] = 0;
+}
+
+static void jb_vec(jbuf *b, const double *v, int n) {
+  jb_add(b, "[");
+  for (int i = 0; i < n; i++) {
+    if (i) jb_add(b, ",");
+    jb_num(b, v[i]);
+  }
+  jb_add(b, "]");
+}
+
+/* The json format: {"voxel_size", "alpha_threshold", "grid": {"min", "max", "shape"},
+ * "occupied", "returned", "best": {"position", "score"} or null, "points": [[x, y, z, score],
+ * ...]} with the points by score, best first. Written by hand: a reply has up to millions of
+ * numbers. A malloc'd NUL-terminated text, or NULL when out of memory. */
+static char *heatmap_json(const fg_heatmap *hm, size_t *len) {
+  jbuf b = {0};
+  char tmp[160];
+  const fg_voxel_grid *g = &hm->grid;
+  jb_add(&b, "{\"voxel_size\":");
+  jb_num(&b, g->voxel_size);
+  jb_add(&b, ",\"alpha_threshold\":");
+  jb_num(&b, hm->alpha_threshold);
+  jb_add(&b, ",\"grid\":{\"min\":");
+  jb_vec(&b, g->min, 3);
+  jb_add(&b, ",\"max\":");
+  jb_vec(&b, g->max, 3);
+  snprintf(tmp, sizeof tmp, ",\"shape\":[%d,%d,%d]},\"occupied\":%zu,\"returned\":%zu,\"best\":",
+           g->nz, g->ny, g->nx, hm->n_occupied, hm->n_points);
+  jb_add(&b, tmp);
+  if (hm->has_best) {
+    jb_add(&b, "{\"position\":");
+    jb_vec(&b, hm->best_p_world, 3);
+    jb_add(&b, ",\"score\":");
+    jb_num(&b, hm->best_score);
+    jb_add(&b, "}");
+  } else {
+    jb_add(&b, "null");
+  }
+  jb_add(&b, ",\"points\":[");
+  jb_reserve(&b, hm->n_points * 48);
+  for (size_t i = 0; i < hm->n_points; i++) {
+    const fg_heatmap_point *pt = &hm->points[i];
+    jb_add(&b, i ? ",[" : "[");
+    for (int k = 0; k < 3; k++) {
+      jb_num(&b, pt->p_world[k]);
+      jb_add(&b, ",");
+    }
+    jb_num(&b, pt->score);
+    jb_add(&b, "]");
+  }
+  jb_add(&b, "]}");
+  if (b.failed) {
+    free(b.p);
+    return NULL;
+  }
+  *len = b.n;
+  return b.p;
+}
+
+/* ---------------------------------------------------------------- the handler */
+
+int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  fg_field_ref *ref = NULL;
+  fg_voxels *vox = NULL;
+  fg_query q = {0};
+  fg_heatmap hm = {0};
+  if (!body) goto out;
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  heatmap_req r;
+  if (parse_heatmap(body, &info.params, &r, resp) != 0) goto out;
+  fg_voxel_grid grid;
+  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
+                              info.params.voxel_size);
+  if (rc == FG_ERANGE) {
+    fg_resp_error(resp, 400, "grid_too_large", "scene '%s': its workspace at voxel_size %g m "
+                  "has more than %zu voxels, the most a heatmap takes (%s); create the scene "
+                  "with a larger \"voxel_size\" or a smaller \"workspace\"", info.name,
+                  info.params.voxel_size, FG_QUERY_MAX_VOXELS, fg_error_detail());
+    goto out;
+  }
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info.name, fg_error_detail());
+    goto out;
+  }
+  /* The query is checked first, against the trained field's D, else the frames'. */
+  if (fg_query_parse(req, resp, body, info.field_feature_dim ? info.field_feature_dim
+                     : info.feature_dim, &q) != 0)
+    goto out;
+  ref = fg_api_scene_field(s, &info, resp);
+  if (!ref) goto out;
+  const fg_field *field = fg_field_ref_field(ref);
+  if (fg_api_query_fits(field, &q, info.name, resp) != 0) goto out;
+
+  int threads = fg_conf_threads(req->conf);
+  double built_s = 0;
+  rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, &built_s);
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of scene '%s': "
+                  "%s", info.name, fg_error_detail());
+    goto out;
+  }
+  if (built_s > 0) {
+    const fg_voxel_features *vf = fg_voxels_features(vox);
+    fg_metrics_add_voxel_build(built_s);
+    fg_info("scene %s: voxel features built in %.2f s: %zu voxels at %g m, %zu occupied, %.1f MB",
+            info.name, built_s, fg_voxel_grid_count(&grid), grid.voxel_size,
+            fg_voxel_features_n_kept(vf), (double)fg_voxel_features_bytes(vf) / 1048576.0);
+  }
+  /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
+  fg_field_ref_release(ref);
+  ref = NULL;
+
+  fg_heatmap_options o;
+  fg_heatmap_options_default(&o);
+  o.alpha_threshold = r.alpha_threshold;
+  o.min_score = r.min_score;
+  o.max_points = r.max_points;
+  o.want_dense = r.format == FORMAT_NPY;
+  o.want_points = r.format != FORMAT_NPY;
+  o.n_threads = threads;
+  rc = fg_heatmap_compute(fg_voxels_features(vox), &q, &o, &hm);
+  if (rc != 0) {
+    if (rc == FG_EINVAL)
+      fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
+    else
+      fg_resp_error(resp, 500, "internal_error", "cannot compute the heatmap: %s",
+                    fg_error_detail());
+    goto out;
+  }
+  uint8_t *bytes = NULL;
+  size_t len = 0;
+  if (r.format == FORMAT_JSON) {
+    char *text = heatmap_json(&hm, &len);
+    if (!text) {
+      fg_resp_error(resp, 500, "internal_error", "out of memory writing %zu points",
+                    hm.n_points);
+      goto out;
+    }
+    fg_resp_take(resp, 200, "application/json", text, len);
+    fg_metrics_count_heatmap(FG_METRICS_HEATMAP_JSON);
+  } else if (r.format == FORMAT_NPY) {
+    if (fg_heatmap_encode_npy(&hm, &bytes, &len) != 0) {
+      fg_resp_error(resp, 500, "internal_error", "cannot encode the grid: %s", fg_error_detail());
+      goto out;
+    }
+    fg_resp_take(resp, 200, "application/x-npy", (char *)bytes, len);
+    fg_metrics_count_heatmap(FG_METRICS_HEATMAP_NPY);
+  } else {
+    if (fg_heatmap_encode_ply(&hm, NAN, NAN, &bytes, &len) != 0) {
+      fg_resp_error(resp, 500, "internal_error", "cannot encode the point cloud: %s",
+                    fg_error_detail());
+      goto out;
+    }
+    fg_resp_take(resp, 200, "application/octet-stream", (char *)bytes, len);
+    fg_metrics_count_heatmap(FG_METRICS_HEATMAP_PLY);
+  }
+out:
+  fg_heatmap_release(&hm);
+  fg_query_release(&q);
+  fg_voxels_release(vox);
+  fg_field_ref_release(ref);
+  json_decref(body);
+  fg_scene_unref(s);
+  return 0;
+}

@@ -1,0 +1,117 @@
+/* The voxel feature cache of a trained field; see voxcache.h. */
+#include "voxcache.h"
+
+#include "core/error.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+struct fg_voxels {
+  fg_voxel_features *vf; /* owned */
+  atomic_int refs;
+};
+
+struct fg_voxcache {
+  pthread_mutex_t lock; /* guards the two below */
+  pthread_cond_t done;  /* signalled when a build ends */
+  int building;
+  fg_voxels *current;   /* NULL until built; holds one reference */
+};
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+int fg_voxcache_new(fg_voxcache **out) {
+  fg_voxcache *c = calloc(1, sizeof *c);
+  if (!c) return fg_fail(FG_ENOMEM, "out of memory");
+  pthread_mutex_init(&c->lock, NULL);
+  pthread_cond_init(&c->done, NULL);
+  *out = c;
+  return 0;
+}
+
+void fg_voxcache_free(fg_voxcache *c) {
+  if (!c) return;
+  fg_voxels_release(c->current);
+  pthread_cond_destroy(&c->done);
+  pthread_mutex_destroy(&c->lock);
+  free(c);
+}
+
+const fg_voxel_features *fg_voxels_features(const fg_voxels *v) { return v->vf; }
+
+void fg_voxels_release(fg_voxels *v) {
+  if (v && atomic_fetch_sub(&v->refs, 1) == 1) {
+    fg_voxel_features_free(v->vf);
+    free(v);
+  }
+}
+
+/* Whether the cached voxels were built for grid g. */
+static int same_grid(const fg_voxels *v, const fg_voxel_grid *g) {
+  const fg_voxel_grid *h = fg_voxel_features_grid(v->vf);
+  for (int a = 0; a < 3; a++)
+    if (h->min[a] != g->min[a] || h->max[a] != g->max[a]) return 0;
+  return h->voxel_size == g->voxel_size && h->nx == g->nx && h->ny == g->ny && h->nz == g->nz;
+}
+
+int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, int n_threads,
+                    fg_voxels **out, double *built_s) {
+  *out = NULL;
+  if (built_s) *built_s = 0;
+  pthread_mutex_lock(&c->lock);
+  while (c->building) pthread_cond_wait(&c->done, &c->lock);
+  if (c->current && same_grid(c->current, g)) {
+    atomic_fetch_add(&c->current->refs, 1);
+    *out = c->current;
+    pthread_mutex_unlock(&c->lock);
+    return 0;
+  }
+  c->building = 1;
+  pthread_mutex_unlock(&c->lock);
+
+  /* The build runs without the lock, so that describing the cache never waits for it. */
+  double t0 = now_s();
+  fg_voxels *v = calloc(1, sizeof *v);
+  int rc = v ? fg_voxel_features_build(&v->vf, f, g, n_threads)
+             : fg_fail(FG_ENOMEM, "out of memory");
+  double seconds = now_s() - t0;
+  fg_voxels *old = NULL;
+  pthread_mutex_lock(&c->lock);
+  c->building = 0;
+  if (rc == 0) {
+    atomic_init(&v->refs, 2); /* the cache's and the caller's */
+    old = c->current;
+    c->current = v;
+    *out = v;
+    if (built_s) *built_s = seconds;
+  }
+  pthread_cond_broadcast(&c->done);
+  pthread_mutex_unlock(&c->lock);
+  if (rc != 0) free(v);
+  fg_voxels_release(old);
+  return rc;
+}
+
+void fg_voxcache_describe(fg_voxcache *c, fg_voxcache_info *out) {
+  memset(out, 0, sizeof *out);
+  if (!c) return;
+  pthread_mutex_lock(&c->lock);
+  out->building = c->building;
+  if (c->current) {
+    const fg_voxel_features *vf = c->current->vf;
+    out->built = 1;
+    out->bytes = fg_voxel_features_bytes(vf);
+    out->voxels = fg_voxel_grid_count(fg_voxel_features_grid(vf));
+    out->kept = fg_voxel_features_n_kept(vf);
+    out->voxel_size = fg_voxel_features_grid(vf)->voxel_size;
+    out->build_seconds = fg_voxel_features_build_seconds(vf);
+  }
+  pthread_mutex_unlock(&c->lock);
+}

@@ -1,0 +1,60 @@
+/* The voxel feature cache of a trained field (query/heatmap.h): the field sampled once on the
+ * scene's workspace grid, shared by every heatmap of that field.
+ *
+ * One fg_voxcache belongs to each trained field the store holds (store.h, fg_field_ref) and
+ * dies with it, so a new field (a training committed, a restart, the scene deleted) starts
+ * with an empty cache while requests still holding the old field keep using the old one.
+ * The cache is built lazily, by the first request that needs it, on that request's thread;
+ * requests arriving during the build wait for it instead of building again. A built cache
+ * (fg_voxels) is immutable and reference counted: any number of heatmaps read it at once,
+ * and one built for another grid (the scene's workspace or voxel size changed in the
+ * configuration) replaces it without pulling it from under a reader. All functions are
+ * thread-safe. */
+#ifndef FG_DAEMON_VOXCACHE_H
+#define FG_DAEMON_VOXCACHE_H
+
+#include <stddef.h>
+
+#include "field/model.h"
+#include "query/heatmap.h"
+
+typedef struct fg_voxcache fg_voxcache;
+typedef struct fg_voxels fg_voxels;
+
+/* An empty cache. On success the caller owns *out (fg_voxcache_free). FG_ENOMEM. */
+int fg_voxcache_new(fg_voxcache **out);
+
+/* Drops the cache's reference to its voxels (readers holding one keep them). Must not be
+ * called while a build runs (the store frees it with the last reference to its field, and a
+ * build holds one). Accepts NULL. */
+void fg_voxcache_free(fg_voxcache *c);
+
+/* The voxel features of field f (which the caller keeps alive for the call) on grid g:
+ * the cached ones when they were built for g, else built now with n_threads (waiting first
+ * for a build in progress). On success *out holds a reference the caller drops with
+ * fg_voxels_release, and *built_s (may be NULL) receives the seconds this call spent
+ * building (0 when it found them built). Errors of fg_voxel_features_build, with its
+ * detail; the cache stays as it was. */
+int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, int n_threads,
+                    fg_voxels **out, double *built_s);
+
+/* The features, owned by v. */
+const fg_voxel_features *fg_voxels_features(const fg_voxels *v);
+/* Accepts NULL. */
+void fg_voxels_release(fg_voxels *v);
+
+/* A consistent description of the cache. */
+typedef struct fg_voxcache_info {
+  int built;            /* voxels are cached */
+  int building;         /* a build is in progress */
+  size_t bytes;         /* heap bytes of the cached voxels */
+  size_t voxels;        /* voxels of their grid */
+  size_t kept;          /* voxels that keep features (alpha >= FG_QUERY_ALPHA_FLOOR) */
+  double voxel_size;    /* metres */
+  double build_seconds; /* wall time of their build */
+} fg_voxcache_info;
+
+/* Accepts NULL (all zero). */
+void fg_voxcache_describe(fg_voxcache *c, fg_voxcache_info *out);
+
+#endif
