@@ -265,7 +265,7 @@ int main(int argc, char **argv) {
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   char *imports = h_fmt("%s/imports", h_tmpdir());
   g_sg = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_sg, VIEWS, W, H, 8);
+  t_scenegen(argv[2], g_sg, VIEWS, W, H, 8, 0);
   strip_features(g_sg);
   g_weights = h_fmt("%s/clip.safetensors", h_tmpdir());
   g_vocab = c_vocab_path();

@@ -15,10 +15,8 @@
  *     render through the turbo table.
  *
  * argv[1]: fieldgripd, argv[2]: fieldgrip-scenegen. */
-#include <errno.h>
 #include <math.h>
 #include <pthread.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "core/error.h"
@@ -31,7 +29,7 @@
 #define W 160
 #define H 120
 #define DIM 32
-#define PATCH "8" /* feature cells of 8 pixels: the ball covers a few of them in most views */
+#define PATCH 8 /* feature cells of 8 pixels: the ball covers a few of them in most views */
 
 /* Under AddressSanitizer a training step is ten times slower: the test then trains a few
  * steps only, lowers the occupancy threshold so the sparse field still has voxels, and
@@ -91,16 +89,6 @@ static void expect_error(const char *scene, const char *body, long status, const
   if (r->status != status) fprintf(stderr, "heatmap %s -> %s\n", body, r->body);
   ASSERT_HTTP_ERROR(r, status, code);
   h_resp_free(r);
-}
-
-static json_t *scene_json(const char *name) {
-  char *path = h_fmt("/v1/scenes/%s", name);
-  h_resp *r = h_get(path);
-  ASSERT_STATUS(r, 200);
-  json_t *j = json_incref(RJSON(r));
-  h_resp_free(r);
-  free(path);
-  return j;
 }
 
 /* ---------------------------------------------------------------- json, npy, ply */
@@ -458,27 +446,6 @@ static void concurrent_first(const char *body) {
   ASSERT_EQ(h_metric("fieldgrip_voxel_cache_builds_total"), builds + 1);
 }
 
-/* t_scenegen with finer feature cells (--patch). */
-static void scenegen(const char *prog, const char *dir) {
-  char views[16], w[16], h[16], dim[16];
-  snprintf(views, sizeof views, "%d", VIEWS);
-  snprintf(w, sizeof w, "%d", W);
-  snprintf(h, sizeof h, "%d", H);
-  snprintf(dim, sizeof dim, "%d", DIM);
-  const char *args[] = {prog, "--out", dir, "--views", views, "--width", w, "--height", h,
-                        "--dim", dim, "--patch", PATCH, "--holdout", "0", NULL};
-  pid_t pid = fork();
-  if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));
-  if (pid == 0) {
-    execv(prog, (char *const *)args);
-    _exit(127);
-  }
-  int status = 0;
-  if (waitpid(pid, &status, 0) != pid) FG_TEST_FAIL("waitpid: %s", strerror(errno));
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-    FG_TEST_FAIL("%s --out %s failed (status %#x)", prog, dir, (unsigned)status);
-}
-
 /* ---------------------------------------------------------------- main */
 
 int main(int argc, char **argv) {
@@ -487,7 +454,7 @@ int main(int argc, char **argv) {
   double t0 = t_now();
   char *imports = h_fmt("%s/imports", h_tmpdir());
   g_dir = h_fmt("%s/sg", imports);
-  scenegen(argv[2], g_dir);
+  t_scenegen(argv[2], g_dir, VIEWS, W, H, DIM, PATCH);
   char *gt_path = h_fmt("%s/gt.json", g_dir), *tf_path = h_fmt("%s/transforms.json", g_dir);
   json_error_t jerr;
   g_gt = json_load_file(gt_path, 0, &jerr);
@@ -515,14 +482,14 @@ int main(int argc, char **argv) {
   json_decref(t_wait_job(id, "done", 900));
   free(id);
   double t_trained = t_now();
-  json_t *sj = scene_json("sg");
+  json_t *sj = t_scene_json("sg");
   ASSERT(json_is_false(JGET(sj, "voxel_cache.built")));
   ASSERT_EQ(JINT(sj, "voxel_cache.bytes"), 0);
   json_decref(sj);
   double builds0 = h_metric("fieldgrip_voxel_cache_builds_total");
 
   test_objects();
-  sj = scene_json("sg");
+  sj = t_scene_json("sg");
   ASSERT(json_is_true(JGET(sj, "voxel_cache.built")));
   ASSERT_EQ(JINT(sj, "voxel_cache.voxels"), 70 * 90 * 40);
   long long bytes = JINT(sj, "voxel_cache.bytes");
@@ -570,7 +537,7 @@ int main(int argc, char **argv) {
   id = t_train("sg", "{\"steps\": 2}");
   json_decref(t_wait_job(id, "done", 600));
   free(id);
-  sj = scene_json("sg");
+  sj = t_scene_json("sg");
   ASSERT(json_is_false(JGET(sj, "voxel_cache.built")));
   json_decref(sj);
   ASSERT_EQ(h_metric("fieldgrip_voxel_cache_bytes"), 0);

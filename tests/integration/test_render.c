@@ -173,7 +173,7 @@ int main(int argc, char **argv) {
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   char *imports = h_fmt("%s/imports", h_tmpdir());
   char *sg = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], sg, 12, 64, 48, 8);
+  t_scenegen(argv[2], sg, 12, 64, 48, 8, 0);
   t_write_config(imports);
   static const double eye[3] = {0.45, -0.75, 0.55}, target[3] = {0.45, 0, 0.05};
   g_camera = t_camera(eye, target, 60, 64, 48);

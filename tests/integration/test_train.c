@@ -30,16 +30,6 @@ static int file_exists(const char *scene, const char *name) {
   return ok;
 }
 
-static json_t *scene_json(const char *name) {
-  char *path = h_fmt("/v1/scenes/%s", name);
-  h_resp *r = h_get(path);
-  ASSERT_STATUS(r, 200);
-  json_t *j = json_incref(RJSON(r));
-  h_resp_free(r);
-  free(path);
-  return j;
-}
-
 static void expect_error(const char *path, const char *body, long status, const char *code) {
   h_resp *r = h_post_json(path, body);
   if (r->status != status) fprintf(stderr, "POST %s %s\n", path, body);
@@ -92,7 +82,7 @@ static void test_errors(void) {
   ASSERT_STATUS(r, 200);
   ASSERT_EQ(json_array_size(JGET(r->json, "jobs")), 0);
   h_resp_free(r);
-  json_t *s = scene_json("sg");
+  json_t *s = t_scene_json("sg");
   ASSERT(json_is_false(JGET(s, "trained")));
   ASSERT(json_is_null(JGET(s, "last_job")));
   ASSERT_EQ(JINT(s, "trained_steps"), 0);
@@ -177,7 +167,7 @@ static void test_train_and_events(void) {
   h_resp_free(c.resp);
   free(c.path);
 
-  json_t *s = scene_json("sg");
+  json_t *s = t_scene_json("sg");
   ASSERT(json_is_true(JGET(s, "trained")));
   ASSERT_EQ(JINT(s, "trained_steps"), 8);
   ASSERT(JINT(s, "checkpoint_bytes") > 0);
@@ -375,10 +365,10 @@ static void test_queue(void) {
   ASSERT_STREQ(JSTR(r->json, "jobs.0.id"), b);
   ASSERT_STREQ(JSTR(r->json, "jobs.1.id"), a);
   h_resp_free(r);
-  json_t *s = scene_json("sg2");
+  json_t *s = t_scene_json("sg2");
   ASSERT_EQ(JINT(s, "trained_steps"), 2);
   json_decref(s);
-  s = scene_json("sg");
+  s = t_scene_json("sg");
   ASSERT_EQ(JINT(s, "trained_steps"), 4);
   json_decref(s);
   free(a);
@@ -455,14 +445,14 @@ static void test_restart(void) {
     ASSERT_STREQ(JSTR(j, "error"), "interrupted by a daemon restart");
     json_decref(j);
   }
-  json_t *s = scene_json("fresh");
+  json_t *s = t_scene_json("fresh");
   ASSERT(json_is_true(JGET(s, "trained")));
   ASSERT(json_is_true(JGET(s, "partial")));
   ASSERT(JINT(s, "trained_steps") >= 1);
   ASSERT_STREQ(JSTR(s, "last_job.state"), "failed");
   json_decref(s);
   ASSERT(h_log_count("loaded field.next.fgc") == 1);
-  s = scene_json("sg");
+  s = t_scene_json("sg");
   ASSERT(json_is_true(JGET(s, "trained")));
   ASSERT(json_is_false(JGET(s, "partial")));
   ASSERT_EQ(JINT(s, "trained_steps"), 4);
@@ -487,7 +477,7 @@ static void test_restart(void) {
   cancel(again);
   wait_stopped(again);
   ASSERT(!file_exists("fresh", "field.next.fgc"));
-  s = scene_json("fresh");
+  s = t_scene_json("fresh");
   ASSERT(json_is_true(JGET(s, "trained")));
   json_decref(s);
 
@@ -500,7 +490,7 @@ static void test_restart(void) {
   h_start();
   ASSERT(!file_exists("sg", "field.next.fgc"));
   ASSERT(h_log_count("scene sg: removed field.next.fgc") == 1);
-  s = scene_json("sg");
+  s = t_scene_json("sg");
   ASSERT(json_is_false(JGET(s, "partial")));
   ASSERT_EQ(JINT(s, "trained_steps"), 4);
   json_decref(s);
@@ -517,7 +507,7 @@ static void test_restart(void) {
   ASSERT_STREQ(JSTR(j, "state"), "failed");
   ASSERT_STREQ(JSTR(j, "error"), "interrupted by a daemon restart");
   json_decref(j);
-  s = scene_json("sg2");
+  s = t_scene_json("sg2");
   ASSERT_EQ(JINT(s, "trained_steps"), 2);
   json_decref(s);
   ASSERT_EQ(h_count_files(h_state_dir(), ".tmp."), 0);
@@ -533,7 +523,7 @@ int main(int argc, char **argv) {
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   char *imports = h_fmt("%s/imports", h_tmpdir());
   g_sg = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_sg, 12, 64, 48, 8);
+  t_scenegen(argv[2], g_sg, 12, 64, 48, 8, 0);
   t_write_config(imports);
   h_start();
   t_scene_from_dataset("sg", g_sg, 12);
@@ -547,7 +537,7 @@ int main(int argc, char **argv) {
   check_nice();
   test_streams_and_cancel(long_job);
   free(long_job);
-  json_t *s = scene_json("sg");
+  json_t *s = t_scene_json("sg");
   ASSERT_EQ(JINT(s, "trained_steps"), 8); /* the cancelled job changed nothing */
   ASSERT(!file_exists("sg", "field.next.fgc"));
   json_decref(s);

@@ -12,14 +12,16 @@ double t_now(void) {
   return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
-void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim) {
-  char sv[16], sw[16], sh[16], sd[16];
+void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim,
+                int patch) {
+  char sv[16], sw[16], sh[16], sd[16], sp[16];
   snprintf(sv, sizeof sv, "%d", views);
   snprintf(sw, sizeof sw, "%d", w);
   snprintf(sh, sizeof sh, "%d", h);
   snprintf(sd, sizeof sd, "%d", dim);
+  snprintf(sp, sizeof sp, "%d", patch);
   const char *argv[] = {scenegen, "--out", dir, "--views", sv, "--width", sw, "--height", sh,
-                        "--dim", sd, "--holdout", "0", NULL};
+                        "--dim", sd, "--holdout", "0", patch > 0 ? "--patch" : NULL, sp, NULL};
   pid_t pid = fork();
   if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));
   if (pid == 0) {
@@ -30,6 +32,16 @@ void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, 
   if (waitpid(pid, &status, 0) != pid) FG_TEST_FAIL("waitpid: %s", strerror(errno));
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
     FG_TEST_FAIL("%s --out %s failed (status %#x)", scenegen, dir, (unsigned)status);
+}
+
+json_t *t_scene_json(const char *name) {
+  char *path = h_fmt("/v1/scenes/%s", name);
+  h_resp *r = h_get(path);
+  ASSERT_STATUS(r, 200);
+  json_t *j = json_incref(RJSON(r));
+  h_resp_free(r);
+  free(path);
+  return j;
 }
 
 void t_write_config(const char *imports) {

@@ -7,8 +7,13 @@
 #include "harness.h"
 
 /* Runs fieldgrip-scenegen (its path as the test's argv[2]) with --out dir --views views
- * --width w --height h --dim dim --holdout 0 and asserts that it succeeds. */
-void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim);
+ * --width w --height h --dim dim --holdout 0 (and --patch patch when patch > 0, else
+ * scenegen's default feature cells) and asserts that it succeeds. */
+void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim,
+                int patch);
+
+/* GET /v1/scenes/{name}, asserted 200; the caller owns the JSON (json_decref). */
+json_t *t_scene_json(const char *name);
 
 /* Writes a configuration with import_dirs = imports, [train] threads = 2, steps = 20. */
 void t_write_config(const char *imports);
