@@ -18,6 +18,9 @@ const char *fg_strerror(int err) {
   case FG_EBUSY: return "busy";
   case FG_ECANCELED: return "cancelled";
   case FG_EPERM: return "not permitted";
+  case FG_ETIMEDOUT: return "timed out";
+  case FG_EUNAVAIL: return "peer unavailable";
+  case FG_EPEER: return "peer reported an error";
   default: return "unknown error";
   }
 }

@@ -21,6 +21,9 @@ enum {
   FG_EBUSY = -8,     /* the resource is in use */
   FG_ECANCELED = -9, /* stopped on request */
   FG_EPERM = -10,    /* not allowed (path outside an allowed folder) */
+  FG_ETIMEDOUT = -11, /* a peer did not answer, or did not finish, in time */
+  FG_EUNAVAIL = -12, /* a peer is not connected (refused, reset, unreachable) */
+  FG_EPEER = -13,    /* a peer answered with an error (Modbus exception, gripper fault) */
 };
 
 /* Returns a static, human-readable name of a FG_E* code; never NULL. */

@@ -1,0 +1,192 @@
+#include "modbus/regs.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "core/error.h"
+
+/* ---------------------------------------------------------------- pose-registers */
+
+int fg_pose_block_words(fg_pose_encoding e) {
+  return e == FG_POSE_FLOAT32 ? FG_POSE_WORDS_FLOAT32 : FG_POSE_WORDS_INT16;
+}
+
+int fg_pose_ack_offset(fg_pose_encoding e) { return fg_pose_block_words(e); }
+
+uint16_t fg_seq_next(uint16_t s) { return s == 65535 ? 1 : (uint16_t)(s + 1); }
+
+void fg_float32_to_words(float v, uint16_t w[2]) {
+  uint32_t bits;
+  memcpy(&bits, &v, sizeof bits);
+  w[0] = (uint16_t)(bits >> 16);
+  w[1] = (uint16_t)(bits & 0xFFFF);
+}
+
+float fg_float32_from_words(const uint16_t w[2]) {
+  const uint32_t bits = (uint32_t)w[0] << 16 | w[1];
+  float v;
+  memcpy(&v, &bits, sizeof v);
+  return v;
+}
+
+void fg_rotvec_from_quat(const double q_wxyz[4], double rotvec_rad[3]) {
+  const double s = q_wxyz[0] < 0 ? -1.0 : 1.0;
+  const double w = s * q_wxyz[0], x = s * q_wxyz[1], y = s * q_wxyz[2], z = s * q_wxyz[3];
+  const double n = sqrt(x * x + y * y + z * z);
+  /* angle / n, with its small-angle limit 2 / w (w is then close to 1) */
+  const double k = n > 1e-12 ? 2.0 * atan2(n, w) / n : 2.0 / (w > 0 ? w : 1.0);
+  rotvec_rad[0] = k * x;
+  rotvec_rad[1] = k * y;
+  rotvec_rad[2] = k * z;
+}
+
+/* A signed value in units of `unit` (0.0001 m, 0.001 rad) as an int16 register, rounded half
+ * away from zero; FG_ERANGE naming it when it does not fit. */
+static int put_int16(const char *field, double v, double per_unit, const char *unit_name,
+                     uint16_t *w) {
+  const double r = round(v * per_unit);
+  if (!(r >= -32768.0 && r <= 32767.0))
+    return fg_fail(FG_ERANGE, "%s = %g does not fit the int16 encoding (%g .. %g %s; use "
+                   "[robot] encoding = float32 for larger values)", field, v,
+                   -32768.0 / per_unit, 32767.0 / per_unit, unit_name);
+  *w = (uint16_t)(int16_t)r;
+  return 0;
+}
+
+int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w) {
+  static const char *const pn[3] = {"x", "y", "z"}, *const rn[3] = {"rx", "ry", "rz"};
+  if (b->seq == 0) return fg_fail(FG_EINVAL, "seq 0 is never sent");
+  if (b->command < FG_ROBOT_PICK || b->command > FG_ROBOT_MOVE)
+    return fg_fail(FG_EINVAL, "unknown robot command %d (1..5)", b->command);
+  for (int i = 0; i < 3; i++) {
+    if (!isfinite(b->p_world_m[i]) || !isfinite(b->rotvec_rad[i]))
+      return fg_fail(FG_EINVAL, "the pose is not finite");
+  }
+  if (!isfinite(b->width_m) || b->width_m < 0)
+    return fg_fail(FG_ERANGE, "width = %g m: expected a finite width >= 0", b->width_m);
+  if (b->force_n < 0 || b->force_n > 65535)
+    return fg_fail(FG_ERANGE, "force = %d N: expected 0 .. 65535", b->force_n);
+  w[0] = b->seq;
+  w[1] = (uint16_t)b->command;
+  if (e == FG_POSE_INT16) {
+    for (int i = 0; i < 3; i++) {
+      FG_TRY(put_int16(pn[i], b->p_world_m[i], 1e4, "m", &w[2 + i]));
+      FG_TRY(put_int16(rn[i], b->rotvec_rad[i], 1e3, "rad", &w[5 + i]));
+    }
+    const double wd = round(b->width_m * 1e4);
+    if (wd > 65535.0)
+      return fg_fail(FG_ERANGE, "width = %g m does not fit the int16 encoding (0 .. 6.5535 m)",
+                     b->width_m);
+    w[8] = (uint16_t)wd;
+    w[9] = (uint16_t)b->force_n;
+    return 0;
+  }
+  for (int i = 0; i < 3; i++) {
+    const float p = (float)b->p_world_m[i], r = (float)b->rotvec_rad[i];
+    if (!isfinite(p) || !isfinite(r)) return fg_fail(FG_ERANGE, "the pose exceeds float32");
+    fg_float32_to_words(p, &w[2 + 2 * i]);
+    fg_float32_to_words(r, &w[8 + 2 * i]);
+  }
+  if (!isfinite((float)b->width_m)) return fg_fail(FG_ERANGE, "width exceeds float32");
+  fg_float32_to_words((float)b->width_m, &w[14]);
+  w[16] = (uint16_t)b->force_n;
+  return 0;
+}
+
+void fg_pose_block_decode(const uint16_t *w, fg_pose_encoding e, fg_pose_block *b) {
+  memset(b, 0, sizeof *b);
+  b->seq = w[0];
+  b->command = w[1];
+  if (e == FG_POSE_INT16) {
+    for (int i = 0; i < 3; i++) {
+      b->p_world_m[i] = (int16_t)w[2 + i] * 1e-4;
+      b->rotvec_rad[i] = (int16_t)w[5 + i] * 1e-3;
+    }
+    b->width_m = w[8] * 1e-4;
+    b->force_n = w[9];
+    return;
+  }
+  for (int i = 0; i < 3; i++) {
+    b->p_world_m[i] = fg_float32_from_words(&w[2 + 2 * i]);
+    b->rotvec_rad[i] = fg_float32_from_words(&w[8 + 2 * i]);
+  }
+  b->width_m = fg_float32_from_words(&w[14]);
+  b->force_n = w[16];
+}
+
+/* ---------------------------------------------------------------- robotiq-2f */
+
+const fg_robotiq_model fg_robotiq_2f85 = {"robotiq-2f85", 0.085, 0.020, 0.150, 20.0, 235.0};
+const fg_robotiq_model fg_robotiq_2f140 = {"robotiq-2f140", 0.140, 0.030, 0.250, 10.0, 125.0};
+
+void fg_robotiq_request(int action, int position, int speed, int force, uint16_t w[3]) {
+  w[0] = (uint16_t)((action & 0xFF) << 8);
+  w[1] = (uint16_t)(position & 0xFF);
+  w[2] = (uint16_t)((speed & 0xFF) << 8 | (force & 0xFF));
+}
+
+void fg_robotiq_status_decode(const uint16_t w[3], fg_robotiq_status *s) {
+  const int st = w[0] >> 8, fault = w[1] >> 8;
+  s->act = st & 1;
+  s->gto = st >> 3 & 1;
+  s->sta = st >> 4 & 3;
+  s->obj = st >> 6 & 3;
+  s->flt = fault & 0x0F;
+  s->kflt = fault >> 4;
+  s->echo = w[1] & 0xFF;
+  s->position = w[2] >> 8;
+  s->current = w[2] & 0xFF;
+}
+
+int fg_robotiq_object_detected(const fg_robotiq_status *s) { return s->obj == 1 || s->obj == 2; }
+
+const char *fg_robotiq_fault_name(int flt) {
+  switch (flt) {
+  case 0x00: return "no fault";
+  case 0x05: return "action delayed: the activation must complete first";
+  case 0x07: return "the activation bit must be set before an action";
+  case 0x08: return "maximum operating temperature exceeded";
+  case 0x09: return "no communication for at least 1 s";
+  case 0x0A: return "under minimum operating voltage";
+  case 0x0B: return "automatic release in progress";
+  case 0x0C: return "internal fault";
+  case 0x0D: return "activation fault";
+  case 0x0E: return "overcurrent";
+  case 0x0F: return "automatic release completed";
+  default: {
+    static _Thread_local char buf[24];
+    snprintf(buf, sizeof buf, "fault 0x%02X", flt & 0xFF);
+    return buf;
+  }
+  }
+}
+
+/* v in [lo, hi] as the byte round(255 (v - lo) / (hi - lo)); FG_ERANGE naming it otherwise. */
+static int to_byte(const char *what, const char *unit, const fg_robotiq_model *m, double v,
+                   double lo, double hi, int *byte) {
+  if (!(v >= lo && v <= hi))
+    return fg_fail(FG_ERANGE, "%s = %g %s is outside the %s's range %g .. %g %s", what, v, unit,
+                   m->name, lo, hi, unit);
+  *byte = (int)lround(255.0 * (v - lo) / (hi - lo));
+  return 0;
+}
+
+int fg_robotiq_width_to_position(const fg_robotiq_model *m, double width_m, int *position) {
+  int b;
+  FG_TRY(to_byte("width", "m", m, width_m, 0.0, m->stroke_m, &b));
+  *position = (int)lround(255.0 * (m->stroke_m - width_m) / m->stroke_m);
+  return 0;
+}
+
+int fg_robotiq_speed_to_byte(const fg_robotiq_model *m, double speed_mps, int *byte) {
+  return to_byte("speed", "m/s", m, speed_mps, m->speed_min_mps, m->speed_max_mps, byte);
+}
+
+int fg_robotiq_force_to_byte(const fg_robotiq_model *m, double force_n, int *byte) {
+  return to_byte("force", "N", m, force_n, m->force_min_n, m->force_max_n, byte);
+}
+
+double fg_robotiq_position_to_width(const fg_robotiq_model *m, int position) {
+  return m->stroke_m * (255 - position) / 255.0;
+}

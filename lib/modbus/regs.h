@@ -1,0 +1,118 @@
+/* Register maps of proto/modbus.md as plain encoders and decoders: the `pose-registers`
+ * block a robot controller reads, and the Robotiq 2F gripper's request and status words.
+ * No I/O here: link.h moves the words. */
+#ifndef FG_MODBUS_REGS_H
+#define FG_MODBUS_REGS_H
+
+#include <stdint.h>
+
+/* ---------------------------------------------------------------- pose-registers */
+
+typedef enum { FG_POSE_INT16 = 0, FG_POSE_FLOAT32 = 1 } fg_pose_encoding;
+
+typedef enum {
+  FG_ROBOT_PICK = 1,  /* go to pose, close */
+  FG_ROBOT_PLACE = 2, /* go to pose, open */
+  FG_ROBOT_OPEN = 3,
+  FG_ROBOT_CLOSE = 4,
+  FG_ROBOT_MOVE = 5, /* move only */
+} fg_robot_command;
+
+/* Robot-written status word. */
+enum { FG_ROBOT_IDLE = 0, FG_ROBOT_BUSY = 1, FG_ROBOT_DONE = 2, FG_ROBOT_FAILED = 3 };
+
+/* Words fieldgrip writes (offsets 0 .. n-1) and the offset of ack (status follows it). */
+#define FG_POSE_WORDS_INT16 10
+#define FG_POSE_WORDS_FLOAT32 17
+#define FG_POSE_MAX_WORDS 17
+#define FG_POSE_BLOCK_SPAN 19 /* registers of the whole float32 block, ack and status too */
+
+/* One command as the robot sees it. */
+typedef struct fg_pose_block {
+  uint16_t seq;         /* 1..65535 */
+  int command;          /* fg_robot_command */
+  double p_world_m[3];  /* TCP position, metres, world (robot base) frame */
+  double rotvec_rad[3]; /* TCP orientation as a rotation vector, radians */
+  double width_m;       /* opening before the approach, metres, >= 0 */
+  int force_n;          /* newtons, 0..65535 */
+} fg_pose_block;
+
+/* Words of one command for encoding e: FG_POSE_WORDS_INT16 or FG_POSE_WORDS_FLOAT32. */
+int fg_pose_block_words(fg_pose_encoding e);
+
+/* Offset of `ack` from the base (10 or 17); `status` is the next register. */
+int fg_pose_ack_offset(fg_pose_encoding e);
+
+/* Encodes b into words[0 .. fg_pose_block_words(e)-1] (words has room for
+ * FG_POSE_MAX_WORDS). Returns 0, or FG_ERANGE with a detail naming the field, its value and
+ * its range when a value does not fit (never wraps or clamps), FG_EINVAL for seq 0, an
+ * unknown command or a value that is not finite. words is unspecified on failure. */
+int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *words);
+
+/* Decodes words (as written by fg_pose_block_encode) back into *b, for simulators and tests;
+ * int16 values come back at their 0.1 mm / mrad resolution. */
+void fg_pose_block_decode(const uint16_t *words, fg_pose_encoding e, fg_pose_block *b);
+
+/* The rotation vector (axis x angle, radians, angle in [0, pi]) of a unit quaternion
+ * [w, x, y, z]; a quaternion with w < 0 is taken as its negation (the same rotation). */
+void fg_rotvec_from_quat(const double q_wxyz[4], double rotvec_rad[3]);
+
+/* The sequence number after s: 1..65535, then 1 again; never 0. */
+uint16_t fg_seq_next(uint16_t s);
+
+/* IEEE 754 binary32 of v as two registers, high word first ("ABCD"), and back. */
+void fg_float32_to_words(float v, uint16_t w[2]);
+float fg_float32_from_words(const uint16_t w[2]);
+
+/* ---------------------------------------------------------------- robotiq-2f */
+
+#define FG_ROBOTIQ_REQUEST_ADDR 0x03E8
+#define FG_ROBOTIQ_STATUS_ADDR 0x07D0
+#define FG_ROBOTIQ_WORDS 3
+
+/* A gripper model's ranges; bytes map linearly onto them (proto/modbus.md "Units"). */
+typedef struct fg_robotiq_model {
+  const char *name;
+  double stroke_m;           /* width at position 0; position 255 is 0 m */
+  double speed_min_mps, speed_max_mps; /* at speed byte 0 and 255 */
+  double force_min_n, force_max_n;     /* at force byte 0 and 255 */
+} fg_robotiq_model;
+
+extern const fg_robotiq_model fg_robotiq_2f85, fg_robotiq_2f140;
+
+/* Action request bits (high byte of the first request register). */
+enum { FG_ROBOTIQ_ACT = 1 << 0, FG_ROBOTIQ_GTO = 1 << 3, FG_ROBOTIQ_ATR = 1 << 4 };
+
+/* Request words: action bits, position 0..255, speed 0..255, force 0..255. */
+void fg_robotiq_request(int action, int position, int speed, int force, uint16_t w[3]);
+
+/* The status words, decoded. */
+typedef struct fg_robotiq_status {
+  int act, gto;  /* gACT, gGTO */
+  int sta;       /* gSTA: 0 reset, 1 activating, 3 activated */
+  int obj;       /* gOBJ: 0 moving, 1 contact opening, 2 contact closing, 3 at position */
+  int flt, kflt; /* gFLT, kFLT */
+  int echo;      /* gPR, the position request echoed */
+  int position;  /* gPO, 0 open .. 255 closed */
+  int current;   /* gCU, x 10 mA */
+} fg_robotiq_status;
+
+void fg_robotiq_status_decode(const uint16_t w[3], fg_robotiq_status *s);
+
+/* gOBJ says the fingers stopped on an object (1 or 2). */
+int fg_robotiq_object_detected(const fg_robotiq_status *s);
+
+/* A fault's name for messages ("overcurrent"); "no fault" for 0, "fault 0xNN" otherwise
+ * unknown (static storage per thread). */
+const char *fg_robotiq_fault_name(int flt);
+
+/* Width (metres) to position byte, speed (m/s) and force (N) to their bytes. FG_ERANGE with
+ * a detail giving the model's range when the value lies outside it (or is not finite). */
+int fg_robotiq_width_to_position(const fg_robotiq_model *m, double width_m, int *position);
+int fg_robotiq_speed_to_byte(const fg_robotiq_model *m, double speed_mps, int *byte);
+int fg_robotiq_force_to_byte(const fg_robotiq_model *m, double force_n, int *byte);
+
+/* The width (metres) that position byte p stands for. */
+double fg_robotiq_position_to_width(const fg_robotiq_model *m, int position);
+
+#endif
