@@ -1,0 +1,778 @@
+/* fieldgrip-sim: one Modbus TCP server that plays both peers of fieldgripd (proto/modbus.md):
+ *
+ *   unit --robot-unit (1)    profile pose-registers: holding registers base .. base + 11
+ *                            (int16) or base .. base + 18 (float32); acknowledges each new
+ *                            seq like the URScript program of proto/modbus.md
+ *   unit --gripper-unit (9)  profile robotiq-2f: request registers 0x03E8..0x03EA (holding),
+ *                            status registers 0x07D0..0x07D2 (input), with activation, finger
+ *                            motion at the requested speed and an optional object
+ *
+ * Served functions: 3 (read holding), 4 (read input), 6 (write single), 16 (write multiple).
+ * Others get exception 1, addresses outside a unit's registers exception 2, and unit ids that
+ * are neither peer exception 0x0B (gateway target failed to respond), as a Modbus TCP gateway
+ * in front of an RTU bus answers.
+ *
+ * Time is kept lazily: before every request the simulated state is advanced to the monotonic
+ * clock, and the poll loop wakes at the next due event. Several clients may be connected at
+ * once (fieldgripd opens one connection per peer). Only used by tests and demo setups. */
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <getopt.h>
+#include <inttypes.h>
+#include <limits.h>
+#include <math.h>
+#include <modbus.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/signalfd.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#define SIM_MAX_CLIENTS 32
+#define SIM_NEVER INT64_MAX
+
+/* Robotiq register addresses (proto/modbus.md "Profile robotiq-2f"). */
+#define SIM_RQ_OUT 0x03E8
+#define SIM_RQ_IN 0x07D0
+#define SIM_RQ_FLT_NOT_ACTIVATED 0x07
+#define SIM_RQ_FLT_ACTION_DELAYED 0x05
+
+typedef struct {
+  char host[256];          /* without brackets; "" = any address */
+  int ipv6;                /* host was given as [v6] */
+  char service[8];         /* port as text, "0" = pick a free one */
+  const char *port_file;   /* NULL: none */
+  const char *log_path;    /* NULL: no request log */
+  int robot_unit, gripper_unit;
+  int base;                /* first holding register of the robot block */
+  int float32;             /* 0 int16 layout (12 registers), 1 float32 layout (19) */
+  int ack_init;
+  int ack_delay_ms, done_delay_ms;
+  int never_ack, fail;
+  int exception;           /* 0 none, else the exception code for robot-block writes */
+  long drop_after;         /* 0 none, else the 1-based request number to drop */
+  int activation_ms, stroke_ms;
+  double object_width_mm;  /* < 0: no object */
+  double stroke_mm;
+} sim_config;
+
+/* The robot block and its pending acknowledgement. */
+typedef struct {
+  modbus_mapping_t *map;   /* holding registers base .. base + n_regs - 1 */
+  int n_regs, ack_off, status_off;
+  int pending;             /* an acknowledgement of pending_seq is scheduled */
+  uint16_t pending_seq;
+  int64_t ack_due_ns;      /* SIM_NEVER when none */
+  int64_t done_due_ns;     /* SIM_NEVER when none */
+} sim_robot;
+
+/* The gripper: status bits, finger position and the motion in progress. */
+typedef struct {
+  modbus_mapping_t *map;   /* holding 0x03E8..0x03EA, input 0x07D0..0x07D2 */
+  int act, gto, sta, obj, flt, pr, cu;
+  double pos;              /* finger position, 0 open .. 255 closed, when not moving */
+  int64_t act_due_ns;      /* end of the activation in progress; SIM_NEVER when none */
+  int moving;              /* a motion from p0 (at t0_ns) toward stop is in progress */
+  int contact;             /* the motion ends on the object */
+  int force;               /* rFR of the motion in progress */
+  int64_t t0_ns, arrive_ns;
+  double p0, stop;
+  double rate;             /* position units per ms */
+  int obj_pos;             /* finger position at the object; -1 without an object */
+} sim_gripper;
+
+typedef struct {
+  sim_config cfg;
+  sim_robot robot;
+  sim_gripper grip;
+  modbus_t *ctx;           /* server context; its socket is switched per client */
+  int listen_fd, sig_fd;
+  int clients[SIM_MAX_CLIENTS];
+  int n_clients;
+  long n_requests;         /* received so far, over all connections */
+  FILE *log;
+} sim_state;
+
+/* A request as received, for logging and for the simulated side effects. */
+typedef struct {
+  int unit, fn, addr, n;
+  int n_words;             /* words present in the request (writes only) */
+  uint16_t words[MODBUS_MAX_WRITE_REGISTERS];
+  int well_formed;         /* count and byte count agree (writes) */
+} sim_request;
+
+static void usage(FILE *f) {
+  fprintf(f,
+          "usage: fieldgrip-sim --listen HOST:PORT [options]\n"
+          "  --listen HOST:PORT     address to serve (PORT 0: a free port; IPv6 as [::1]:PORT)\n"
+          "  --port-file FILE       write the bound port + newline to FILE once listening\n"
+          "  --log FILE             append one line per write request received\n"
+          "  --robot-unit N         unit id of the robot block (default 1)\n"
+          "  --gripper-unit N       unit id of the Robotiq gripper (default 9)\n"
+          "  --base N               first register of the robot block (default 128)\n"
+          "  --encoding E           int16 | float32 (default int16)\n"
+          "  --ack-init N           initial value of the ack register (default 0)\n"
+          "  --ack-delay-ms N       acknowledge a new seq after N ms (default 0)\n"
+          "  --never-ack            never acknowledge\n"
+          "  --done-delay-ms N      status busy -> done N ms after the ack (default 0)\n"
+          "  --fail                 commands end with status 3 (failed)\n"
+          "  --exception CODE       answer robot-block writes with exception CODE (1..11)\n"
+          "  --drop-after N         apply the Nth request, then close its connection unanswered\n"
+          "  --activation-ms N      gripper activation time (default 100)\n"
+          "  --stroke-ms N          full stroke time at speed 255 (default 200)\n"
+          "  --object-width-mm W    an object of width W mm between the fingers\n"
+          "  --stroke-mm S          gripper stroke in mm (default 85)\n");
+}
+
+/* ---------------------------------------------------------------- time */
+
+static int64_t now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static int64_t ms_to_ns(double ms) { return (int64_t)llround(ms * 1e6); }
+
+/* ---------------------------------------------------------------- arguments */
+
+static int parse_long(const char *opt, const char *s, long lo, long hi, long *out) {
+  char *end;
+  errno = 0;
+  long v = strtol(s, &end, 10);
+  if (errno || end == s || *end || v < lo || v > hi) {
+    fprintf(stderr, "fieldgrip-sim: %s wants an integer in %ld..%ld, got \"%s\"\n", opt, lo,
+            hi, s);
+    return -1;
+  }
+  *out = v;
+  return 0;
+}
+
+static int parse_int(const char *opt, const char *s, int lo, int hi, int *out) {
+  long v;
+  if (parse_long(opt, s, lo, hi, &v) != 0) return -1;
+  *out = (int)v;
+  return 0;
+}
+
+static int parse_mm(const char *opt, const char *s, double *out) {
+  char *end;
+  errno = 0;
+  double v = strtod(s, &end);
+  if (errno || end == s || *end || !isfinite(v) || v < 0 || v > 1000) {
+    fprintf(stderr, "fieldgrip-sim: %s wants millimetres in 0..1000, got \"%s\"\n", opt, s);
+    return -1;
+  }
+  *out = v;
+  return 0;
+}
+
+/* Splits HOST:PORT or [V6]:PORT into cfg->host and cfg->service; returns 0 or -1. */
+static int parse_listen(const char *s, sim_config *cfg) {
+  const char *colon;
+  size_t host_len;
+  const char *host = s;
+  if (s[0] == '[') {
+    const char *close = strchr(s, ']');
+    if (!close || close[1] != ':') goto bad;
+    host = s + 1;
+    host_len = (size_t)(close - host);
+    colon = close + 1;
+    cfg->ipv6 = 1;
+  } else {
+    colon = strrchr(s, ':');
+    if (!colon || memchr(s, ':', (size_t)(colon - s))) goto bad;
+    host_len = (size_t)(colon - s);
+  }
+  if (host_len >= sizeof cfg->host) goto bad;
+  memcpy(cfg->host, host, host_len);
+  cfg->host[host_len] = '\0';
+  long port;
+  if (parse_long("--listen port", colon + 1, 0, 65535, &port) != 0) return -1;
+  snprintf(cfg->service, sizeof cfg->service, "%ld", port);
+  return 0;
+bad:
+  fprintf(stderr, "fieldgrip-sim: --listen wants HOST:PORT or [IPV6]:PORT, got \"%s\"\n", s);
+  return -1;
+}
+
+/* Fills cfg from the command line; returns 0, 1 for --help, or -1 after a message. */
+static int parse_args(int argc, char **argv, sim_config *cfg) {
+  static const struct option opts[] = {
+      {"listen", required_argument, NULL, 'l'},
+      {"port-file", required_argument, NULL, 'p'},
+      {"log", required_argument, NULL, 'L'},
+      {"robot-unit", required_argument, NULL, 'r'},
+      {"gripper-unit", required_argument, NULL, 'g'},
+      {"base", required_argument, NULL, 'b'},
+      {"encoding", required_argument, NULL, 'e'},
+      {"ack-init", required_argument, NULL, 'i'},
+      {"ack-delay-ms", required_argument, NULL, 'a'},
+      {"never-ack", no_argument, NULL, 'n'},
+      {"done-delay-ms", required_argument, NULL, 'd'},
+      {"fail", no_argument, NULL, 'f'},
+      {"exception", required_argument, NULL, 'x'},
+      {"drop-after", required_argument, NULL, 'D'},
+      {"activation-ms", required_argument, NULL, 'A'},
+      {"stroke-ms", required_argument, NULL, 's'},
+      {"object-width-mm", required_argument, NULL, 'o'},
+      {"stroke-mm", required_argument, NULL, 'S'},
+      {"help", no_argument, NULL, 'h'},
+      {NULL, 0, NULL, 0},
+  };
+  memset(cfg, 0, sizeof *cfg);
+  cfg->robot_unit = 1;
+  cfg->gripper_unit = 9;
+  cfg->base = 128;
+  cfg->activation_ms = 100;
+  cfg->stroke_ms = 200;
+  cfg->object_width_mm = -1;
+  cfg->stroke_mm = 85;
+  int have_listen = 0, rc = 0, c;
+  const int max_ms = 3600000;
+  opterr = 0;
+  while ((c = getopt_long(argc, argv, "", opts, NULL)) != -1) {
+    switch (c) {
+    case 'l':
+      rc = parse_listen(optarg, cfg);
+      have_listen = 1;
+      break;
+    case 'p': cfg->port_file = optarg; break;
+    case 'L': cfg->log_path = optarg; break;
+    case 'r': rc = parse_int("--robot-unit", optarg, 0, 255, &cfg->robot_unit); break;
+    case 'g': rc = parse_int("--gripper-unit", optarg, 0, 255, &cfg->gripper_unit); break;
+    case 'b': rc = parse_int("--base", optarg, 0, 65535 - 18, &cfg->base); break;
+    case 'e':
+      if (strcmp(optarg, "int16") == 0) {
+        cfg->float32 = 0;
+      } else if (strcmp(optarg, "float32") == 0) {
+        cfg->float32 = 1;
+      } else {
+        fprintf(stderr, "fieldgrip-sim: --encoding wants int16 or float32, got \"%s\"\n",
+                optarg);
+        rc = -1;
+      }
+      break;
+    case 'i': rc = parse_int("--ack-init", optarg, 0, 65535, &cfg->ack_init); break;
+    case 'a': rc = parse_int("--ack-delay-ms", optarg, 0, max_ms, &cfg->ack_delay_ms); break;
+    case 'n': cfg->never_ack = 1; break;
+    case 'd': rc = parse_int("--done-delay-ms", optarg, 0, max_ms, &cfg->done_delay_ms); break;
+    case 'f': cfg->fail = 1; break;
+    case 'x': rc = parse_int("--exception", optarg, 1, 11, &cfg->exception); break;
+    case 'D': rc = parse_long("--drop-after", optarg, 1, LONG_MAX, &cfg->drop_after); break;
+    case 'A': rc = parse_int("--activation-ms", optarg, 0, max_ms, &cfg->activation_ms); break;
+    case 's': rc = parse_int("--stroke-ms", optarg, 1, max_ms, &cfg->stroke_ms); break;
+    case 'o': rc = parse_mm("--object-width-mm", optarg, &cfg->object_width_mm); break;
+    case 'S': rc = parse_mm("--stroke-mm", optarg, &cfg->stroke_mm); break;
+    case 'h': usage(stdout); return 1;
+    default:
+      fprintf(stderr, "fieldgrip-sim: unknown or incomplete option \"%s\"\n",
+              argv[optind - 1]);
+      usage(stderr);
+      return -1;
+    }
+    if (rc != 0) return -1;
+  }
+  if (optind < argc) {
+    fprintf(stderr, "fieldgrip-sim: unexpected argument \"%s\"\n", argv[optind]);
+    return -1;
+  }
+  if (!have_listen) {
+    fprintf(stderr, "fieldgrip-sim: --listen HOST:PORT is required\n");
+    usage(stderr);
+    return -1;
+  }
+  if (cfg->robot_unit == cfg->gripper_unit) {
+    fprintf(stderr, "fieldgrip-sim: --robot-unit and --gripper-unit must differ (both %d)\n",
+            cfg->robot_unit);
+    return -1;
+  }
+  if (cfg->stroke_mm <= 0) {
+    fprintf(stderr, "fieldgrip-sim: --stroke-mm must be positive\n");
+    return -1;
+  }
+  if (cfg->object_width_mm > cfg->stroke_mm) {
+    fprintf(stderr, "fieldgrip-sim: --object-width-mm %g is wider than the stroke (%g mm)\n",
+            cfg->object_width_mm, cfg->stroke_mm);
+    return -1;
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- robot block */
+
+static int robot_init(sim_robot *r, const sim_config *cfg) {
+  memset(r, 0, sizeof *r);
+  r->n_regs = cfg->float32 ? 19 : 12;
+  r->ack_off = cfg->float32 ? 17 : 10;
+  r->status_off = cfg->float32 ? 18 : 11;
+  r->map = modbus_mapping_new_start_address(0, 0, 0, 0, (unsigned)cfg->base,
+                                            (unsigned)r->n_regs, 0, 0);
+  if (!r->map) return -1;
+  r->map->tab_registers[r->ack_off] = (uint16_t)cfg->ack_init;
+  r->ack_due_ns = SIM_NEVER;
+  r->done_due_ns = SIM_NEVER;
+  return 0;
+}
+
+/* Applies the acknowledgement and the end of the command when they are due at now. */
+static void robot_advance(sim_robot *r, const sim_config *cfg, int64_t now) {
+  uint16_t *reg = r->map->tab_registers;
+  if (r->pending && now >= r->ack_due_ns) {
+    /* Both in one step, as one function-16 write of the robot program would. */
+    reg[r->status_off] = 1;
+    reg[r->ack_off] = r->pending_seq;
+    r->pending = 0;
+    r->done_due_ns = r->ack_due_ns + ms_to_ns(cfg->done_delay_ms);
+    r->ack_due_ns = SIM_NEVER;
+  }
+  if (now >= r->done_due_ns) {
+    reg[r->status_off] = cfg->fail ? 3 : 2;
+    r->done_due_ns = SIM_NEVER;
+  }
+}
+
+/* After a write that reached the block: a seq that is nonzero, not yet acknowledged and not
+ * already scheduled starts a new command, superseding one that has not finished. */
+static void robot_on_write(sim_robot *r, const sim_config *cfg, int64_t now) {
+  const uint16_t *reg = r->map->tab_registers;
+  uint16_t seq = reg[0];
+  if (cfg->never_ack || seq == 0 || seq == reg[r->ack_off]) return;
+  if (r->pending && seq == r->pending_seq) return;
+  r->pending = 1;
+  r->pending_seq = seq;
+  r->ack_due_ns = now + ms_to_ns(cfg->ack_delay_ms);
+  r->done_due_ns = SIM_NEVER;
+  robot_advance(r, cfg, now);
+}
+
+/* ---------------------------------------------------------------- gripper */
+
+static int gripper_init(sim_gripper *g, const sim_config *cfg) {
+  memset(g, 0, sizeof *g);
+  g->map = modbus_mapping_new_start_address(0, 0, 0, 0, SIM_RQ_OUT, 3, SIM_RQ_IN, 3);
+  if (!g->map) return -1;
+  g->act_due_ns = SIM_NEVER;
+  g->obj_pos = -1;
+  if (cfg->object_width_mm >= 0)
+    g->obj_pos = (int)lround(255.0 * (cfg->stroke_mm - cfg->object_width_mm) / cfg->stroke_mm);
+  return 0;
+}
+
+/* Finger position at time t (0 open .. 255 closed). */
+static double gripper_pos_at(const sim_gripper *g, int64_t t) {
+  if (!g->moving) return g->pos;
+  double travel = fabs(g->stop - g->p0);
+  double done = g->rate * (double)(t - g->t0_ns) * 1e-6;
+  if (done > travel) done = travel;
+  return g->stop > g->p0 ? g->p0 + done : g->p0 - done;
+}
+
+/* Freezes the fingers where they are at t. */
+static void gripper_halt(sim_gripper *g, int64_t t) {
+  g->pos = gripper_pos_at(g, t);
+  g->moving = 0;
+}
+
+static void gripper_arrive(sim_gripper *g) {
+  g->pos = g->stop;
+  g->moving = 0;
+  g->obj = g->contact ? 2 : 3;
+  /* Holding an object draws current that grows with the force setting (x 10 mA). */
+  g->cu = g->contact ? 1 + g->force * 63 / 255 : 0;
+}
+
+/* Starts a motion at time t toward the requested position at the requested speed; closing
+ * past the object stops at it. */
+static void gripper_start_move(sim_gripper *g, const sim_config *cfg, int target, int speed,
+                               int force, int64_t t) {
+  gripper_halt(g, t);
+  g->pr = target;
+  g->force = force;
+  g->rate = 255.0 / cfg->stroke_ms * (0.25 + 0.75 * speed / 255.0);
+  g->stop = target;
+  g->contact = 0;
+  if (g->obj_pos >= 0 && target > g->obj_pos && g->pos <= g->obj_pos) {
+    g->stop = g->obj_pos;
+    g->contact = 1;
+  }
+  g->p0 = g->pos;
+  g->t0_ns = t;
+  double travel = fabs(g->stop - g->p0);
+  if (travel < 1e-9) {
+    gripper_arrive(g);
+    return;
+  }
+  g->moving = 1;
+  g->obj = 0;
+  g->cu = 0;
+  g->arrive_ns = t + ms_to_ns(travel / g->rate);
+}
+
+/* Applies the end of the activation and the end of a motion when they are due at now. */
+static void gripper_advance(sim_gripper *g, const sim_config *cfg, int64_t now) {
+  if (now >= g->act_due_ns) {
+    int64_t t = g->act_due_ns;
+    g->act_due_ns = SIM_NEVER;
+    g->sta = 3;
+    g->act = 1;
+    g->pos = 0; /* activation ends with the fingers fully open */
+    g->moving = 0;
+    const uint16_t *reg = g->map->tab_registers;
+    if ((reg[0] >> 8) & 0x08) {
+      /* A go-to that waited for the activation runs now. */
+      g->flt = 0;
+      gripper_start_move(g, cfg, reg[1] & 0xFF, reg[2] >> 8, reg[2] & 0xFF, t);
+    }
+  }
+  if (g->moving && now >= g->arrive_ns) gripper_arrive(g);
+}
+
+/* After a write that reached the request registers: reset, activation or a go-to. */
+static void gripper_on_write(sim_gripper *g, const sim_config *cfg, int64_t now) {
+  const uint16_t *reg = g->map->tab_registers;
+  int action = reg[0] >> 8;
+  int ract = action & 0x01, rgto = (action >> 3) & 0x01;
+  g->gto = rgto;
+  if (!ract) {
+    gripper_halt(g, now);
+    g->act = 0;
+    g->sta = 0;
+    g->obj = 0;
+    g->cu = 0;
+    g->act_due_ns = SIM_NEVER;
+    g->flt = rgto ? SIM_RQ_FLT_NOT_ACTIVATED : 0;
+    return;
+  }
+  if (g->sta == 0) {
+    gripper_halt(g, now);
+    g->act = 1; /* gACT echoes rACT; gSTA tells when the activation is complete */
+    g->sta = 1;
+    g->obj = 0;
+    g->act_due_ns = now + ms_to_ns(cfg->activation_ms);
+  }
+  if (g->sta == 1) {
+    g->flt = rgto ? SIM_RQ_FLT_ACTION_DELAYED : 0;
+    gripper_advance(g, cfg, now); /* an activation of 0 ms completes at once */
+    return;
+  }
+  g->flt = 0;
+  if (rgto)
+    gripper_start_move(g, cfg, reg[1] & 0xFF, reg[2] >> 8, reg[2] & 0xFF, now);
+  else
+    gripper_halt(g, now);
+}
+
+/* Writes the status (input) registers from the state at now. */
+static void gripper_publish(sim_gripper *g, int64_t now) {
+  uint16_t *in = g->map->tab_input_registers;
+  int status = g->act | g->gto << 3 | g->sta << 4 | g->obj << 6;
+  long po = lround(gripper_pos_at(g, now));
+  if (po < 0) po = 0;
+  if (po > 255) po = 255;
+  in[0] = (uint16_t)(status << 8);
+  in[1] = (uint16_t)(g->flt << 8 | g->pr);
+  in[2] = (uint16_t)(po << 8 | g->cu);
+}
+
+/* ---------------------------------------------------------------- state and events */
+
+static void sim_advance(sim_state *s, int64_t now) {
+  robot_advance(&s->robot, &s->cfg, now);
+  gripper_advance(&s->grip, &s->cfg, now);
+}
+
+/* Milliseconds until the next due event (rounded up), or -1 when nothing is scheduled. */
+static int sim_poll_timeout(const sim_state *s, int64_t now) {
+  int64_t due = s->robot.ack_due_ns;
+  if (s->robot.done_due_ns < due) due = s->robot.done_due_ns;
+  if (s->grip.act_due_ns < due) due = s->grip.act_due_ns;
+  if (s->grip.moving && s->grip.arrive_ns < due) due = s->grip.arrive_ns;
+  if (due == SIM_NEVER) return -1;
+  if (due <= now) return 0;
+  int64_t ms = (due - now + 999999) / 1000000;
+  return ms > INT_MAX ? INT_MAX : (int)ms;
+}
+
+/* ---------------------------------------------------------------- requests */
+
+static int is_write(int fn) {
+  return fn == MODBUS_FC_WRITE_SINGLE_REGISTER || fn == MODBUS_FC_WRITE_MULTIPLE_REGISTERS;
+}
+
+/* Decodes the fields of a received request (len bytes, MBAP header first). */
+static void request_parse(const uint8_t *req, int len, int header, sim_request *r) {
+  memset(r, 0, sizeof *r);
+  const uint8_t *pdu = req + header;
+  int avail = len - header;
+  r->unit = req[header - 1];
+  r->fn = pdu[0];
+  if (avail >= 5) {
+    r->addr = pdu[1] << 8 | pdu[2];
+    r->n = pdu[3] << 8 | pdu[4];
+  }
+  if (r->fn == MODBUS_FC_WRITE_SINGLE_REGISTER && avail >= 5) {
+    r->words[0] = (uint16_t)r->n;
+    r->n = 1;
+    r->n_words = 1;
+    r->well_formed = 1;
+  } else if (r->fn == MODBUS_FC_WRITE_MULTIPLE_REGISTERS && avail >= 6) {
+    int bytes = pdu[5];
+    int present = (avail - 6) / 2;
+    if (present > bytes / 2) present = bytes / 2;
+    if (present > MODBUS_MAX_WRITE_REGISTERS) present = MODBUS_MAX_WRITE_REGISTERS;
+    for (int i = 0; i < present; i++) r->words[i] = (uint16_t)(pdu[6 + 2 * i] << 8 | pdu[7 + 2 * i]);
+    r->n_words = present;
+    r->well_formed = r->n >= 1 && r->n <= MODBUS_MAX_WRITE_REGISTERS && bytes == 2 * r->n &&
+                     present == r->n;
+  }
+}
+
+/* One line per write request, as received: "write unit=U fn=F addr=A n=N words=W1,W2". */
+static void request_log(sim_state *s, const sim_request *r) {
+  if (!s->log) return;
+  fprintf(s->log, "write unit=%d fn=%d addr=%d n=%d words=", r->unit, r->fn, r->addr, r->n);
+  for (int i = 0; i < r->n_words; i++) fprintf(s->log, "%s%u", i ? "," : "", r->words[i]);
+  fputc('\n', s->log);
+  fflush(s->log);
+}
+
+/* Whether a write lies wholly inside the mapping's holding registers (so modbus_reply
+ * applies it). */
+static int write_fits(const modbus_mapping_t *map, const sim_request *r) {
+  if (!r->well_formed) return 0;
+  int first = r->addr - map->start_registers;
+  return first >= 0 && first + r->n <= map->nb_registers;
+}
+
+/* Applies a fitting write to the mapping without answering (for --drop-after). */
+static void write_apply(modbus_mapping_t *map, const sim_request *r) {
+  int first = r->addr - map->start_registers;
+  for (int i = 0; i < r->n; i++) map->tab_registers[first + i] = r->words[i];
+}
+
+/* Serves one request received on the current socket. Returns 0 to keep the connection,
+ * -1 to close it (a send failed, or the request was the one to drop). */
+static int sim_handle(sim_state *s, const uint8_t *req, int len) {
+  sim_request r;
+  int header = modbus_get_header_length(s->ctx);
+  if (len <= header) return -1;
+  request_parse(req, len, header, &r);
+  int64_t now = now_ns();
+  sim_advance(s, now);
+  s->n_requests++;
+  int drop = s->cfg.drop_after > 0 && s->n_requests == s->cfg.drop_after;
+  if (is_write(r.fn)) request_log(s, &r);
+
+  int robot = r.unit == s->cfg.robot_unit;
+  int gripper = r.unit == s->cfg.gripper_unit;
+  int code = 0;
+  if (!robot && !gripper)
+    code = MODBUS_EXCEPTION_GATEWAY_TARGET;
+  else if (r.fn != MODBUS_FC_READ_HOLDING_REGISTERS && r.fn != MODBUS_FC_READ_INPUT_REGISTERS &&
+           !is_write(r.fn))
+    code = MODBUS_EXCEPTION_ILLEGAL_FUNCTION;
+  else if (robot && is_write(r.fn) && s->cfg.exception)
+    code = s->cfg.exception;
+  if (code) {
+    if (drop) return -1;
+    return modbus_reply_exception(s->ctx, req, (unsigned)code) < 0 ? -1 : 0;
+  }
+
+  modbus_mapping_t *map = robot ? s->robot.map : s->grip.map;
+  if (gripper) gripper_publish(&s->grip, now);
+  int applied = is_write(r.fn) && write_fits(map, &r);
+  if (drop) {
+    if (applied) write_apply(map, &r);
+  } else if (modbus_reply(s->ctx, req, len, map) < 0) {
+    return -1;
+  }
+  if (applied) {
+    if (robot)
+      robot_on_write(&s->robot, &s->cfg, now);
+    else
+      gripper_on_write(&s->grip, &s->cfg, now);
+  }
+  return drop ? -1 : 0;
+}
+
+/* ---------------------------------------------------------------- server */
+
+static void client_close(sim_state *s, int i) {
+  close(s->clients[i]);
+  s->clients[i] = s->clients[--s->n_clients];
+}
+
+static void client_accept(sim_state *s) {
+  int fd = accept4(s->listen_fd, NULL, NULL, SOCK_CLOEXEC);
+  if (fd < 0) return;
+  if (s->n_clients == SIM_MAX_CLIENTS) {
+    fprintf(stderr, "fieldgrip-sim: more than %d clients, refusing one\n", SIM_MAX_CLIENTS);
+    close(fd);
+    return;
+  }
+  int one = 1;
+  setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  s->clients[s->n_clients++] = fd;
+}
+
+/* Receives and serves one request from client i; closes it when it went away. */
+static void client_serve(sim_state *s, int i) {
+  uint8_t req[MODBUS_TCP_MAX_ADU_LENGTH];
+  modbus_set_socket(s->ctx, s->clients[i]);
+  int len = modbus_receive(s->ctx, req);
+  if (len == 0) return; /* ignored by libmodbus */
+  if (len < 0 || sim_handle(s, req, len) != 0) client_close(s, i);
+}
+
+/* Writes the port and a newline to path through a temp file and a rename. */
+static int port_file_write(const char *path, int port) {
+  char tmp[PATH_MAX];
+  if (snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)getpid()) >= (int)sizeof tmp) return -1;
+  FILE *f = fopen(tmp, "w");
+  if (!f) return -1;
+  int ok = fprintf(f, "%d\n", port) > 0;
+  ok &= fflush(f) == 0 && fsync(fileno(f)) == 0;
+  ok &= fclose(f) == 0;
+  if (!ok || rename(tmp, path) != 0) {
+    unlink(tmp);
+    return -1;
+  }
+  return 0;
+}
+
+static int bound_port(int fd) {
+  struct sockaddr_storage ss;
+  socklen_t len = sizeof ss;
+  if (getsockname(fd, (struct sockaddr *)&ss, &len) != 0) return -1;
+  if (ss.ss_family == AF_INET) return ntohs(((struct sockaddr_in *)&ss)->sin_port);
+  if (ss.ss_family == AF_INET6) return ntohs(((struct sockaddr_in6 *)&ss)->sin6_port);
+  return -1;
+}
+
+static int log_open(sim_state *s) {
+  if (!s->cfg.log_path) return 0;
+  if (s->log) fclose(s->log);
+  s->log = fopen(s->cfg.log_path, "a");
+  if (!s->log) {
+    fprintf(stderr, "fieldgrip-sim: cannot open log %s: %s\n", s->cfg.log_path, strerror(errno));
+    return -1;
+  }
+  return 0;
+}
+
+/* Sets up the mappings, the signal fd, the log and the listening socket; returns 0 or -1
+ * after a message. */
+static int sim_open(sim_state *s) {
+  s->listen_fd = -1;
+  s->sig_fd = -1;
+  if (robot_init(&s->robot, &s->cfg) != 0 || gripper_init(&s->grip, &s->cfg) != 0) {
+    fprintf(stderr, "fieldgrip-sim: out of memory\n");
+    return -1;
+  }
+  sigset_t mask;
+  sigemptyset(&mask);
+  sigaddset(&mask, SIGTERM);
+  sigaddset(&mask, SIGINT);
+  sigaddset(&mask, SIGUSR1);
+  sigprocmask(SIG_BLOCK, &mask, NULL);
+  signal(SIGPIPE, SIG_IGN);
+  s->sig_fd = signalfd(-1, &mask, SFD_CLOEXEC);
+  if (s->sig_fd < 0) {
+    fprintf(stderr, "fieldgrip-sim: signalfd: %s\n", strerror(errno));
+    return -1;
+  }
+  if (log_open(s) != 0) return -1;
+
+  s->ctx = modbus_new_tcp_pi(s->cfg.host[0] ? s->cfg.host : NULL, s->cfg.service);
+  if (!s->ctx) {
+    fprintf(stderr, "fieldgrip-sim: modbus_new_tcp_pi: %s\n", modbus_strerror(errno));
+    return -1;
+  }
+  /* Kept short: libmodbus sleeps this long before flushing a malformed request. */
+  modbus_set_response_timeout(s->ctx, 0, 50000);
+  /* SO_REUSEADDR is set by libmodbus, so a restarted simulator binds the port at once. */
+  s->listen_fd = modbus_tcp_pi_listen(s->ctx, SIM_MAX_CLIENTS);
+  int port = s->listen_fd >= 0 ? bound_port(s->listen_fd) : -1;
+  if (port < 0) {
+    fprintf(stderr, "fieldgrip-sim: cannot listen on %s%s%s:%s: %s\n", s->cfg.ipv6 ? "[" : "",
+            s->cfg.host, s->cfg.ipv6 ? "]" : "", s->cfg.service, modbus_strerror(errno));
+    return -1;
+  }
+  if (s->cfg.port_file && port_file_write(s->cfg.port_file, port) != 0) {
+    fprintf(stderr, "fieldgrip-sim: cannot write port file %s: %s\n", s->cfg.port_file,
+            strerror(errno));
+    return -1;
+  }
+  fprintf(stderr, "fieldgrip-sim: listening on %s%s%s:%d\n", s->cfg.ipv6 ? "[" : "",
+          s->cfg.host[0] ? s->cfg.host : "0.0.0.0", s->cfg.ipv6 ? "]" : "", port);
+  return 0;
+}
+
+static void sim_close(sim_state *s) {
+  while (s->n_clients > 0) client_close(s, s->n_clients - 1);
+  if (s->listen_fd >= 0) close(s->listen_fd);
+  if (s->sig_fd >= 0) close(s->sig_fd);
+  if (s->ctx) {
+    modbus_set_socket(s->ctx, -1);
+    modbus_free(s->ctx);
+  }
+  modbus_mapping_free(s->robot.map);
+  modbus_mapping_free(s->grip.map);
+  if (s->log) fclose(s->log);
+}
+
+/* Serves until SIGTERM or SIGINT; returns 0, or -1 when poll fails. */
+static int sim_run(sim_state *s) {
+  struct pollfd fds[2 + SIM_MAX_CLIENTS];
+  for (;;) {
+    int64_t now = now_ns();
+    sim_advance(s, now);
+    int timeout = sim_poll_timeout(s, now);
+    fds[0] = (struct pollfd){.fd = s->sig_fd, .events = POLLIN};
+    fds[1] = (struct pollfd){.fd = s->listen_fd, .events = POLLIN};
+    int n = s->n_clients;
+    for (int i = 0; i < n; i++) fds[2 + i] = (struct pollfd){.fd = s->clients[i], .events = POLLIN};
+    if (poll(fds, (nfds_t)(2 + n), timeout) < 0) {
+      if (errno == EINTR) continue;
+      fprintf(stderr, "fieldgrip-sim: poll: %s\n", strerror(errno));
+      return -1;
+    }
+    if (fds[0].revents & POLLIN) {
+      struct signalfd_siginfo si;
+      if (read(s->sig_fd, &si, sizeof si) == (ssize_t)sizeof si) {
+        if (si.ssi_signo == SIGUSR1) {
+          log_open(s);
+        } else {
+          return 0;
+        }
+      }
+    }
+    /* Clients from the last to the first, so that closing one (which moves the last into
+     * its slot) leaves the slots still to visit in place. */
+    for (int i = n - 1; i >= 0; i--) {
+      if (fds[2 + i].revents & (POLLIN | POLLHUP | POLLERR)) client_serve(s, i);
+    }
+    if (fds[1].revents & POLLIN) client_accept(s);
+  }
+}
+
+int main(int argc, char **argv) {
+  sim_state s;
+  memset(&s, 0, sizeof s);
+  int rc = parse_args(argc, argv, &s.cfg);
+  if (rc != 0) return rc > 0 ? 0 : 2;
+  rc = sim_open(&s);
+  if (rc == 0) rc = sim_run(&s);
+  sim_close(&s);
+  return rc == 0 ? 0 : 1;
+}
