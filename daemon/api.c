@@ -5,6 +5,7 @@
 #include "json.h"
 #include "metrics.h"
 #include "query.h"
+#include "robot.h"
 
 #include "config.h"
 #include "core/error.h"
@@ -37,6 +38,11 @@ const fg_route fg_api_routes[] = {
   {"GET", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_get, 0},
   {"DELETE", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_cancel, 0},
   {"GET", "/v1/jobs/{}/events", "/v1/jobs/{id}/events", fg_api_job_events, 0},
+  {"GET", "/v1/robot", "/v1/robot", fg_api_robot_get, 0},
+  {"POST", "/v1/robot/commands", "/v1/robot/commands", fg_api_robot_command, FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/robot/commands/{}", "/v1/robot/commands/{id}", fg_api_robot_command_get, 0},
+  {"GET", "/v1/gripper", "/v1/gripper", fg_api_gripper_get, 0},
+  {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_gripper_action, FG_ROUTE_OFFLOAD},
 };
 const size_t fg_api_n_routes = sizeof fg_api_routes / sizeof fg_api_routes[0];
 
@@ -194,6 +200,18 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   size_t len;
   char *text = fg_metrics_render(&g, &len);
   if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");
+  if (req->app->robot) {
+    char modbus[4096];
+    const size_t n = fg_robot_metrics(req->app->robot, modbus, sizeof modbus);
+    char *more = realloc(text, len + n + 1);
+    if (!more) {
+      free(text);
+      return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");
+    }
+    memcpy(more + len, modbus, n + 1);
+    text = more;
+    len += n;
+  }
   fg_resp_take(resp, 200, "text/plain; version=0.0.4; charset=utf-8", text, len);
   return 0;
 }

@@ -19,6 +19,8 @@ typedef struct fg_app {
   struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
   struct fg_jobs *jobs;       /* trainings (jobs.h) */
   struct fg_clip_svc *clip;   /* the CLIP model of [clip] (clip_svc.h) */
+  struct fg_robot_svc *robot; /* the [robot] and [gripper.modbus] peers (robot.h) */
+  struct fg_idem *idem;       /* Idempotency-Keys of actuating requests (idem.h) */
 } fg_app;
 
 /* Installs conf as the current configuration (taking ownership); requests already running
@@ -58,6 +60,11 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp);
 int fg_api_scene_heatmap(fg_req *req, fg_resp *resp);
 int fg_api_embed_text(fg_req *req, fg_resp *resp);
 int fg_api_embed_image(fg_req *req, fg_resp *resp);
+int fg_api_robot_command(fg_req *req, fg_resp *resp);
+int fg_api_robot_command_get(fg_req *req, fg_resp *resp);
+int fg_api_robot_get(fg_req *req, fg_resp *resp);
+int fg_api_gripper_get(fg_req *req, fg_resp *resp);
+int fg_api_gripper_action(fg_req *req, fg_resp *resp);
 
 /* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
 #define FG_API_MAX_EVENT_STREAMS 64

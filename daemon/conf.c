@@ -58,15 +58,16 @@ enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
 enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION };
 enum { K_MODEL };
-/* [gripper.modbus] takes the first eight of these (gripper_modbus_keys); the rest are
- * [robot] only. */
+/* Both Modbus sections take the first eight of these; K_BASE .. K_DONE_TIMEOUT_MS are
+ * [robot] only, K_MOTION_TIMEOUT_MS [gripper.modbus] only (its ninth key, translated by
+ * gripper_key). */
 enum {
   K_TRANSPORT, K_HOST, K_PORT, K_DEVICE, K_BAUD, K_PARITY, K_UNIT_ID, K_TIMEOUT_MS,
-  K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS
+  K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS, K_DONE_TIMEOUT_MS, K_MOTION_TIMEOUT_MS
 };
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
-#define MAX_KEYS 11
+#define MAX_KEYS 13
 
 static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
@@ -76,10 +77,11 @@ static const char *const train_keys[] = {"steps", "threads", "max_image_side", "
 static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
                                          "baud",      "parity",   "unit_id",        "timeout_ms",
-                                         "base",      "encoding", "ack_timeout_ms", NULL};
+                                         "base",      "encoding", "ack_timeout_ms", "done_timeout_ms",
+                                         NULL};
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
-                                                  NULL};
+                                                  "motion_timeout_ms", NULL};
 static const char *const scene_keys[] = {"workspace_min", "workspace_max", "voxel_size",
                                          "background", NULL};
 
@@ -91,7 +93,8 @@ static const char *const *const section_keys[SEC_COUNT] = {
 
 static const char *const transport_names[] = {"none", "tcp", "rtu", NULL};
 static const char *const encoding_names[] = {"int16", "float32", NULL};
-static const char *const gripper_model_names[] = {"panda", "robotiq-2f85", NULL};
+static const char *const gripper_model_names[] = {"panda", "robotiq-2f85", "robotiq-2f140",
+                                                  NULL};
 static const char *const bool_names[] = {"false", "true", NULL};
 
 /* Per-scene parse bookkeeping, parallel to fg_conf.scenes. */
@@ -452,6 +455,8 @@ static int modbus_defaults(fg_conf_modbus *m, int unit_id) {
   m->base = 128;
   m->encoding = FG_ENCODING_INT16;
   m->ack_timeout_ms = 2000;
+  m->done_timeout_ms = 60000;
+  m->motion_timeout_ms = 10000;
   return m->host && m->device;
 }
 
@@ -655,6 +660,8 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
     m->encoding = (fg_encoding)x;
     return 1;
   case K_ACK_TIMEOUT_MS: return parse_int(st, name, v, 1, 600000, &m->ack_timeout_ms);
+  case K_DONE_TIMEOUT_MS: return parse_int(st, name, v, 1, 3600000, &m->done_timeout_ms);
+  case K_MOTION_TIMEOUT_MS: return parse_int(st, name, v, 1, 600000, &m->motion_timeout_ms);
   }
   return 1;
 }
@@ -756,7 +763,9 @@ static int conf_handler(void *user, const char *section, const char *name, const
     c->gripper_model = (fg_gripper_model)x;
     return 1;
   case SEC_ROBOT: return set_modbus(st, &c->robot, k, name, v);
-  case SEC_GRIPPER_MODBUS: return set_modbus(st, &c->gripper_modbus, k, name, v);
+  case SEC_GRIPPER_MODBUS:
+    return set_modbus(st, &c->gripper_modbus, k > K_TIMEOUT_MS ? K_MOTION_TIMEOUT_MS : k, name,
+                      v);
   case SEC_SCENE: return set_scene(st, &c->scenes[st->scene], k, name, v);
   case SEC_NONE:
   case SEC_COUNT: break;

@@ -18,7 +18,11 @@
 
 typedef enum { FG_TRANSPORT_NONE = 0, FG_TRANSPORT_TCP, FG_TRANSPORT_RTU } fg_transport;
 typedef enum { FG_ENCODING_INT16 = 0, FG_ENCODING_FLOAT32 } fg_encoding;
-typedef enum { FG_GRIPPER_PANDA = 0, FG_GRIPPER_ROBOTIQ_2F85 } fg_gripper_model;
+typedef enum {
+  FG_GRIPPER_PANDA = 0,
+  FG_GRIPPER_ROBOTIQ_2F85,
+  FG_GRIPPER_ROBOTIQ_2F140
+} fg_gripper_model;
 
 /* A Modbus peer ([robot] or [gripper.modbus]). */
 typedef struct fg_conf_modbus {
@@ -34,6 +38,9 @@ typedef struct fg_conf_modbus {
   int base;          /* first holding register, 0..65535 - 20 */
   fg_encoding encoding;
   int ack_timeout_ms; /* 1..600000 */
+  int done_timeout_ms; /* extension: for status done / failed, 1..3600000, default 60000 */
+  /* [gripper.modbus] only */
+  int motion_timeout_ms; /* extension: activation and each move, 1..600000, default 10000 */
 } fg_conf_modbus;
 
 /* A [scene NAME] section. */

@@ -1,6 +1,8 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
 #include "clip_svc.h"
+#include "idem.h"
+#include "robot.h"
 #include "conf.h"
 #include "decoder.h"
 #include "http.h"
@@ -11,6 +13,7 @@
 
 #include "config.h"
 #include "core/error.h"
+#include "core/fsutil.h"
 #include "core/log.h"
 
 #include <errno.h>
@@ -231,6 +234,25 @@ int main(int argc, char **argv) {
     return 1;
   }
 
+  /* The robot and the gripper: peers that are down are fine, their workers keep trying. */
+  char *robot_dir = fg_path_join(conf->state_dir, "robot");
+  char *idem_path = robot_dir ? fg_path_join(robot_dir, "idempotency.json") : NULL;
+  int robot_rc = !idem_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
+  if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
+  if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
+  free(robot_dir);
+  free(idem_path);
+  if (robot_rc != 0) {
+    fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
+    fg_idem_free(app.idem);
+    fg_jobs_free(app.jobs);
+    fg_decoder_free(app.decoder);
+    fg_store_close(app.store);
+    fg_clip_svc_free(app.clip);
+    fg_app_clear_conf(&app);
+    return 1;
+  }
+
   long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
   int poll_threads = ncpu > 2 ? (int)(ncpu < 8 ? ncpu : 8) : 2;
   fg_http_config hc = {
@@ -250,6 +272,8 @@ int main(int argc, char **argv) {
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
     fg_error("%s", fg_error_detail());
+    fg_robot_svc_free(app.robot);
+    fg_idem_free(app.idem);
     fg_jobs_free(app.jobs);
     fg_decoder_free(app.decoder);
     fg_store_close(app.store);
@@ -284,7 +308,10 @@ int main(int argc, char **argv) {
     break;
   }
   fg_notify_stopping();
+  fg_robot_svc_stop(app.robot); /* a command being waited for ends now, as unknown */
   fg_http_stop(http);
+  fg_robot_svc_free(app.robot);
+  fg_idem_free(app.idem);
   fg_jobs_free(app.jobs); /* a running training stops after its step and keeps its field */
   fg_decoder_free(app.decoder);
   fg_store_close(app.store);

@@ -1,0 +1,432 @@
+/* The robot and the gripper over HTTP: POST /v1/robot/commands, GET /v1/robot and
+ * /v1/robot/commands/{id}, GET /v1/gripper and POST /v1/gripper/{open,close,move,activate}.
+ * Requests are checked here and run by robot.h; actuating requests may carry an
+ * Idempotency-Key (idem.h). */
+#include "api.h"
+#include "idem.h"
+#include "json.h"
+#include "robot.h"
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/pose.h"
+
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const command_names[] = {NULL, "pick", "place", "open", "close", "move"};
+
+/* ---------------------------------------------------------------- requests */
+
+/* Reads the keys of a command or gripper request into *r. allowed: NULL-terminated key
+ * names. Answers 400 itself and returns -1 on a bad request. */
+static int parse_request(json_t *body, const char *const *allowed, fg_robot_request *r,
+                         fg_resp *resp) {
+  memset(r, 0, sizeof *r);
+  r->wait = 1;
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    int ok = 0;
+    for (int i = 0; allowed[i]; i++) ok |= strcmp(allowed[i], key) == 0;
+    if (!ok) {
+      char list[160] = "";
+      for (int i = 0; allowed[i]; i++) {
+        size_t n = strlen(list);
+        snprintf(list + n, sizeof list - n, "%s%s", i ? ", " : "", allowed[i]);
+      }
+      fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; expected %s", key, list);
+      return -1;
+    }
+  }
+  const char *cmd = NULL;
+  if (fg_json_string(body, "command", &cmd) < 0 ||
+      (json_object_get(body, "command") && !cmd)) {
+    fg_resp_error(resp, 400, "invalid_request", "\"command\" must be a string");
+    return -1;
+  }
+  if (cmd) {
+    for (int c = FG_ROBOT_PICK; c <= FG_ROBOT_MOVE; c++)
+      if (strcmp(cmd, command_names[c]) == 0) r->command = c;
+    if (!r->command) {
+      fg_resp_error(resp, 400, "invalid_request",
+                    "unknown command \"%s\"; expected pick, place, open, close or move", cmd);
+      return -1;
+    }
+  }
+  json_t *pose = json_object_get(body, "pose");
+  if (pose) {
+    double T[16];
+    if (fg_json_pose(pose, T, "pose") < 0) {
+      fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail());
+      return -1;
+    }
+    r->has_pose = 1;
+    json_t *q = json_is_object(pose) ? json_object_get(pose, "quaternion") : NULL;
+    if (q && !json_object_get(pose, "matrix")) {
+      /* the quaternion as given (its sign picks the rotation vector at a half turn) */
+      fg_json_vec(q, r->q_wxyz, 4, "pose.quaternion");
+      const double n = sqrt(r->q_wxyz[0] * r->q_wxyz[0] + r->q_wxyz[1] * r->q_wxyz[1] +
+                            r->q_wxyz[2] * r->q_wxyz[2] + r->q_wxyz[3] * r->q_wxyz[3]);
+      for (int i = 0; i < 4; i++) r->q_wxyz[i] /= n;
+      for (int i = 0; i < 3; i++) r->p_world_m[i] = T[4 * i + 3];
+    } else {
+      fg_pose_to_quat(T, r->p_world_m, r->q_wxyz);
+    }
+  }
+  static const char *const nums[] = {"width", "force", "speed"};
+  double *dst[] = {&r->width_m, &r->force_n, &r->speed_mps};
+  int *has[] = {&r->has_width, &r->has_force, &r->has_speed};
+  for (int i = 0; i < 3; i++) {
+    int rc = fg_json_number(body, nums[i], dst[i]);
+    if (rc < 0 || (json_object_get(body, nums[i]) && rc == 0)) {
+      fg_resp_error(resp, 400, "invalid_request", "\"%s\" must be a finite number (%s)",
+                    nums[i], i == 0 ? "metres" : i == 1 ? "newtons" : "m/s");
+      return -1;
+    }
+    *has[i] = rc == 1;
+  }
+  static const char *const flags[] = {"dry_run", "wait"};
+  int *fl[] = {&r->dry_run, &r->wait};
+  for (int i = 0; i < 2; i++) {
+    json_t *b = json_object_get(body, flags[i]);
+    if (!b) continue;
+    if (!json_is_boolean(b)) {
+      fg_resp_error(resp, 400, "invalid_request", "\"%s\" must be true or false", flags[i]);
+      return -1;
+    }
+    *fl[i] = json_is_true(b);
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- views */
+
+static json_t *words_json(const uint16_t *w, int n) {
+  json_t *a = json_array();
+  for (int i = 0; a && i < n; i++) json_array_append_new(a, json_integer(w[i]));
+  return a;
+}
+
+static json_t *time_json(double s) {
+  if (s <= 0) return json_null();
+  char buf[32];
+  fg_iso8601((int64_t)(s * 1000), buf);
+  return json_string(buf);
+}
+
+static json_t *pose_json(const fg_robot_request *r) {
+  double T[16];
+  fg_pose_from_quat(r->p_world_m, r->q_wxyz, T);
+  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(r->p_world_m, 3),
+                   "quaternion", fg_json_from_vec(r->q_wxyz, 4), "matrix",
+                   fg_json_from_matrix4(T));
+}
+
+static json_t *command_json(const fg_robot_cmd_view *v, int gripper_unit) {
+  json_t *o = json_object();
+  if (!o) return NULL;
+  if (!v->req.dry_run && v->id) json_object_set_new(o, "id", json_integer((json_int_t)v->id));
+  json_object_set_new(o, "command", json_string(command_names[v->command]));
+  json_object_set_new(o, "dry_run", json_boolean(v->req.dry_run));
+  if (!v->req.dry_run) {
+    json_object_set_new(o, "state", json_string(fg_cmd_state_name(v->state)));
+    json_object_set_new(o, "stage", json_string(v->stage));
+  }
+  json_object_set_new(o, "seq", v->seq ? json_integer(v->seq) : json_null());
+  if (v->req.has_pose) json_object_set_new(o, "pose", pose_json(&v->req));
+  if (v->req.has_width) json_object_set_new(o, "width", json_real(v->req.width_m));
+  if (v->req.has_force) json_object_set_new(o, "force", json_real(v->req.force_n));
+  if (v->req.has_speed) json_object_set_new(o, "speed", json_real(v->req.speed_mps));
+  if (!v->req.dry_run) {
+    json_object_set_new(o, "wait", json_boolean(v->req.wait));
+    json_object_set_new(o, "robot_status",
+                        v->robot_status >= 0 ? json_integer(v->robot_status) : json_null());
+    json_object_set_new(o, "ack_ms", v->ack_ms >= 0 ? json_real(v->ack_ms) : json_null());
+    json_object_set_new(o, "object_detected", v->object_detected >= 0
+                                                  ? json_boolean(v->object_detected)
+                                                  : json_null());
+    json_object_set_new(o, "gripper_width",
+                        isnan(v->gripper_width_m) ? json_null() : json_real(v->gripper_width_m));
+    json_object_set_new(o, "created", time_json(v->created_s));
+    json_object_set_new(o, "finished", time_json(v->finished_s));
+  }
+  json_t *regs = json_object(), *grip = json_array();
+  for (int i = 0; i < v->n_steps; i++) {
+    const fg_robot_step *st = &v->steps[i];
+    if (st->kind == FG_STEP_ROBOT) {
+      json_object_set_new(
+          regs, "robot",
+          json_pack("{s:i, s:i, s:i, s:i, s:s, s:o}", "unit_id", v->robot_unit, "function", 16,
+                    "address", st->address, "count", st->n_words, "encoding",
+                    v->encoding == FG_POSE_FLOAT32 ? "float32" : "int16", "words",
+                    words_json(st->words, st->n_words)));
+    } else {
+      json_array_append_new(
+          grip, json_pack("{s:s, s:i, s:i, s:i, s:i, s:i, s:i, s:o}", "step", st->name,
+                          "unit_id", gripper_unit, "function", 16, "address", st->address,
+                          "position", st->position, "speed", st->speed, "force", st->force,
+                          "words", words_json(st->words, st->n_words)));
+    }
+  }
+  json_object_set_new(regs, "gripper", grip);
+  json_object_set_new(o, "registers", regs);
+  return o;
+}
+
+/* The answer to a command view: the command (200, 202), or the error with the command
+ * beside it. *status gets the HTTP status. */
+static json_t *answer_json(fg_req *req, const fg_robot_cmd_view *v, int *status) {
+  json_t *cmd = command_json(v, req->conf->gripper_modbus.unit_id);
+  *status = v->req.dry_run ? 200 : v->http_status;
+  if (*status < 400) return cmd;
+  return json_pack("{s:{s:s, s:s}, s:o}", "error", "code", v->code, "message", v->message,
+                   "command", cmd);
+}
+
+static void answer_command(fg_req *req, fg_resp *resp, const fg_robot_cmd_view *v,
+                           int replayed) {
+  int status;
+  json_t *o = answer_json(req, v, &status);
+  if (status == 202 && v->id)
+    snprintf(resp->location, sizeof resp->location, "/v1/robot/commands/%" PRIu64, v->id);
+  if (replayed) json_object_set_new(o, "replayed", json_true());
+  fg_resp_json(resp, status, o);
+}
+
+/* The answer for an error a command stopped at before it ran. */
+static int answer_refusal(fg_resp *resp, int rc) {
+  const char *d = fg_error_detail();
+  switch (rc) {
+  case FG_ERANGE: return fg_resp_error(resp, 400, "value_out_of_range", "%s", d);
+  case FG_EINVAL: return fg_resp_error(resp, 400, "invalid_request", "%s", d);
+  case FG_EBUSY: return fg_resp_error(resp, 409, "robot_busy", "%s", d);
+  case FG_EUNAVAIL: return fg_resp_error(resp, 409, "not_configured", "%s", d);
+  default: return fg_resp_error(resp, 500, "internal_error", "%s", d);
+  }
+}
+
+/* ---------------------------------------------------------------- idempotency */
+
+/* With an Idempotency-Key: answers a replay (or a conflict) itself and returns 1; returns 0
+ * with *key set when the request is to run, -1 after answering an error. */
+static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
+  *key = fg_req_header(req, "Idempotency-Key");
+  if (!*key) return 0;
+  if (!fg_idem_key_valid(*key))
+    return fg_resp_error(resp, 400, "invalid_request", "Idempotency-Key must be 1 to %d "
+                         "printable ASCII characters", FG_IDEM_KEY_MAX), -1;
+  uint64_t h = fg_idem_hash(req->path, strlen(req->path));
+  h ^= fg_idem_hash(req->body, req->body_len) * 31;
+  int status = 0;
+  char *body = NULL;
+  int rc = fg_idem_begin(req->app->idem, *key, h, &status, &body);
+  switch (rc) {
+  case FG_IDEM_NEW: return 0;
+  case FG_IDEM_RUNNING:
+    return fg_resp_error(resp, 409, "idempotency_in_progress", "the request with this "
+                         "Idempotency-Key is still running; ask again when it has finished"), 1;
+  case FG_IDEM_CONFLICT:
+    return fg_resp_error(resp, 422, "idempotency_key_reused", "this Idempotency-Key was used "
+                         "for a different request; use a new key for a new command"), 1;
+  case FG_IDEM_REPLAY: {
+    json_t *o = json_loads(body, 0, NULL);
+    free(body);
+    json_t *cmd = json_object_get(o, "command") ? json_object_get(o, "command") : o;
+    json_t *id = json_object_get(cmd, "id");
+    fg_robot_cmd_view v;
+    /* an answer given at the acknowledgement: the command has gone on since */
+    if (status == 202 && json_is_integer(id) && req->app->robot &&
+        fg_robot_command_get(req->app->robot, (uint64_t)json_integer_value(id), &v) == 0) {
+      json_decref(o);
+      answer_command(req, resp, &v, 1);
+      return 1;
+    }
+    if (json_is_object(o)) json_object_set_new(o, "replayed", json_true());
+    fg_resp_json(resp, status, o);
+    return 1;
+  }
+  default:
+    return fg_resp_error(resp, 503, "state_unavailable", "the Idempotency-Key could not be "
+                         "stored, so the command was not run: %s", fg_error_detail()), -1;
+  }
+}
+
+/* ---------------------------------------------------------------- handlers */
+
+/* The body as an object; an empty body is {} (a bare POST /v1/gripper/close). */
+static json_t *body_or_empty(fg_req *req, fg_resp *resp) {
+  if (req->body_len == 0) return json_object();
+  return fg_api_body_object(req, resp);
+}
+
+/* Runs an actuating request under its Idempotency-Key: run() fills *v or returns a refusal. */
+typedef int (*run_fn)(fg_req *req, const char *action, const fg_robot_request *r,
+                      fg_robot_cmd_view *v);
+
+static int run_robot(fg_req *req, const char *action, const fg_robot_request *r,
+                     fg_robot_cmd_view *v) {
+  (void)action;
+  return r->dry_run ? fg_robot_plan(req->app->robot, r, v)
+                    : fg_robot_execute(req->app->robot, r, v);
+}
+
+static int run_gripper(fg_req *req, const char *action, const fg_robot_request *r,
+                       fg_robot_cmd_view *v) {
+  return fg_gripper_action(req->app->robot, action, r, v);
+}
+
+static int actuate(fg_req *req, fg_resp *resp, const char *action, const fg_robot_request *r,
+                   run_fn run) {
+  const char *key = NULL;
+  if (!r->dry_run) {
+    int ir = idem_begin(req, resp, &key);
+    if (ir != 0) return 0;
+  }
+  fg_robot_cmd_view v;
+  int rc = run(req, action, r, &v);
+  if (rc < 0) {
+    if (key) fg_idem_cancel(req->app->idem, key); /* nothing ran: the key may be used again */
+    return answer_refusal(resp, rc);
+  }
+  int status;
+  json_t *o = answer_json(req, &v, &status);
+  if (action && o) {
+    json_t *cmd = status < 400 ? o : json_object_get(o, "command");
+    json_object_del(cmd, "command");
+    json_object_set_new(cmd, "action", json_string(action));
+  }
+  if (key) {
+    char *text = json_dumps(o, JSON_COMPACT);
+    if (!text || fg_idem_finish(req->app->idem, key, status, text) < 0)
+      fg_warn("robot: the answer of Idempotency-Key %s was not stored: %s", key,
+              fg_error_detail());
+    free(text);
+  }
+  if (status == 202 && v.id)
+    snprintf(resp->location, sizeof resp->location, "/v1/robot/commands/%" PRIu64, v.id);
+  fg_resp_json(resp, status, o);
+  return 0;
+}
+
+int fg_api_robot_command(fg_req *req, fg_resp *resp) {
+  json_t *body = fg_api_body_object(req, resp);
+  if (!body) return 0;
+  static const char *const keys[] = {"command", "pose", "width", "force", "speed", "dry_run",
+                                     "wait", NULL};
+  fg_robot_request r;
+  int rc = parse_request(body, keys, &r, resp);
+  json_decref(body);
+  if (rc < 0) return 0;
+  if (!r.command)
+    return fg_resp_error(resp, 400, "invalid_request",
+                         "\"command\" is required: pick, place, open, close or move");
+  return actuate(req, resp, NULL, &r, run_robot);
+}
+
+int fg_api_robot_command_get(fg_req *req, fg_resp *resp) {
+  char *end;
+  const unsigned long long id = strtoull(req->params[0], &end, 10);
+  fg_robot_cmd_view v;
+  if (*end || end == req->params[0] || fg_robot_command_get(req->app->robot, id, &v) < 0)
+    return fg_resp_error(resp, 404, "not_found", "no command %s (commands are numbered from 1 "
+                         "at each start; the newest 1000 are kept)", req->params[0]);
+  fg_resp_json(resp, 200, command_json(&v, req->conf->gripper_modbus.unit_id));
+  return 0;
+}
+
+static json_t *error_json(const char *msg, double at_s) {
+  if (!msg[0]) return json_null();
+  return json_pack("{s:s, s:o}", "message", msg, "at", time_json(at_s));
+}
+
+int fg_api_robot_get(fg_req *req, fg_resp *resp) {
+  fg_robot_state st;
+  fg_robot_state_get(req->app->robot, &st);
+  json_t *o = json_pack(
+      "{s:b, s:s, s:s?, s:i, s:i, s:s, s:b, s:b, s:o, s:o, s:o, s:o, s:{s:I, s:I, s:I, s:I, "
+      "s:I}}",
+      "configured", st.configured, "profile", "pose-registers", "address",
+      st.configured ? st.address : NULL, "unit_id", st.unit_id, "base", st.base, "encoding",
+      st.encoding == FG_POSE_FLOAT32 ? "float32" : "int16", "connected", st.connected, "busy",
+      st.busy, "last_seq", st.last_seq ? json_integer(st.last_seq) : json_null(), "ack",
+      st.ack >= 0 ? json_integer(st.ack) : json_null(), "status",
+      st.status >= 0 ? json_integer(st.status) : json_null(), "last_error",
+      error_json(st.last_error, st.last_error_s), "counters", "requests",
+      (json_int_t)st.requests, "errors", (json_int_t)st.errors, "timeouts",
+      (json_int_t)st.timeouts, "exceptions", (json_int_t)st.exceptions, "reconnects",
+      (json_int_t)st.reconnects);
+  fg_robot_cmd_view v;
+  json_object_set_new(o, "last_command",
+                      st.last_command && fg_robot_command_get(req->app->robot, st.last_command,
+                                                              &v) == 0
+                          ? command_json(&v, req->conf->gripper_modbus.unit_id)
+                          : json_null());
+  fg_resp_json(resp, 200, o);
+  return 0;
+}
+
+int fg_api_gripper_get(fg_req *req, fg_resp *resp) {
+  fg_gripper_state st;
+  fg_gripper_state_get(req->app->robot, &st);
+  const fg_robotiq_status *s = &st.status;
+  json_t *o = json_pack("{s:b, s:s, s:s, s:s?, s:i, s:b}", "configured", st.configured,
+                        "profile", "robotiq-2f", "model", st.model, "address",
+                        st.configured ? st.address : NULL, "unit_id", st.unit_id, "connected",
+                        st.connected);
+  if (st.have_status) {
+    json_object_set_new(o, "activated", json_boolean(s->sta == 3 && s->act));
+    json_object_set_new(o, "width", json_real(st.width_m));
+    json_object_set_new(o, "object_detected", json_boolean(fg_robotiq_object_detected(s)));
+    json_object_set_new(o, "fault", s->flt ? json_pack("{s:i, s:s}", "code", s->flt, "name",
+                                                       fg_robotiq_fault_name(s->flt))
+                                           : json_null());
+    json_object_set_new(o, "registers",
+                        json_pack("{s:i, s:i, s:i, s:i, s:i, s:i, s:i, s:i, s:i}", "gACT",
+                                  s->act, "gGTO", s->gto, "gSTA", s->sta, "gOBJ", s->obj,
+                                  "gFLT", s->flt, "kFLT", s->kflt, "gPR", s->echo, "gPO",
+                                  s->position, "gCU", s->current));
+  } else {
+    json_object_set_new(o, "activated", json_null());
+    json_object_set_new(o, "width", json_null());
+    json_object_set_new(o, "object_detected", json_null());
+    json_object_set_new(o, "fault", json_null());
+  }
+  json_object_set_new(o, "state", json_string(!st.configured ? "not_configured"
+                                              : !st.connected ? "disconnected"
+                                              : !st.have_status ? "connected"
+                                              : s->flt >= 0x08 ? "fault"
+                                              : s->sta == 3 && s->act ? "ready"
+                                              : s->sta == 1 ? "activating"
+                                                            : "not_activated"));
+  json_object_set_new(o, "last_error", error_json(st.last_error, st.last_error_s));
+  json_object_set_new(o, "counters",
+                      json_pack("{s:I, s:I, s:I, s:I, s:I}", "requests", (json_int_t)st.requests,
+                                "errors", (json_int_t)st.errors, "timeouts",
+                                (json_int_t)st.timeouts, "exceptions",
+                                (json_int_t)st.exceptions, "reconnects",
+                                (json_int_t)st.reconnects));
+  fg_resp_json(resp, 200, o);
+  return 0;
+}
+
+int fg_api_gripper_action(fg_req *req, fg_resp *resp) {
+  static const char *const actions[] = {"open", "close", "move", "activate", NULL};
+  const char *action = NULL;
+  for (int i = 0; actions[i]; i++)
+    if (strcmp(req->params[0], actions[i]) == 0) action = actions[i];
+  if (!action)
+    return fg_resp_error(resp, 404, "not_found", "no gripper action \"%s\"; expected open, "
+                         "close, move or activate", req->params[0]);
+  json_t *body = body_or_empty(req, resp);
+  if (!body) return 0;
+  static const char *const keys[] = {"width", "speed", "force", "dry_run", NULL};
+  fg_robot_request r;
+  int rc = parse_request(body, keys, &r, resp);
+  json_decref(body);
+  if (rc < 0) return 0;
+  return actuate(req, resp, action, &r, run_gripper);
+}

@@ -1,0 +1,763 @@
+#include "robot.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "modbus/devices.h"
+#include "modbus/peer.h"
+
+#define MAX_RECORDS 1000
+#define DEFAULT_FORCE_N 40.0
+#define ROBOT_IDLE_MS 1000
+#define GRIPPER_IDLE_MS 500
+
+typedef struct rec {
+  fg_robot_cmd_view v;
+  int refs; /* guarded by svc->lock */
+  struct fg_robot_svc *svc;
+} rec;
+
+struct fg_robot_svc {
+  fg_mb_peer *robot, *gripper; /* NULL when not configured */
+  fg_robot_profile rp;
+  int robot_unit, gripper_unit;
+  const fg_robotiq_model *model;
+  int motion_timeout_ms;
+
+  pthread_mutex_t lock; /* guards everything below */
+  pthread_cond_t cond;  /* records changed */
+  rec *recs[MAX_RECORDS]; /* ring of the newest records, oldest at head */
+  size_t n_recs, head;
+  uint64_t next_id;
+  rec *active;          /* the command running, or NULL */
+  int stopping;
+  /* robot: written by its worker */
+  uint16_t last_seq;
+  unsigned gen_seen;    /* link generation whose ack last_seq was read from */
+  int ack, status;
+  /* gripper: written by its worker */
+  int g_have;
+  fg_robotiq_status g_status;
+  unsigned g_gen;       /* link generation of g_status */
+  uint64_t by_state[FG_CMD_STATES];
+};
+
+static const char *const state_names[FG_CMD_STATES] = {
+    "pending", "acknowledged", "done", "failed", "unknown", "error"};
+
+const char *fg_cmd_state_name(fg_cmd_state s) {
+  return s >= 0 && s < FG_CMD_STATES ? state_names[s] : "?";
+}
+
+static double now_real(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static double now_mono_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+/* ---------------------------------------------------------------- idle jobs */
+
+static int robot_idle(fg_mb_link *l, void *arg) {
+  fg_robot_svc *svc = arg;
+  uint16_t ack;
+  int status;
+  FG_TRY(fg_robot_read_ack(l, &svc->rp, &ack, &status));
+  pthread_mutex_lock(&svc->lock);
+  svc->ack = ack;
+  svc->status = status;
+  if (svc->gen_seen != fg_mb_link_generation(l)) {
+    /* a new connection: continue after the number the robot saw last */
+    svc->gen_seen = fg_mb_link_generation(l);
+    svc->last_seq = ack;
+  }
+  pthread_mutex_unlock(&svc->lock);
+  return 0;
+}
+
+/* Stores a gripper status read on link l. */
+static void gripper_store(fg_robot_svc *svc, fg_mb_link *l, const fg_robotiq_status *s) {
+  pthread_mutex_lock(&svc->lock);
+  svc->g_status = *s;
+  svc->g_have = 1;
+  svc->g_gen = fg_mb_link_generation(l);
+  pthread_mutex_unlock(&svc->lock);
+}
+
+static int gripper_idle(fg_mb_link *l, void *arg) {
+  fg_robot_svc *svc = arg;
+  fg_robotiq_status s;
+  FG_TRY(fg_gripper_read(l, &s));
+  gripper_store(svc, l, &s);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- set-up */
+
+static int peer_config(const fg_conf_modbus *m, const char *name, fg_mb_link_config *lc) {
+  memset(lc, 0, sizeof *lc);
+  lc->name = name;
+  lc->transport = m->transport == FG_TRANSPORT_TCP ? FG_MB_TCP : FG_MB_RTU;
+  lc->host = m->host;
+  lc->port = m->port;
+  lc->device = m->device;
+  lc->baud = m->baud;
+  lc->parity = m->parity;
+  lc->unit_id = m->unit_id;
+  lc->timeout_ms = m->timeout_ms;
+  return m->transport != FG_TRANSPORT_NONE;
+}
+
+int fg_robot_svc_new(fg_robot_svc **out, const fg_conf *conf) {
+  *out = NULL;
+  fg_robot_svc *svc = calloc(1, sizeof *svc);
+  if (!svc) return FG_ENOMEM;
+  pthread_mutex_init(&svc->lock, NULL);
+  pthread_cond_init(&svc->cond, NULL);
+  svc->next_id = 1;
+  svc->ack = svc->status = -1;
+  svc->rp = (fg_robot_profile){
+      .base = conf->robot.base,
+      .encoding = conf->robot.encoding == FG_ENCODING_FLOAT32 ? FG_POSE_FLOAT32 : FG_POSE_INT16,
+      .ack_timeout_ms = conf->robot.ack_timeout_ms,
+      .done_timeout_ms = conf->robot.done_timeout_ms,
+  };
+  svc->robot_unit = conf->robot.unit_id;
+  svc->gripper_unit = conf->gripper_modbus.unit_id;
+  svc->model = conf->gripper_model == FG_GRIPPER_ROBOTIQ_2F140 ? &fg_robotiq_2f140
+                                                                : &fg_robotiq_2f85;
+  svc->motion_timeout_ms = conf->gripper_modbus.motion_timeout_ms;
+  fg_mb_link_config lc;
+  int rc = 0;
+  if (peer_config(&conf->robot, "robot", &lc))
+    rc = fg_mb_peer_new(&svc->robot, &lc, ROBOT_IDLE_MS, robot_idle, svc);
+  if (rc == 0 && peer_config(&conf->gripper_modbus, "gripper", &lc)) {
+    if (conf->gripper_model == FG_GRIPPER_PANDA)
+      fg_warn("[gripper.modbus] drives a Robotiq 2F but [gripper] model is panda; using the "
+              "2F-85's stroke, speeds and forces (set model = robotiq-2f85 or robotiq-2f140)");
+    rc = fg_mb_peer_new(&svc->gripper, &lc, GRIPPER_IDLE_MS, gripper_idle, svc);
+  }
+  if (rc < 0) {
+    fg_robot_svc_free(svc);
+    return rc;
+  }
+  *out = svc;
+  return 0;
+}
+
+static void rec_unref_locked(rec *r) {
+  if (r && --r->refs == 0) free(r);
+}
+
+void fg_robot_svc_stop(fg_robot_svc *svc) {
+  if (!svc) return;
+  pthread_mutex_lock(&svc->lock);
+  svc->stopping = 1;
+  pthread_mutex_unlock(&svc->lock);
+}
+
+void fg_robot_svc_free(fg_robot_svc *svc) {
+  if (!svc) return;
+  fg_robot_svc_stop(svc);
+  fg_mb_peer_free(svc->robot);
+  fg_mb_peer_free(svc->gripper);
+  for (size_t i = 0; i < svc->n_recs; i++)
+    rec_unref_locked(svc->recs[(svc->head + i) % MAX_RECORDS]);
+  pthread_cond_destroy(&svc->cond);
+  pthread_mutex_destroy(&svc->lock);
+  free(svc);
+}
+
+int fg_robot_svc_has_robot(const fg_robot_svc *svc) { return svc->robot != NULL; }
+int fg_robot_svc_has_gripper(const fg_robot_svc *svc) { return svc->gripper != NULL; }
+
+/* ---------------------------------------------------------------- planning */
+
+/* A gripper step moving to position at the request's speed and force. */
+static int plan_gripper(fg_robot_svc *svc, const fg_robot_request *req, const char *name,
+                        int position, fg_robot_step *st) {
+  memset(st, 0, sizeof *st);
+  st->kind = FG_STEP_GRIPPER;
+  st->name = name;
+  st->position = position;
+  const fg_robotiq_model *m = svc->model;
+  FG_TRY(fg_robotiq_speed_to_byte(m, req->has_speed ? req->speed_mps : m->speed_max_mps,
+                                  &st->speed));
+  FG_TRY(fg_robotiq_force_to_byte(m, req->has_force ? req->force_n : DEFAULT_FORCE_N,
+                                  &st->force));
+  fg_robotiq_request(FG_ROBOTIQ_ACT | FG_ROBOTIQ_GTO, position, st->speed, st->force, st->words);
+  st->n_words = FG_ROBOTIQ_WORDS;
+  st->address = FG_ROBOTIQ_REQUEST_ADDR;
+  return 0;
+}
+
+/* The position of the request's width, or fully open without one. */
+static int open_position(fg_robot_svc *svc, const fg_robot_request *req, int *position) {
+  if (!req->has_width) {
+    *position = 0;
+    return 0;
+  }
+  return fg_robotiq_width_to_position(svc->model, req->width_m, position);
+}
+
+static int plan_locked(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v) {
+  memset(v, 0, sizeof *v);
+  v->command = req->command;
+  v->req = *req;
+  v->robot_status = -1;
+  v->object_detected = -1;
+  v->gripper_width_m = NAN;
+  v->ack_ms = -1;
+  v->stage = "queued";
+  v->robot_unit = svc->robot_unit;
+  v->robot_base = svc->rp.base;
+  v->encoding = svc->rp.encoding;
+  const int c = req->command, grip = svc->gripper != NULL;
+  if (c < FG_ROBOT_PICK || c > FG_ROBOT_MOVE)
+    return fg_fail(FG_EINVAL, "unknown command %d", c);
+  const int robot_step = !(grip && (c == FG_ROBOT_OPEN || c == FG_ROBOT_CLOSE));
+  const int needs_pose = c == FG_ROBOT_PICK || c == FG_ROBOT_PLACE || c == FG_ROBOT_MOVE;
+  if (needs_pose && !req->has_pose)
+    return fg_fail(FG_EINVAL, "this command needs a pose: {\"position\": [x, y, z], "
+                   "\"quaternion\": [w, x, y, z]} or a 4x4 matrix, in the robot's base frame");
+  if (!robot_step && req->has_pose)
+    return fg_fail(FG_EINVAL, "open and close go to the gripper ([gripper.modbus]) and take no "
+                   "pose; use pick or place to move");
+  if (req->has_force && (req->force_n != floor(req->force_n) || req->force_n < 0 ||
+                         req->force_n > 65535))
+    return fg_fail(FG_ERANGE, "force = %g: expected whole newtons, 0 .. 65535", req->force_n);
+  int n = 0, pos;
+  if (grip && c == FG_ROBOT_PICK) {
+    FG_TRY(open_position(svc, req, &pos));
+    FG_TRY(plan_gripper(svc, req, "gripper_open", pos, &v->steps[n++]));
+  }
+  if (robot_step) {
+    fg_pose_block b = {
+        .seq = fg_seq_next(svc->last_seq),
+        .command = c,
+        .width_m = req->has_width ? req->width_m : svc->model->stroke_m,
+        .force_n = (int)(req->has_force ? req->force_n : DEFAULT_FORCE_N),
+    };
+    if (req->has_pose) {
+      memcpy(b.p_world_m, req->p_world_m, sizeof b.p_world_m);
+      fg_rotvec_from_quat(req->q_wxyz, b.rotvec_rad);
+    }
+    fg_robot_step *st = &v->steps[n++];
+    memset(st, 0, sizeof *st);
+    st->kind = FG_STEP_ROBOT;
+    st->name = "robot";
+    FG_TRY(fg_pose_block_encode(&b, svc->rp.encoding, st->words));
+    st->n_words = fg_pose_block_words(svc->rp.encoding);
+    st->address = svc->rp.base;
+    v->seq = b.seq;
+  }
+  if (grip && c == FG_ROBOT_PICK) FG_TRY(plan_gripper(svc, req, "gripper_close", 255, &v->steps[n++]));
+  if (grip && (c == FG_ROBOT_PLACE || c == FG_ROBOT_OPEN)) {
+    FG_TRY(open_position(svc, req, &pos));
+    FG_TRY(plan_gripper(svc, req, "gripper_open", pos, &v->steps[n++]));
+  }
+  if (grip && c == FG_ROBOT_CLOSE) FG_TRY(plan_gripper(svc, req, "gripper_close", 255, &v->steps[n++]));
+  v->n_steps = n;
+  return 0;
+}
+
+int fg_robot_plan(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v) {
+  pthread_mutex_lock(&svc->lock);
+  int rc = plan_locked(svc, req, v);
+  pthread_mutex_unlock(&svc->lock);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- execution */
+
+/* Ends r with an outcome (under no lock); wakes the waiters. */
+static void finish(rec *r, fg_cmd_state state, int http, const char *code, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+static void finish(rec *r, fg_cmd_state state, int http, const char *code, const char *fmt,
+                   ...) {
+  fg_robot_svc *svc = r->svc;
+  pthread_mutex_lock(&svc->lock);
+  r->v.state = state;
+  r->v.http_status = http;
+  snprintf(r->v.code, sizeof r->v.code, "%s", code ? code : "");
+  if (fmt) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(r->v.message, sizeof r->v.message, fmt, ap);
+    va_end(ap);
+  }
+  r->v.finished_s = now_real();
+  r->v.stage = "finished";
+  svc->by_state[state]++;
+  if (svc->active == r) svc->active = NULL;
+  pthread_cond_broadcast(&svc->cond);
+  pthread_mutex_unlock(&svc->lock);
+  if (state != FG_CMD_DONE)
+    fg_warn("robot: command %llu (%s) ended %s: %s", (unsigned long long)r->v.id,
+            r->v.steps[0].name, state_names[state], r->v.message);
+}
+
+static void set_stage(rec *r, const char *stage) {
+  pthread_mutex_lock(&r->svc->lock);
+  r->v.stage = stage;
+  pthread_mutex_unlock(&r->svc->lock);
+}
+
+static int cancelled(void *arg) {
+  fg_robot_svc *svc = arg;
+  pthread_mutex_lock(&svc->lock);
+  int s = svc->stopping;
+  pthread_mutex_unlock(&svc->lock);
+  return s;
+}
+
+/* A gripper step on the gripper's worker: activate first when needed, then move. */
+typedef struct grip_job {
+  fg_robot_svc *svc;
+  const fg_robot_step *step;
+  fg_robotiq_status status;
+  int activate_only;
+} grip_job;
+
+static int grip_run(fg_mb_link *l, void *arg) {
+  grip_job *g = arg;
+  fg_robot_svc *svc = g->svc;
+  FG_TRY(fg_gripper_read(l, &g->status));
+  gripper_store(svc, l, &g->status);
+  if (g->activate_only || g->status.sta != 3 || !g->status.act) {
+    int rc = fg_gripper_activate(l, svc->motion_timeout_ms, &g->status);
+    gripper_store(svc, l, &g->status);
+    if (rc < 0 || g->activate_only) return rc;
+  }
+  int rc = fg_gripper_move(l, g->step->position, g->step->speed, g->step->force,
+                           svc->motion_timeout_ms, &g->status);
+  gripper_store(svc, l, &g->status);
+  return rc;
+}
+
+/* The HTTP answer for a failed gripper call. */
+static void gripper_outcome(int rc, int *http, const char **code) {
+  *http = rc == FG_EUNAVAIL ? 503 : rc == FG_ETIMEDOUT ? 504 : 502;
+  *code = rc == FG_EUNAVAIL    ? "gripper_disconnected"
+          : rc == FG_ETIMEDOUT ? "gripper_timeout"
+          : rc == FG_EPEER     ? "gripper_fault"
+                               : "gripper_error";
+}
+
+/* Runs gripper step i of r: directly on link gl when the caller is the gripper's worker,
+ * else through the gripper's queue. 0, or finishes r (state: error before the robot moved,
+ * failed after) and returns the error. */
+static int run_gripper_step(rec *r, int i, int robot_moved, fg_mb_link *gl) {
+  fg_robot_svc *svc = r->svc;
+  set_stage(r, r->v.steps[i].name);
+  grip_job g = {.svc = svc, .step = &r->v.steps[i]};
+  int rc = gl ? grip_run(gl, &g) : fg_mb_peer_call(svc->gripper, grip_run, &g);
+  pthread_mutex_lock(&svc->lock);
+  r->v.gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
+  if (rc == 0 && strcmp(r->v.steps[i].name, "gripper_close") == 0)
+    r->v.object_detected = fg_robotiq_object_detected(&g.status);
+  pthread_mutex_unlock(&svc->lock);
+  if (rc == 0) return 0;
+  int http;
+  const char *code;
+  gripper_outcome(rc, &http, &code);
+  finish(r, robot_moved ? FG_CMD_FAILED : FG_CMD_ERROR, http, code, "%s: %s",
+         r->v.steps[i].name, fg_error_detail());
+  return rc;
+}
+
+/* The robot step: write once, wait for ack, then for done. 0, or finishes r. */
+static int run_robot_step(rec *r, fg_mb_link *l, int i) {
+  fg_robot_svc *svc = r->svc;
+  fg_robot_step *st = &r->v.steps[i];
+  set_stage(r, "robot");
+  int rc = fg_mb_link_ensure(l);
+  if (rc == 0 && svc->gen_seen != fg_mb_link_generation(l)) rc = robot_idle(l, svc);
+  if (rc < 0) {
+    finish(r, FG_CMD_ERROR, 503, "robot_disconnected", "nothing was sent: %s",
+           fg_error_detail());
+    return rc;
+  }
+  pthread_mutex_lock(&svc->lock);
+  uint16_t seq = fg_seq_next(svc->last_seq);
+  if (seq == svc->ack) seq = fg_seq_next(seq);
+  svc->last_seq = seq;
+  st->words[0] = seq;
+  r->v.seq = seq;
+  pthread_mutex_unlock(&svc->lock);
+
+  const double t0 = now_mono_ms();
+  rc = fg_robot_write(l, &svc->rp, st->words);
+  if (rc == FG_EPEER) {
+    finish(r, FG_CMD_ERROR, 502, "modbus_exception", "the robot refused the pose write: %s",
+           fg_error_detail());
+    return rc;
+  }
+  if (rc < 0 && !fg_mb_link_maybe_sent(l)) {
+    finish(r, FG_CMD_ERROR, 503, "robot_disconnected", "nothing was sent: %s",
+           fg_error_detail());
+    return rc;
+  }
+  if (rc < 0) {
+    finish(r, FG_CMD_UNKNOWN, 504, "robot_unknown",
+           "the pose write of seq %u may have reached the robot but was not confirmed (%s); "
+           "it is not sent again: check the robot before sending a new command", seq,
+           fg_error_detail());
+    return rc;
+  }
+  int status = -1;
+  rc = fg_robot_wait_ack(l, &svc->rp, seq, &status, cancelled, svc);
+  if (rc < 0) {
+    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
+           rc == FG_ETIMEDOUT ? "ack_timeout" : "robot_unknown",
+           "%s; the command's outcome is unknown and it is not sent again: check the robot "
+           "before sending a new command", fg_error_detail());
+    return rc;
+  }
+  pthread_mutex_lock(&svc->lock);
+  svc->ack = seq;
+  svc->status = status;
+  r->v.ack_ms = now_mono_ms() - t0;
+  r->v.robot_status = status;
+  r->v.state = FG_CMD_ACKNOWLEDGED;
+  pthread_cond_broadcast(&svc->cond);
+  pthread_mutex_unlock(&svc->lock);
+
+  rc = fg_robot_wait_done(l, &svc->rp, seq, &status, cancelled, svc);
+  pthread_mutex_lock(&svc->lock);
+  if (rc == 0) svc->status = r->v.robot_status = status;
+  pthread_mutex_unlock(&svc->lock);
+  if (rc < 0) {
+    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
+           rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
+           "seq %u was acknowledged but its end was not seen: %s", seq, fg_error_detail());
+    return rc;
+  }
+  if (status == FG_ROBOT_FAILED) {
+    finish(r, FG_CMD_FAILED, 502, "robot_failed", "the robot reported seq %u failed (status 3)",
+           seq);
+    return FG_EPEER;
+  }
+  return 0;
+}
+
+/* The robot worker's job: every step in order. */
+static int run_command(fg_mb_link *l, void *arg) {
+  rec *r = arg;
+  int robot_moved = 0;
+  for (int i = 0; i < r->v.n_steps; i++) {
+    const int rc = r->v.steps[i].kind == FG_STEP_GRIPPER
+                       ? run_gripper_step(r, i, robot_moved, NULL)
+                       : run_robot_step(r, l, i);
+    if (rc < 0) return rc;
+    robot_moved |= r->v.steps[i].kind == FG_STEP_ROBOT;
+  }
+  finish(r, FG_CMD_DONE, 200, NULL, NULL);
+  return 0;
+}
+
+/* Gripper-only commands run on the gripper's worker directly. */
+static int run_gripper_command(fg_mb_link *l, void *arg) {
+  rec *r = arg;
+  for (int i = 0; i < r->v.n_steps; i++) FG_TRY(run_gripper_step(r, i, 0, l));
+  finish(r, FG_CMD_DONE, 200, NULL, NULL);
+  return 0;
+}
+
+static void job_done(void *arg, int rc) {
+  rec *r = arg;
+  fg_robot_svc *svc = r->svc;
+  pthread_mutex_lock(&svc->lock);
+  const int open = r->v.finished_s == 0;
+  pthread_mutex_unlock(&svc->lock);
+  if (open) /* cancelled before it ran */
+    finish(r, FG_CMD_ERROR, 503, "shutting_down", "the daemon is stopping; nothing was sent");
+  (void)rc;
+  pthread_mutex_lock(&svc->lock);
+  rec_unref_locked(r);
+  pthread_mutex_unlock(&svc->lock);
+}
+
+/* Adds r to the ring (taking one reference), dropping the oldest record. Under the lock. */
+static void remember_locked(fg_robot_svc *svc, rec *r) {
+  if (svc->n_recs == MAX_RECORDS) {
+    rec_unref_locked(svc->recs[svc->head]);
+    svc->recs[svc->head] = r;
+    svc->head = (svc->head + 1) % MAX_RECORDS;
+  } else {
+    svc->recs[(svc->head + svc->n_recs++) % MAX_RECORDS] = r;
+  }
+  r->refs++;
+}
+
+/* Starts a planned record on peer p with job fn and waits as req asks. */
+static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_peer *p,
+                          fg_mb_job_fn fn, fg_robot_cmd_view *v) {
+  rec *r = calloc(1, sizeof *r);
+  if (!r) return FG_ENOMEM;
+  pthread_mutex_lock(&svc->lock);
+  if (svc->stopping) {
+    pthread_mutex_unlock(&svc->lock);
+    free(r);
+    return fg_fail(FG_EBUSY, "the daemon is stopping");
+  }
+  if (svc->active) {
+    const fg_robot_cmd_view *a = &svc->active->v;
+    int rc = fg_fail(FG_EBUSY, "command %llu (%s) is still running (stage %s); wait for it: GET "
+                     "/v1/robot/commands/%llu", (unsigned long long)a->id,
+                     a->n_steps ? a->steps[0].name : "?", a->stage, (unsigned long long)a->id);
+    pthread_mutex_unlock(&svc->lock);
+    free(r);
+    return rc;
+  }
+  int rc = plan_locked(svc, req, &r->v);
+  if (rc < 0) {
+    pthread_mutex_unlock(&svc->lock);
+    free(r);
+    return rc;
+  }
+  r->svc = svc;
+  r->v.id = svc->next_id++;
+  r->v.created_s = now_real();
+  r->v.state = FG_CMD_PENDING;
+  r->v.seq = 0;
+  r->refs = 2; /* this call and the job */
+  remember_locked(svc, r);
+  svc->active = r;
+  pthread_mutex_unlock(&svc->lock);
+  if (fg_mb_peer_post(p, fn, r, job_done) < 0) {
+    finish(r, FG_CMD_ERROR, 503, "busy", "%s", fg_error_detail());
+    pthread_mutex_lock(&svc->lock);
+    rec_unref_locked(r);
+    pthread_mutex_unlock(&svc->lock);
+  }
+  /* the longest a command can honestly take, and then some */
+  double budget_ms = svc->rp.ack_timeout_ms + svc->rp.done_timeout_ms +
+                     3.0 * 2 * svc->motion_timeout_ms + 10000;
+  struct timespec until;
+  clock_gettime(CLOCK_REALTIME, &until);
+  until.tv_sec += (time_t)(budget_ms / 1000) + 1;
+  pthread_mutex_lock(&svc->lock);
+  while (r->v.finished_s == 0 && !(!req->wait && r->v.state == FG_CMD_ACKNOWLEDGED))
+    if (pthread_cond_timedwait(&svc->cond, &svc->lock, &until) != 0) break;
+  *v = r->v;
+  if (v->finished_s == 0) v->http_status = 202;
+  rec_unref_locked(r);
+  pthread_mutex_unlock(&svc->lock);
+  return 0;
+}
+
+int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v) {
+  const int c = req->command;
+  const int gripper_only = svc->gripper && (c == FG_ROBOT_OPEN || c == FG_ROBOT_CLOSE);
+  if (!gripper_only && !svc->robot)
+    return fg_fail(FG_EUNAVAIL, "no robot is configured: set [robot] transport = tcp (host, "
+                   "port) or rtu (device) in the configuration file and reload");
+  return start_and_wait(svc, req, gripper_only ? svc->gripper : svc->robot,
+                        gripper_only ? run_gripper_command : run_command, v);
+}
+
+int fg_robot_command_get(fg_robot_svc *svc, uint64_t id, fg_robot_cmd_view *v) {
+  int rc = fg_fail(FG_ENOENT, "no command %llu (the newest %d are kept)",
+                   (unsigned long long)id, MAX_RECORDS);
+  pthread_mutex_lock(&svc->lock);
+  for (size_t i = 0; i < svc->n_recs; i++) {
+    rec *r = svc->recs[(svc->head + i) % MAX_RECORDS];
+    if (r->v.id == id) {
+      *v = r->v;
+      rc = 0;
+      break;
+    }
+  }
+  pthread_mutex_unlock(&svc->lock);
+  return rc;
+}
+
+/* ---------------------------------------------------------------- gripper actions */
+
+int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_request *req,
+                      fg_robot_cmd_view *v) {
+  if (strcmp(action, "move") == 0 && !req->has_width)
+    return fg_fail(FG_EINVAL, "move needs \"width\" in metres (0 .. %g for the %s)",
+                   svc->model->stroke_m, svc->model->name);
+  if (strcmp(action, "close") == 0 && req->has_width)
+    return fg_fail(FG_EINVAL, "close takes no width (it closes until the fingers meet an "
+                   "object); use move for a width");
+  fg_robot_request r = *req;
+  r.command = strcmp(action, "close") == 0 ? FG_ROBOT_CLOSE : FG_ROBOT_OPEN;
+  r.has_pose = 0;
+  pthread_mutex_lock(&svc->lock);
+  memset(v, 0, sizeof *v);
+  int rc = 0, pos = 255;
+  if (r.command == FG_ROBOT_OPEN) rc = open_position(svc, &r, &pos);
+  if (rc == 0)
+    rc = plan_gripper(svc, &r, r.command == FG_ROBOT_OPEN ? "gripper_open" : "gripper_close",
+                      pos, &v->steps[0]);
+  pthread_mutex_unlock(&svc->lock);
+  if (rc < 0) return rc;
+  v->n_steps = 1;
+  v->command = r.command;
+  v->req = r;
+  v->object_detected = -1;
+  v->gripper_width_m = NAN;
+  v->robot_status = -1;
+  v->ack_ms = -1;
+  v->stage = "queued";
+  const int activate = strcmp(action, "activate") == 0;
+  if (activate) v->steps[0].name = "gripper_activate";
+  if (req->dry_run) return 0;
+  if (!svc->gripper)
+    return fg_fail(FG_EUNAVAIL, "no gripper is configured: set [gripper.modbus] transport = "
+                   "rtu (device, baud) or tcp (host, port) and reload");
+  grip_job g = {.svc = svc, .step = &v->steps[0], .activate_only = activate};
+  v->created_s = now_real();
+  rc = fg_mb_peer_call(svc->gripper, grip_run, &g);
+  v->finished_s = now_real();
+  v->stage = "finished";
+  v->gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
+  if (r.command == FG_ROBOT_CLOSE && rc == 0)
+    v->object_detected = fg_robotiq_object_detected(&g.status);
+  if (rc == 0) {
+    v->state = FG_CMD_DONE;
+    v->http_status = 200;
+    return 0;
+  }
+  const char *code;
+  gripper_outcome(rc, &v->http_status, &code);
+  v->state = FG_CMD_ERROR;
+  snprintf(v->code, sizeof v->code, "%s", code);
+  snprintf(v->message, sizeof v->message, "%s", fg_error_detail());
+  return 0;
+}
+
+/* ---------------------------------------------------------------- state and metrics */
+
+void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st) {
+  memset(st, 0, sizeof *st);
+  st->configured = svc->robot != NULL;
+  st->unit_id = svc->robot_unit;
+  st->base = svc->rp.base;
+  st->encoding = svc->rp.encoding;
+  if (svc->robot) {
+    fg_mb_link_state ls;
+    fg_mb_peer_state(svc->robot, &ls);
+    st->connected = ls.connected;
+    snprintf(st->address, sizeof st->address, "%s", fg_mb_peer_address(svc->robot));
+    memcpy(st->last_error, ls.last_error, sizeof st->last_error);
+    st->last_error_s = ls.last_error_s;
+    st->requests = ls.requests;
+    st->errors = ls.errors;
+    st->timeouts = ls.timeouts;
+    st->exceptions = ls.exceptions;
+    st->reconnects = ls.reconnects;
+  }
+  pthread_mutex_lock(&svc->lock);
+  st->last_seq = svc->last_seq;
+  st->ack = svc->ack;
+  st->status = svc->status;
+  st->busy = svc->active != NULL;
+  st->last_command = svc->next_id - 1;
+  pthread_mutex_unlock(&svc->lock);
+}
+
+void fg_gripper_state_get(fg_robot_svc *svc, fg_gripper_state *st) {
+  memset(st, 0, sizeof *st);
+  st->configured = svc->gripper != NULL;
+  st->model = svc->model->name;
+  st->unit_id = svc->gripper_unit;
+  st->width_m = NAN;
+  if (!svc->gripper) return;
+  fg_mb_link_state ls;
+  fg_mb_peer_state(svc->gripper, &ls);
+  st->connected = ls.connected;
+  snprintf(st->address, sizeof st->address, "%s", fg_mb_peer_address(svc->gripper));
+  memcpy(st->last_error, ls.last_error, sizeof st->last_error);
+  st->last_error_s = ls.last_error_s;
+  st->requests = ls.requests;
+  st->errors = ls.errors;
+  st->timeouts = ls.timeouts;
+  st->exceptions = ls.exceptions;
+  st->reconnects = ls.reconnects;
+  pthread_mutex_lock(&svc->lock);
+  st->have_status = svc->g_have && ls.connected;
+  st->status = svc->g_status;
+  pthread_mutex_unlock(&svc->lock);
+  if (st->have_status) st->width_m = fg_robotiq_position_to_width(svc->model, st->status.position);
+}
+
+/* Appends printf output to buf at *len, never past size. */
+static void append(char *buf, size_t size, size_t *len, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static void append(char *buf, size_t size, size_t *len, const char *fmt, ...) {
+  if (*len + 1 >= size) return;
+  va_list ap;
+  va_start(ap, fmt);
+  int n = vsnprintf(buf + *len, size - *len, fmt, ap);
+  va_end(ap);
+  if (n > 0) *len += (size_t)n < size - *len ? (size_t)n : size - *len - 1;
+}
+
+size_t fg_robot_metrics(fg_robot_svc *svc, char *buf, size_t size) {
+  fg_mb_peer *peers[2] = {svc->robot, svc->gripper};
+  static const char *const names[2] = {"robot", "gripper"};
+  fg_mb_link_state ls[2] = {{0}, {0}};
+  for (int i = 0; i < 2; i++)
+    if (peers[i]) fg_mb_peer_state(peers[i], &ls[i]);
+  size_t len = 0;
+  buf[0] = '\0';
+  append(buf, size, &len, "# HELP fieldgrip_modbus_connected Whether the Modbus peer is "
+         "connected (absent: not configured).\n# TYPE fieldgrip_modbus_connected gauge\n");
+  for (int i = 0; i < 2; i++)
+    if (peers[i])
+      append(buf, size, &len, "fieldgrip_modbus_connected{peer=\"%s\"} %d\n", names[i],
+             ls[i].connected);
+  append(buf, size, &len, "# HELP fieldgrip_modbus_requests_total Modbus requests sent.\n"
+         "# TYPE fieldgrip_modbus_requests_total counter\n");
+  for (int i = 0; i < 2; i++)
+    if (peers[i])
+      append(buf, size, &len, "fieldgrip_modbus_requests_total{peer=\"%s\"} %llu\n", names[i],
+             (unsigned long long)ls[i].requests);
+  append(buf, size, &len, "# HELP fieldgrip_modbus_errors_total Failed Modbus requests and "
+         "connection attempts, by kind.\n# TYPE fieldgrip_modbus_errors_total counter\n");
+  for (int i = 0; i < 2; i++) {
+    if (!peers[i]) continue;
+    const fg_mb_link_state *l = &ls[i];
+    append(buf, size, &len,
+           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"timeout\"} %llu\n"
+           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"exception\"} %llu\n"
+           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"connection\"} %llu\n"
+           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"connect\"} %llu\n",
+           names[i], (unsigned long long)l->timeouts, names[i],
+           (unsigned long long)l->exceptions, names[i],
+           (unsigned long long)(l->errors - l->timeouts - l->exceptions), names[i],
+           (unsigned long long)l->connect_failures);
+  }
+  append(buf, size, &len, "# HELP fieldgrip_modbus_reconnects_total Connections made after "
+         "the first.\n# TYPE fieldgrip_modbus_reconnects_total counter\n");
+  for (int i = 0; i < 2; i++)
+    if (peers[i])
+      append(buf, size, &len, "fieldgrip_modbus_reconnects_total{peer=\"%s\"} %llu\n",
+             names[i], (unsigned long long)ls[i].reconnects);
+  uint64_t by[FG_CMD_STATES];
+  pthread_mutex_lock(&svc->lock);
+  memcpy(by, svc->by_state, sizeof by);
+  pthread_mutex_unlock(&svc->lock);
+  append(buf, size, &len, "# HELP fieldgrip_robot_commands_total Robot and gripper commands "
+         "finished, by outcome.\n# TYPE fieldgrip_robot_commands_total counter\n");
+  for (int s = FG_CMD_DONE; s < FG_CMD_STATES; s++)
+    append(buf, size, &len, "fieldgrip_robot_commands_total{state=\"%s\"} %llu\n",
+           state_names[s], (unsigned long long)by[s]);
+  return len;
+}
