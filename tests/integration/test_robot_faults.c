@@ -1,0 +1,237 @@
+/* Failures of the robot and gripper peers, each reported and none re-sent: no acknowledgement
+ * (504, unknown), a Modbus exception (502 naming it), a robot that reports failure, peers
+ * down at start (the daemon serves, commands answer 503) and coming up later, a peer killed
+ * mid-command and restarted (unknown, then the next command works), a second command while
+ * one runs (409), no [robot] at all, and the Modbus lines of /metrics.
+ * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "robot_util.h"
+
+#include <netinet/in.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+static const char *g_sim;
+static it_write g_w[64];
+
+static const char move[] = "{\"command\": \"move\", \"pose\": {\"position\": [0.4, -0.2, 0.1], "
+                           "\"quaternion\": [0, 1, 0, 0]}";
+
+static h_resp *send_move(const char *tail, const char *key) {
+  char body[512];
+  snprintf(body, sizeof body, "%s%s}", move, tail ? tail : "");
+  return r_post("/v1/robot/commands", body, key);
+}
+
+static const char *state_of(const h_resp *r) {
+  return json_string_value(json_object_get(r_command(r), "state"));
+}
+
+/* Polls GET /v1/robot/commands/{id} until its state is want; 1 when it got there. */
+static int wait_state(json_int_t id, const char *want, double timeout_s) {
+  char path[64];
+  snprintf(path, sizeof path, "/v1/robot/commands/%lld", (long long)id);
+  for (int i = 0; i < (int)(timeout_s * 50); i++) {
+    h_resp *r = h_get(path);
+    int ok = r->status == 200 && strcmp(state_of(r), want) == 0;
+    h_resp_free(r);
+    if (ok) return 1;
+    const struct timespec ts = {0, 20000000};
+    nanosleep(&ts, NULL);
+  }
+  return 0;
+}
+
+/* A loopback port nobody listens on. */
+static int closed_port(void) {
+  int s = socket(AF_INET, SOCK_STREAM, 0);
+  struct sockaddr_in a = {.sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK)};
+  ASSERT_EQ(bind(s, (struct sockaddr *)&a, sizeof a), 0);
+  socklen_t len = sizeof a;
+  ASSERT_EQ(getsockname(s, (struct sockaddr *)&a, &len), 0);
+  close(s);
+  return ntohs(a.sin_port);
+}
+
+static void check_no_ack(void) {
+  it_peer sim = {0};
+  const char *args[] = {"--never-ack", NULL};
+  it_sim_start(&sim, g_sim, 0, args);
+  r_config(sim.port, "ack_timeout_ms = 300", 0, NULL);
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  h_resp *r = send_move(NULL, "k-noack");
+  r_expect(r, 504, "ack_timeout");
+  ASSERT_STREQ(state_of(r), "unknown");
+  ASSERT(strstr(json_string_value(json_object_get(json_object_get(r->json, "error"), "message")),
+                "not sent again"));
+  const json_int_t id = json_integer_value(json_object_get(r_command(r), "id"));
+  h_resp_free(r);
+  ASSERT(wait_state(id, "unknown", 1));
+  /* the retry with its key is the same answer, and nothing is sent again */
+  r = send_move(NULL, "k-noack");
+  r_expect(r, 504, "ack_timeout");
+  ASSERT(json_is_true(json_object_get(r->json, "replayed")));
+  h_resp_free(r);
+  ASSERT_EQ(it_peer_writes(&sim, 1, g_w, 64), 1);
+  r = h_get("/metrics");
+  ASSERT(strstr(r->body, "fieldgrip_robot_commands_total{state=\"unknown\"} 1"));
+  ASSERT(strstr(r->body, "fieldgrip_modbus_connected{peer=\"robot\"} 1"));
+  ASSERT(!strstr(r->body, "peer=\"gripper\""));
+  h_resp_free(r);
+  h_stop();
+  it_peer_stop(&sim);
+}
+
+static void check_exception_and_failure(void) {
+  it_peer sim = {0};
+  const char *args[] = {"--exception", "2", NULL};
+  it_sim_start(&sim, g_sim, 0, args);
+  r_config(sim.port, NULL, 0, NULL);
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  h_resp *r = send_move(NULL, NULL);
+  r_expect(r, 502, "modbus_exception");
+  ASSERT(strstr(r->body, "illegal data address"));
+  ASSERT_STREQ(state_of(r), "error");
+  h_resp_free(r);
+  r = h_get("/metrics");
+  ASSERT(strstr(r->body, "fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"exception\"} 1"));
+  h_resp_free(r);
+  h_stop();
+  it_peer_stop(&sim);
+
+  it_peer fail = {0};
+  const char *fargs[] = {"--fail", "--done-delay-ms", "20", NULL};
+  it_sim_start(&fail, g_sim, 0, fargs);
+  r_config(fail.port, NULL, 0, NULL);
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  r = send_move(NULL, NULL);
+  r_expect(r, 502, "robot_failed");
+  ASSERT_STREQ(state_of(r), "failed");
+  ASSERT_EQ(json_integer_value(json_object_get(r_command(r), "robot_status")), 3);
+  h_resp_free(r);
+  h_stop();
+  it_peer_stop(&fail);
+}
+
+/* Peers down at start: the daemon serves; commands say the peer is down; once the peer is
+ * up the worker connects without a request and commands run. */
+static void check_down_at_start(void) {
+  const int port = closed_port();
+  r_config(port, NULL, port, NULL);
+  h_start();
+  h_resp *r = h_get("/v1/health");
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  r = h_get("/v1/gripper");
+  ASSERT(json_is_false(json_object_get(r->json, "connected")));
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "disconnected");
+  h_resp_free(r);
+  r = send_move(NULL, NULL);
+  r_expect(r, 503, "robot_disconnected");
+  ASSERT_STREQ(state_of(r), "error");
+  ASSERT(strstr(r->body, "nothing was sent"));
+  h_resp_free(r);
+  r = r_post("/v1/robot/commands", R_EXAMPLE_BODY "}", NULL);
+  r_expect(r, 503, "gripper_disconnected"); /* a pick opens the gripper first */
+  h_resp_free(r);
+  r = r_post("/v1/gripper/close", "", NULL);
+  r_expect(r, 503, "gripper_disconnected");
+  h_resp_free(r);
+
+  it_peer sim = {0};
+  it_sim_start(&sim, g_sim, port, NULL);
+  ASSERT(r_wait_true("/v1/robot", "connected", 10));
+  ASSERT(r_wait_true("/v1/gripper", "connected", 10));
+  r = send_move(NULL, NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  ASSERT_EQ(it_peer_writes(&sim, 1, g_w, 64), 1);
+  h_stop();
+  it_peer_stop(&sim);
+}
+
+/* The robot dies while a command runs: the command ends unknown; the robot comes back and the
+ * next command works. Meanwhile a second command is refused. */
+static void check_killed_mid_command(void) {
+  it_peer sim = {0};
+  const char *args[] = {"--done-delay-ms", "3000", NULL};
+  it_sim_start(&sim, g_sim, 0, args);
+  r_config(sim.port, NULL, 0, NULL);
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  h_resp *r = send_move(", \"wait\": false", NULL);
+  r_expect(r, 202, NULL);
+  ASSERT_STREQ(state_of(r), "acknowledged");
+  ASSERT(h_resp_header(r, "Location"));
+  const json_int_t id = json_integer_value(json_object_get(r->json, "id"));
+  h_resp_free(r);
+  r = send_move(NULL, NULL);
+  r_expect(r, 409, "robot_busy");
+  h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_is_true(json_object_get(r->json, "busy")));
+  h_resp_free(r);
+
+  it_peer_kill(&sim);
+  ASSERT(wait_state(id, "unknown", 5));
+  r = h_get("/v1/robot");
+  ASSERT(json_is_false(json_object_get(r->json, "connected")));
+  ASSERT(json_is_false(json_object_get(r->json, "busy")));
+  ASSERT(!json_is_null(json_object_get(r->json, "last_error")));
+  h_resp_free(r);
+
+  const char *fast[] = {"--done-delay-ms", "10", NULL};
+  it_sim_start(&sim, g_sim, sim.port, fast);
+  ASSERT(r_wait_true("/v1/robot", "connected", 10));
+  r = send_move(NULL, NULL);
+  r_expect(r, 200, NULL);
+  ASSERT_STREQ(state_of(r), "done");
+  h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_integer_value(json_object_get(json_object_get(r->json, "counters"),
+                                            "reconnects")) >= 1);
+  h_resp_free(r);
+  h_stop();
+  it_peer_stop(&sim);
+}
+
+static void check_not_configured(void) {
+  h_write_config("");
+  h_start();
+  h_resp *r = send_move(NULL, NULL);
+  r_expect(r, 409, "not_configured");
+  ASSERT(strstr(r->body, "[robot]"));
+  h_resp_free(r);
+  r = send_move(", \"dry_run\": true", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  r = r_post("/v1/gripper/open", "", NULL);
+  r_expect(r, 409, "not_configured");
+  h_resp_free(r);
+  r = h_get("/v1/gripper");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "not_configured");
+  h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_is_false(json_object_get(r->json, "configured")));
+  h_resp_free(r);
+  h_stop();
+}
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+  ASSERT(argc >= 3);
+  g_sim = argv[2];
+  check_no_ack();
+  check_exception_and_failure();
+  check_down_at_start();
+  check_killed_mid_command();
+  check_not_configured();
+  h_done();
+  printf("ok\n");
+  return 0;
+}
