@@ -7,6 +7,9 @@
  *                            status registers 0x07D0..0x07D2 (input), with activation, finger
  *                            motion at the requested speed and an optional object
  *
+ * With --rtu DEVICE the gripper unit is also served over Modbus RTU on that serial line (one
+ * end of a socat pty pair in the tests), as a Robotiq on RS-485 is.
+ *
  * Served functions: 3 (read holding), 4 (read input), 6 (write single), 16 (write multiple).
  * Others get exception 1, addresses outside a unit's registers exception 2, and unit ids that
  * are neither peer exception 0x0B (gateway target failed to respond), as a Modbus TCP gateway
@@ -62,6 +65,7 @@ typedef struct {
   int activation_ms, stroke_ms;
   double object_width_mm;  /* < 0: no object */
   double stroke_mm;
+  const char *rtu_device;  /* also serve the gripper unit on this serial line; NULL: none */
 } sim_config;
 
 /* The robot block and its pending acknowledgement. */
@@ -94,6 +98,7 @@ typedef struct {
   sim_robot robot;
   sim_gripper grip;
   modbus_t *ctx;           /* server context; its socket is switched per client */
+  modbus_t *rtu;           /* --rtu: the serial line's context, or NULL */
   int listen_fd, sig_fd;
   int clients[SIM_MAX_CLIENTS];
   int n_clients;
@@ -129,7 +134,9 @@ static void usage(FILE *f) {
           "  --activation-ms N      gripper activation time (default 100)\n"
           "  --stroke-ms N          full stroke time at speed 255 (default 200)\n"
           "  --object-width-mm W    an object of width W mm between the fingers\n"
-          "  --stroke-mm S          gripper stroke in mm (default 85)\n");
+          "  --stroke-mm S          gripper stroke in mm (default 85)\n"
+          "  --rtu DEVICE           also serve the gripper unit over Modbus RTU on DEVICE\n"
+          "                         (115200 8N1; e.g. one end of a socat pty pair)\n");
 }
 
 /* ---------------------------------------------------------------- time */
@@ -226,6 +233,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"stroke-ms", required_argument, NULL, 's'},
       {"object-width-mm", required_argument, NULL, 'o'},
       {"stroke-mm", required_argument, NULL, 'S'},
+      {"rtu", required_argument, NULL, 'R'},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -273,6 +281,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     case 's': rc = parse_int("--stroke-ms", optarg, 1, max_ms, &cfg->stroke_ms); break;
     case 'o': rc = parse_mm("--object-width-mm", optarg, &cfg->object_width_mm); break;
     case 'S': rc = parse_mm("--stroke-mm", optarg, &cfg->stroke_mm); break;
+    case 'R': cfg->rtu_device = optarg; break;
     case 'h': usage(stdout); return 1;
     default:
       fprintf(stderr, "fieldgrip-sim: unknown or incomplete option \"%s\"\n",
@@ -562,9 +571,9 @@ static void write_apply(modbus_mapping_t *map, const sim_request *r) {
 
 /* Serves one request received on the current socket. Returns 0 to keep the connection,
  * -1 to close it (a send failed, or the request was the one to drop). */
-static int sim_handle(sim_state *s, const uint8_t *req, int len) {
+static int sim_handle(sim_state *s, modbus_t *ctx, const uint8_t *req, int len) {
   sim_request r;
-  int header = modbus_get_header_length(s->ctx);
+  int header = modbus_get_header_length(ctx);
   if (len <= header) return -1;
   request_parse(req, len, header, &r);
   int64_t now = now_ns();
@@ -585,7 +594,7 @@ static int sim_handle(sim_state *s, const uint8_t *req, int len) {
     code = s->cfg.exception;
   if (code) {
     if (drop) return -1;
-    return modbus_reply_exception(s->ctx, req, (unsigned)code) < 0 ? -1 : 0;
+    return modbus_reply_exception(ctx, req, (unsigned)code) < 0 ? -1 : 0;
   }
 
   modbus_mapping_t *map = robot ? s->robot.map : s->grip.map;
@@ -593,7 +602,7 @@ static int sim_handle(sim_state *s, const uint8_t *req, int len) {
   int applied = is_write(r.fn) && write_fits(map, &r);
   if (drop) {
     if (applied) write_apply(map, &r);
-  } else if (modbus_reply(s->ctx, req, len, map) < 0) {
+  } else if (modbus_reply(ctx, req, len, map) < 0) {
     return -1;
   }
   if (applied) {
@@ -631,7 +640,15 @@ static void client_serve(sim_state *s, int i) {
   modbus_set_socket(s->ctx, s->clients[i]);
   int len = modbus_receive(s->ctx, req);
   if (len == 0) return; /* ignored by libmodbus */
-  if (len < 0 || sim_handle(s, req, len) != 0) client_close(s, i);
+  if (len < 0 || sim_handle(s, s->ctx, req, len) != 0) client_close(s, i);
+}
+
+/* Receives and serves one request from the serial line; a garbled frame is flushed. */
+static void rtu_serve(sim_state *s) {
+  uint8_t req[MODBUS_RTU_MAX_ADU_LENGTH];
+  int len = modbus_receive(s->rtu, req);
+  if (len < 0) modbus_flush(s->rtu);
+  if (len > 0) sim_handle(s, s->rtu, req, len);
 }
 
 /* Writes the port and a newline to path through a temp file and a rename. */
@@ -713,8 +730,19 @@ static int sim_open(sim_state *s) {
             strerror(errno));
     return -1;
   }
-  fprintf(stderr, "fieldgrip-sim: listening on %s%s%s:%d\n", s->cfg.ipv6 ? "[" : "",
-          s->cfg.host[0] ? s->cfg.host : "0.0.0.0", s->cfg.ipv6 ? "]" : "", port);
+  if (s->cfg.rtu_device) {
+    /* a serial line is a bus: libmodbus answers only the unit set here */
+    s->rtu = modbus_new_rtu(s->cfg.rtu_device, 115200, 'N', 8, 1);
+    if (!s->rtu || modbus_set_slave(s->rtu, s->cfg.gripper_unit) != 0 ||
+        modbus_connect(s->rtu) != 0) {
+      fprintf(stderr, "fieldgrip-sim: cannot open %s for RTU: %s\n", s->cfg.rtu_device,
+              modbus_strerror(errno));
+      return -1;
+    }
+  }
+  fprintf(stderr, "fieldgrip-sim: listening on %s%s%s:%d%s%s\n", s->cfg.ipv6 ? "[" : "",
+          s->cfg.host[0] ? s->cfg.host : "0.0.0.0", s->cfg.ipv6 ? "]" : "", port,
+          s->rtu ? " and RTU " : "", s->rtu ? s->cfg.rtu_device : "");
   return 0;
 }
 
@@ -722,6 +750,10 @@ static void sim_close(sim_state *s) {
   while (s->n_clients > 0) client_close(s, s->n_clients - 1);
   if (s->listen_fd >= 0) close(s->listen_fd);
   if (s->sig_fd >= 0) close(s->sig_fd);
+  if (s->rtu) {
+    modbus_close(s->rtu);
+    modbus_free(s->rtu);
+  }
   if (s->ctx) {
     modbus_set_socket(s->ctx, -1);
     modbus_free(s->ctx);
@@ -733,7 +765,7 @@ static void sim_close(sim_state *s) {
 
 /* Serves until SIGTERM or SIGINT; returns 0, or -1 when poll fails. */
 static int sim_run(sim_state *s) {
-  struct pollfd fds[2 + SIM_MAX_CLIENTS];
+  struct pollfd fds[3 + SIM_MAX_CLIENTS];
   for (;;) {
     int64_t now = now_ns();
     sim_advance(s, now);
@@ -742,7 +774,9 @@ static int sim_run(sim_state *s) {
     fds[1] = (struct pollfd){.fd = s->listen_fd, .events = POLLIN};
     int n = s->n_clients;
     for (int i = 0; i < n; i++) fds[2 + i] = (struct pollfd){.fd = s->clients[i], .events = POLLIN};
-    if (poll(fds, (nfds_t)(2 + n), timeout) < 0) {
+    const int rtu = s->rtu ? 2 + n : -1;
+    if (s->rtu) fds[rtu] = (struct pollfd){.fd = modbus_get_socket(s->rtu), .events = POLLIN};
+    if (poll(fds, (nfds_t)(2 + n + (s->rtu != NULL)), timeout) < 0) {
       if (errno == EINTR) continue;
       fprintf(stderr, "fieldgrip-sim: poll: %s\n", strerror(errno));
       return -1;
@@ -762,6 +796,7 @@ static int sim_run(sim_state *s) {
     for (int i = n - 1; i >= 0; i--) {
       if (fds[2 + i].revents & (POLLIN | POLLHUP | POLLERR)) client_serve(s, i);
     }
+    if (rtu >= 0 && (fds[rtu].revents & POLLIN)) rtu_serve(s);
     if (fds[1].revents & POLLIN) client_accept(s);
   }
 }
