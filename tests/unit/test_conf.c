@@ -89,8 +89,10 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_EQ(r->base, 128);
   ASSERT_EQ(r->encoding, FG_ENCODING_INT16);
   ASSERT_EQ(r->ack_timeout_ms, 2000);
+  ASSERT_EQ(r->done_timeout_ms, 60000);
 
   const fg_conf_modbus *g = &c->gripper_modbus;
+  ASSERT_EQ(g->motion_timeout_ms, 10000);
   ASSERT_EQ(g->transport, FG_TRANSPORT_NONE);
   ASSERT_STREQ(g->host, "127.0.0.1");
   ASSERT_EQ(g->port, 502);
@@ -235,7 +237,7 @@ static void test_values(void) {
       "max_image_side = 16\n"
       "half_precision = true\n"
       "[gripper]\n"
-      "model = robotiq-2f85\n"
+      "model = robotiq-2f140\n"
       "[robot]\n"
       "transport = rtu\n"
       "device = /dev/ttyS3\n"
@@ -246,7 +248,9 @@ static void test_values(void) {
       "base = 65515\n"
       "encoding = float32\n"
       "ack_timeout_ms = 600000\n"
+      "done_timeout_ms = 3600000\n"
       "[gripper.modbus]\n"
+      "motion_timeout_ms = 1\n"
       "transport = tcp\n"
       "host = ::1\n"
       "port = 1502\n"
@@ -264,7 +268,9 @@ static void test_values(void) {
   ASSERT_EQ(c->train_threads, 1024);
   ASSERT_EQ(c->max_image_side, 16);
   ASSERT_EQ(c->half_precision, 1);
-  ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F85);
+  ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F140);
+  ASSERT_EQ(c->robot.done_timeout_ms, 3600000);
+  ASSERT_EQ(c->gripper_modbus.motion_timeout_ms, 1);
   ASSERT_EQ(c->robot.transport, FG_TRANSPORT_RTU);
   ASSERT_STREQ(c->robot.device, "/dev/ttyS3");
   ASSERT_EQ(c->robot.baud, 9600);
@@ -456,7 +462,8 @@ static void test_errors(void) {
                "expected none, tcp or rtu, got 'udp'");
   EXPECT_ERROR("[robot]\nencoding = int32\n", 2, "[robot] encoding:", "int16 or float32");
   EXPECT_ERROR("[robot]\nparity = X\n", 2, "[robot] parity:", "N, E or O");
-  EXPECT_ERROR("[gripper]\nmodel = ur5\n", 2, "[gripper] model:", "panda or robotiq-2f85");
+  EXPECT_ERROR("[gripper]\nmodel = ur5\n", 2, "[gripper] model:",
+               "panda, robotiq-2f85 or robotiq-2f140");
 
   /* robot-only keys in [gripper.modbus] */
   EXPECT_ERROR("[gripper.modbus]\ntransport = none\nbase = 128\n", 3,
@@ -464,6 +471,13 @@ static void test_errors(void) {
   EXPECT_ERROR("[gripper.modbus]\nencoding = int16\n", 2, "[gripper.modbus] encoding:", NULL);
   EXPECT_ERROR("[gripper.modbus]\nack_timeout_ms = 5\n", 2, "[gripper.modbus] ack_timeout_ms:",
                NULL);
+  EXPECT_ERROR("[gripper.modbus]\ndone_timeout_ms = 5\n", 2,
+               "[gripper.modbus] done_timeout_ms: unknown key", "[robot] only");
+  EXPECT_ERROR("[robot]\nmotion_timeout_ms = 5\n", 2, "[robot] motion_timeout_ms: unknown key",
+               NULL);
+  EXPECT_ERROR("[robot]\ndone_timeout_ms = 0\n", 2, "[robot] done_timeout_ms:", NULL);
+  EXPECT_ERROR("[gripper.modbus]\nmotion_timeout_ms = 600001\n", 2,
+               "[gripper.modbus] motion_timeout_ms:", NULL);
 
   /* floats and vectors */
   EXPECT_ERROR("[scene t]\nvoxel_size = nan\n", 2, "[scene t] voxel_size:", "finite number");
@@ -576,6 +590,32 @@ static void test_missing_file(void) {
   ASSERT_EQ(strlen(small), sizeof small - 1);
 }
 
+/* The files shipped in config/ load as they are: the documented example holds every key
+ * with its default, the demo a robot and a gripper on the simulator's port. */
+static void test_shipped(void) {
+  const char *src = getenv("FG_SOURCE_DIR");
+  ASSERT(src);
+  char path[PATH_MAX], err[1024];
+  fg_conf *c = NULL;
+  snprintf(path, sizeof path, "%s/config/fieldgripd.conf", src);
+  if (fg_conf_load(path, &c, err, sizeof err) != 0) FG_TEST_FAIL("%s", err);
+  fg_conf *d = fg_conf_defaults();
+  ASSERT(d);
+  ASSERT_EQ(c->robot.transport, FG_TRANSPORT_NONE);
+  ASSERT_EQ(c->robot.done_timeout_ms, d->robot.done_timeout_ms);
+  ASSERT_EQ(c->gripper_modbus.motion_timeout_ms, d->gripper_modbus.motion_timeout_ms);
+  ASSERT_EQ(c->gripper_model, d->gripper_model);
+  fg_conf_free(c);
+  fg_conf_free(d);
+  snprintf(path, sizeof path, "%s/config/demo.conf", src);
+  if (fg_conf_load(path, &c, err, sizeof err) != 0) FG_TEST_FAIL("%s", err);
+  ASSERT_EQ(c->robot.transport, FG_TRANSPORT_TCP);
+  ASSERT_EQ(c->robot.port, 1502);
+  ASSERT_EQ(c->gripper_modbus.transport, FG_TRANSPORT_TCP);
+  ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F85);
+  fg_conf_free(c);
+}
+
 int main(void) {
   char tmpl[] = "/tmp/fg_test_conf.XXXXXX";
   ASSERT(mkdtemp(tmpl) != NULL);
@@ -589,6 +629,7 @@ int main(void) {
   test_scene_names();
   test_errors();
   test_missing_file();
+  test_shipped();
 
   char cmd[PATH_MAX + 16];
   snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmp_root);
