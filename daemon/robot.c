@@ -78,11 +78,13 @@ static int robot_idle(fg_mb_link *l, void *arg) {
   pthread_mutex_lock(&svc->lock);
   svc->ack = ack;
   svc->status = status;
-  if (svc->gen_seen != fg_mb_link_generation(l)) {
-    /* a new connection: continue after the number the robot saw last */
-    svc->gen_seen = fg_mb_link_generation(l);
+  if (svc->gen_seen == 0) {
+    /* the first connection: continue after the number the robot saw last (a restarted
+     * daemon must not reuse it); later ones keep counting, so that a seq that was sent but
+     * never acknowledged is not given to another command */
     svc->last_seq = ack;
   }
+  svc->gen_seen = fg_mb_link_generation(l);
   pthread_mutex_unlock(&svc->lock);
   return 0;
 }
@@ -304,9 +306,10 @@ static void finish(rec *r, fg_cmd_state state, int http, const char *code, const
   if (svc->active == r) svc->active = NULL;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
+  static const char *const commands[] = {"?", "pick", "place", "open", "close", "move"};
   if (state != FG_CMD_DONE)
-    fg_warn("robot: command %llu (%s) ended %s: %s", (unsigned long long)r->v.id,
-            r->v.steps[0].name, state_names[state], r->v.message);
+    fg_warn("robot: command %llu (%s, seq %u) ended %s: %s", (unsigned long long)r->v.id,
+            commands[r->v.command], r->v.seq, state_names[state], r->v.message);
 }
 
 static void set_stage(rec *r, const char *stage) {
@@ -406,6 +409,9 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
     return rc;
   }
   if (rc < 0 && !fg_mb_link_maybe_sent(l)) {
+    pthread_mutex_lock(&svc->lock);
+    if (svc->last_seq == seq) svc->last_seq = (uint16_t)(seq == 1 ? 65535 : seq - 1);
+    pthread_mutex_unlock(&svc->lock);
     finish(r, FG_CMD_ERROR, 503, "robot_disconnected", "nothing was sent: %s",
            fg_error_detail());
     return rc;
