@@ -126,7 +126,7 @@ static json_t *pose_json(const fg_robot_request *r) {
                    fg_json_from_matrix4(T));
 }
 
-static json_t *command_json(const fg_robot_cmd_view *v, int gripper_unit) {
+static json_t *command_json(const fg_robot_cmd_view *v) {
   json_t *o = json_object();
   if (!o) return NULL;
   if (!v->req.dry_run && v->id) json_object_set_new(o, "id", json_integer((json_int_t)v->id));
@@ -167,7 +167,7 @@ static json_t *command_json(const fg_robot_cmd_view *v, int gripper_unit) {
     } else {
       json_array_append_new(
           grip, json_pack("{s:s, s:i, s:i, s:i, s:i, s:i, s:i, s:o}", "step", st->name,
-                          "unit_id", gripper_unit, "function", 16, "address", st->address,
+                          "unit_id", v->gripper_unit, "function", 16, "address", st->address,
                           "position", st->position, "speed", st->speed, "force", st->force,
                           "words", words_json(st->words, st->n_words)));
     }
@@ -180,7 +180,7 @@ static json_t *command_json(const fg_robot_cmd_view *v, int gripper_unit) {
 /* The answer to a command view: the command (200, 202), or the error with the command
  * beside it. *status gets the HTTP status. */
 static json_t *answer_json(fg_req *req, const fg_robot_cmd_view *v, int *status) {
-  json_t *cmd = command_json(v, req->conf->gripper_modbus.unit_id);
+  json_t *cmd = command_json(v);
   *status = v->req.dry_run ? 200 : v->http_status;
   if (*status < 400) return cmd;
   return json_pack("{s:{s:s, s:s}, s:o}", "error", "code", v->code, "message", v->message,
@@ -334,7 +334,7 @@ int fg_api_robot_command_get(fg_req *req, fg_resp *resp) {
   if (*end || end == req->params[0] || fg_robot_command_get(req->app->robot, id, &v) < 0)
     return fg_resp_error(resp, 404, "not_found", "no command %s (commands are numbered from 1 "
                          "at each start; the newest 1000 are kept)", req->params[0]);
-  fg_resp_json(resp, 200, command_json(&v, req->conf->gripper_modbus.unit_id));
+  fg_resp_json(resp, 200, command_json(&v));
   return 0;
 }
 
@@ -363,7 +363,7 @@ int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   json_object_set_new(o, "last_command",
                       st.last_command && fg_robot_command_get(req->app->robot, st.last_command,
                                                               &v) == 0
-                          ? command_json(&v, req->conf->gripper_modbus.unit_id)
+                          ? command_json(&v)
                           : json_null());
   fg_resp_json(resp, 200, o);
   return 0;

@@ -124,6 +124,16 @@ static int load_conf(const options *o, fg_conf **out, char *err, size_t errlen) 
   return 0;
 }
 
+/* Whether two Modbus peer settings differ in anything the peer uses. */
+static int modbus_differs(const fg_conf_modbus *a, const fg_conf_modbus *b) {
+  return a->transport != b->transport || strcmp(a->host, b->host) != 0 || a->port != b->port ||
+         strcmp(a->device, b->device) != 0 || a->baud != b->baud || a->parity != b->parity ||
+         a->unit_id != b->unit_id || a->timeout_ms != b->timeout_ms || a->base != b->base ||
+         a->encoding != b->encoding || a->ack_timeout_ms != b->ack_timeout_ms ||
+         a->done_timeout_ms != b->done_timeout_ms ||
+         a->motion_timeout_ms != b->motion_timeout_ms;
+}
+
 static void reload(fg_app *app, const options *o) {
   fg_notify_reloading();
   char err[1024];
@@ -143,6 +153,12 @@ static void reload(fg_app *app, const options *o) {
             conf->state_dir);
     replace_str(&conf->state_dir, cur->state_dir);
   }
+  /* The Modbus peers keep their connections (and a command in flight keeps its peer). */
+  if (modbus_differs(&cur->robot, &conf->robot) ||
+      modbus_differs(&cur->gripper_modbus, &conf->gripper_modbus) ||
+      cur->gripper_model != conf->gripper_model)
+    fg_warn("reload: [robot], [gripper.modbus] or [gripper] model changed; the Modbus peers "
+            "keep their settings until the next restart");
   fg_app_conf_release(app, cur);
   /* CLIP: new files are loaded now, while the old model serves; if they do not load, the old
    * model stays (requests in flight keep theirs either way). */

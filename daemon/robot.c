@@ -224,6 +224,7 @@ static int plan_locked(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_
   v->ack_ms = -1;
   v->stage = "queued";
   v->robot_unit = svc->robot_unit;
+  v->gripper_unit = svc->gripper_unit;
   v->robot_base = svc->rp.base;
   v->encoding = svc->rp.encoding;
   const int c = req->command, grip = svc->gripper != NULL;
@@ -606,6 +607,7 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   r.has_pose = 0;
   pthread_mutex_lock(&svc->lock);
   memset(v, 0, sizeof *v);
+  v->gripper_unit = svc->gripper_unit;
   int rc = 0, pos = 255;
   if (r.command == FG_ROBOT_OPEN) rc = open_position(svc, &r, &pos);
   if (rc == 0)

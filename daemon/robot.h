@@ -77,7 +77,7 @@ typedef struct fg_robot_cmd_view {
   char message[512];
   double created_s, finished_s; /* CLOCK_REALTIME; finished 0 while running */
   double ack_ms;         /* write to acknowledgement, -1 before */
-  int robot_unit, robot_base;
+  int robot_unit, robot_base, gripper_unit;
   fg_pose_encoding encoding;
 } fg_robot_cmd_view;
 

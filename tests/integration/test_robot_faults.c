@@ -7,6 +7,7 @@
 #include "robot_util.h"
 
 #include <netinet/in.h>
+#include <signal.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/socket.h>
@@ -216,6 +217,13 @@ static void check_not_configured(void) {
   r = h_get("/v1/gripper");
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "not_configured");
   h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_is_false(json_object_get(r->json, "configured")));
+  h_resp_free(r);
+  /* a reload does not swap peers under running commands: it says so, and nothing changes */
+  r_config(closed_port(), NULL, 0, NULL);
+  h_signal(SIGHUP);
+  ASSERT(h_wait_log("keep their settings until the next restart", 1, 10));
   r = h_get("/v1/robot");
   ASSERT(json_is_false(json_object_get(r->json, "configured")));
   h_resp_free(r);
