@@ -9,7 +9,9 @@
 #include "modbus/link.h"
 #include "modbus/regs.h"
 
-/* How often status registers are read while waiting. */
+/* How often status registers are read while waiting: every 0.25 ms for the first
+ * FG_MB_FAST_MS of a wait, then every FG_MB_POLL_MS. */
+#define FG_MB_FAST_MS 10
 #define FG_MB_POLL_MS 2
 
 /* Returns 1 to stop a wait early (e.g. shutting down); checked at every poll. */

@@ -25,6 +25,7 @@ struct fg_mb_link {
   int backoff_ms;        /* 0 after a success */
   double next_attempt_s; /* CLOCK_MONOTONIC */
   int timeouts_in_row;
+  int stale;             /* a timed-out request's reply may still arrive */
   int maybe_sent, exception;
   pthread_mutex_t lock;  /* guards st, the only part other threads read */
   fg_mb_link_state st;
@@ -101,6 +102,7 @@ void fg_mb_link_close(fg_mb_link *l) {
   modbus_free(l->ctx);
   l->ctx = NULL;
   l->timeouts_in_row = 0;
+  l->stale = 0;
   set_connected(l, 0);
 }
 
@@ -206,8 +208,10 @@ static int request_failed(fg_mb_link *l, int e, const char *what) {
     pthread_mutex_lock(&l->lock);
     l->st.timeouts++;
     pthread_mutex_unlock(&l->lock);
-    /* a late reply must not be taken for the next request's */
+    /* a late reply must not be taken for the next request's: drop what has come of it, and
+     * again before the next request, as the rest may still be on its way */
     modbus_flush(l->ctx);
+    l->stale = 1;
     int rc = link_fail(l, FG_ETIMEDOUT, "%s %s did not answer %s within %d ms", l->name,
                        l->address, what, l->cfg.timeout_ms);
     if (++l->timeouts_in_row >= TIMEOUTS_BEFORE_RECONNECT) {
@@ -234,6 +238,10 @@ static int request_begin(fg_mb_link *l) {
   l->maybe_sent = 0;
   l->exception = 0;
   FG_TRY(fg_mb_link_ensure(l));
+  if (l->stale) {
+    modbus_flush(l->ctx);
+    l->stale = 0;
+  }
   pthread_mutex_lock(&l->lock);
   l->st.requests++;
   pthread_mutex_unlock(&l->lock);

@@ -125,7 +125,12 @@ void fg_mb_peer_free(fg_mb_peer *p) {
 
 int fg_mb_peer_post(fg_mb_peer *p, fg_mb_job_fn fn, void *arg, void (*done)(void *arg, int rc)) {
   pthread_mutex_lock(&p->lock);
-  if (p->stop || p->count == FG_MB_PEER_QUEUE) {
+  if (p->stop) {
+    pthread_mutex_unlock(&p->lock);
+    return fg_fail(FG_ECANCELED, "the Modbus peer at %s is shutting down",
+                   fg_mb_link_address(p->link));
+  }
+  if (p->count == FG_MB_PEER_QUEUE) {
     pthread_mutex_unlock(&p->lock);
     return fg_fail(FG_EBUSY, "the Modbus peer at %s has %d requests waiting; try again",
                    fg_mb_link_address(p->link), FG_MB_PEER_QUEUE);

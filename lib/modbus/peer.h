@@ -31,8 +31,8 @@ void fg_mb_peer_free(fg_mb_peer *p);
 int fg_mb_peer_call(fg_mb_peer *p, fg_mb_job_fn fn, void *arg);
 
 /* Queues fn(link, arg) and returns at once; done(arg, rc) runs on the worker afterwards
- * (rc FG_ECANCELED when the peer stops before fn ran). 0 or FG_EBUSY (done is then not
- * called). */
+ * (rc FG_ECANCELED when the peer stops before fn ran). 0, FG_EBUSY (queue full) or
+ * FG_ECANCELED (stopping); done is then not called. */
 int fg_mb_peer_post(fg_mb_peer *p, fg_mb_job_fn fn, void *arg, void (*done)(void *arg, int rc));
 
 /* The link's state (link.h); any thread. */

@@ -63,8 +63,8 @@ int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w
     if (!isfinite(b->p_world_m[i]) || !isfinite(b->rotvec_rad[i]))
       return fg_fail(FG_EINVAL, "the pose is not finite");
   }
-  if (!isfinite(b->width_m) || b->width_m < 0)
-    return fg_fail(FG_ERANGE, "width = %g m: expected a finite width >= 0", b->width_m);
+  if (!isfinite(b->width_m)) return fg_fail(FG_EINVAL, "width = %g m is not finite", b->width_m);
+  if (b->width_m < 0) return fg_fail(FG_ERANGE, "width = %g m: expected >= 0", b->width_m);
   if (b->force_n < 0 || b->force_n > 65535)
     return fg_fail(FG_ERANGE, "force = %d N: expected 0 .. 65535", b->force_n);
   w[0] = b->seq;
@@ -84,11 +84,15 @@ int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w
   }
   for (int i = 0; i < 3; i++) {
     const float p = (float)b->p_world_m[i], r = (float)b->rotvec_rad[i];
-    if (!isfinite(p) || !isfinite(r)) return fg_fail(FG_ERANGE, "the pose exceeds float32");
+    if (!isfinite(p))
+      return fg_fail(FG_ERANGE, "%s = %g m exceeds float32", pn[i], b->p_world_m[i]);
+    if (!isfinite(r))
+      return fg_fail(FG_ERANGE, "%s = %g rad exceeds float32", rn[i], b->rotvec_rad[i]);
     fg_float32_to_words(p, &w[2 + 2 * i]);
     fg_float32_to_words(r, &w[8 + 2 * i]);
   }
-  if (!isfinite((float)b->width_m)) return fg_fail(FG_ERANGE, "width exceeds float32");
+  if (!isfinite((float)b->width_m))
+    return fg_fail(FG_ERANGE, "width = %g m exceeds float32", b->width_m);
   fg_float32_to_words((float)b->width_m, &w[14]);
   w[16] = (uint16_t)b->force_n;
   return 0;
