@@ -2,7 +2,7 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy] [clip] [heatmap]
+#                           [busy] [clip] [heatmap] [robot]
 #   (no names: all of them; train takes about 6 minutes, throughput about 3)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
@@ -36,6 +36,14 @@
 #           timed with curl: p50 and p90 ms (target p50 <= 50 ms), the reply's points, the
 #           same at alpha_threshold 0.01 (more points), and the cache's bytes from the
 #           scene's "voxel_cache"
+#   robot   POST /v1/robot/commands round trips to fieldgrip-sim on loopback with zero ack
+#           delay (bench_robot): BENCH_ROBOT_N (default 1000) move commands with
+#           "wait": true in a row over one kept-alive connection, client-side p50 / p90 /
+#           p99 / max ms and the daemon's ack_ms (target p99 <= 5 ms), then 200 with
+#           "wait": false (answered at the acknowledgement) and, for comparison, GET
+#           /v1/robot and dry-run moves (HTTP without Modbus); every command's seq checked
+#           against the simulator's request log: each one once and consecutive, none lost
+#           or duplicated, the logged words equal to the reply's registers.robot.words
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -45,13 +53,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,42p' "$0" >&2
+  sed -n '2,52p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -76,8 +84,9 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# start_daemon NAME: starts fieldgripd with a fresh state dir under $tmp/NAME and sets
-# $pid and $base (http://127.0.0.1:PORT) once it logs its listening line.
+# start_daemon NAME [CONF_LINES]: starts fieldgripd with a fresh state dir under $tmp/NAME
+# (CONF_LINES, if given, appended to its configuration file) and sets $pid and $base
+# (http://127.0.0.1:PORT) once it logs its listening line.
 start_daemon() {
   local dir=$tmp/$1 port= i
   mkdir -p "$dir/state"
@@ -85,8 +94,11 @@ start_daemon() {
     echo "[state]"
     # The shared data sets, and data sets generated into the temp dir.
     if [ -d "$data" ]; then echo "import_dirs = $(realpath "$data"):$tmp"; else echo "import_dirs = $tmp"; fi
+    [ $# -lt 2 ] || printf '%s\n' "$2"
   } > "$dir/bench.conf"
-  # The listening line is logged at level info, the default.
+  # The listening line is logged at level info, the default. The log file exists before the
+  # daemon starts: the background job opens it only once it runs, after the loop below began.
+  : > "$dir/stderr"
   "$daemon" --config "$dir/bench.conf" --listen 127.0.0.1:0 --state-dir "$dir/state" \
     2> "$dir/stderr" &
   pid=$!
@@ -391,6 +403,47 @@ bench_heatmap() {
   echo "bench=heatmap voxels=$voxels dim=512 train_steps=$steps first_heatmap_s=$(printf '%.3f' "$first") heatmaps=$n p50_ms=$p50 p90_ms=$p90 points=$points p50_ms_alpha_0.01=$p50_dense points_alpha_0.01=$points_dense cache_bytes=$bytes cache_mb=$(awk -v b="$bytes" 'BEGIN { printf "%.1f", b / 1048576 }') target_max_first_s=3 target_max_p50_ms=50 pass=$pass"
 }
 
+bench_robot() {
+  local dir=$tmp/robot sim=$build/tests/sim/fieldgrip-sim bin=$build/tests/bench/bench_robot
+  local n=${BENCH_ROBOT_N:-1000} sim_pid port= out rc=0 line p99 pass
+  if [ ! -x "$sim" ] || [ ! -x "$bin" ]; then
+    echo "bench=robot_execute error=not_built hint=meson_compile_bench_robot_fieldgrip-sim pass=no"
+    failed=1; return
+  fi
+  mkdir -p "$dir"
+  "$sim" --listen 127.0.0.1:0 --port-file "$dir/sim.port" --log "$dir/sim.log" \
+    --ack-delay-ms 0 2> "$dir/sim.stderr" &
+  sim_pid=$!
+  pids+=("$sim_pid")
+  for _ in $(seq 1 200); do
+    [ ! -s "$dir/sim.port" ] || break
+    kill -0 "$sim_pid" 2>/dev/null || break
+    sleep 0.05
+  done
+  port=$(cat "$dir/sim.port" 2>/dev/null || true)
+  if [ -z "$port" ]; then
+    cat "$dir/sim.stderr" >&2
+    echo "bench=robot_execute error=simulator_did_not_start pass=no"
+    failed=1; return
+  fi
+  start_daemon robot "$(printf '[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %s' "$port")"
+  out=$("$bin" "$base" "$dir/sim.log" "$n") || rc=$?
+  stop_daemon
+  kill "$sim_pid" 2>/dev/null || true
+  wait "$sim_pid" 2>/dev/null || true
+  line=$(printf '%s\n' "$out" | grep '^bench=robot_execute ' || true)
+  if [ -z "$line" ]; then
+    echo "bench=robot_execute error=bench_robot_exit_$rc pass=no"
+    failed=1; return
+  fi
+  printf '%s\n' "$out" | grep -E '^bench=robot_execute_(nowait|baseline) ' || true
+  p99=$(field p99_ms "$line")
+  pass=$(awk -v p="$p99" -v r="$rc" -v c="$(field checks "$line")" \
+    'BEGIN { print (p <= 5 && r == 0 && c == "pass") ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "$line target_max_p99_ms=5 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -401,7 +454,8 @@ for b in "${benches[@]}"; do
     busy) bench_busy ;;
     clip) bench_clip ;;
     heatmap) bench_heatmap ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap)" >&2; exit 2 ;;
+    robot) bench_robot ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
