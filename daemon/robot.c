@@ -442,7 +442,9 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
 
-  rc = fg_robot_wait_done(l, &svc->rp, seq, &status, cancelled, svc);
+  /* the status read with the ack may already be the end (a quick robot) */
+  if (status != FG_ROBOT_DONE && status != FG_ROBOT_FAILED)
+    rc = fg_robot_wait_done(l, &svc->rp, seq, &status, cancelled, svc);
   pthread_mutex_lock(&svc->lock);
   if (rc == 0) svc->status = r->v.robot_status = status;
   pthread_mutex_unlock(&svc->lock);
