@@ -179,7 +179,7 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
 
 /* The answer to a command view: the command (200, 202), or the error with the command
  * beside it. *status gets the HTTP status. */
-static json_t *answer_json(fg_req *req, const fg_robot_cmd_view *v, int *status) {
+static json_t *answer_json(const fg_robot_cmd_view *v, int *status) {
   json_t *cmd = command_json(v);
   *status = v->req.dry_run ? 200 : v->http_status;
   if (*status < 400) return cmd;
@@ -187,13 +187,10 @@ static json_t *answer_json(fg_req *req, const fg_robot_cmd_view *v, int *status)
                    "command", cmd);
 }
 
-static void answer_command(fg_req *req, fg_resp *resp, const fg_robot_cmd_view *v,
-                           int replayed) {
-  int status;
-  json_t *o = answer_json(req, v, &status);
-  if (status == 202 && v->id)
-    snprintf(resp->location, sizeof resp->location, "/v1/robot/commands/%" PRIu64, v->id);
-  if (replayed) json_object_set_new(o, "replayed", json_true());
+/* Sends o with status, and the command's Location while it runs (202). */
+static void answer_send(fg_resp *resp, json_t *o, int status, uint64_t id) {
+  if (status == 202 && id)
+    snprintf(resp->location, sizeof resp->location, "/v1/robot/commands/%" PRIu64, id);
   fg_resp_json(resp, status, o);
 }
 
@@ -235,14 +232,19 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
   case FG_IDEM_REPLAY: {
     json_t *o = json_loads(body, 0, NULL);
     free(body);
-    json_t *cmd = json_object_get(o, "command") ? json_object_get(o, "command") : o;
+    /* the command object: the body, or beside an error ("command" is then an object) */
+    json_t *cmd = json_is_object(json_object_get(o, "command")) ? json_object_get(o, "command")
+                                                                : o;
     json_t *id = json_object_get(cmd, "id");
     fg_robot_cmd_view v;
     /* an answer given at the acknowledgement: the command has gone on since */
     if (status == 202 && json_is_integer(id) && req->app->robot &&
         fg_robot_command_get(req->app->robot, (uint64_t)json_integer_value(id), &v) == 0) {
       json_decref(o);
-      answer_command(req, resp, &v, 1);
+      int now;
+      o = answer_json(&v, &now);
+      json_object_set_new(o, "replayed", json_true());
+      answer_send(resp, o, now, v.id);
       return 1;
     }
     if (json_is_object(o)) json_object_set_new(o, "replayed", json_true());
@@ -293,7 +295,7 @@ static int actuate(fg_req *req, fg_resp *resp, const char *action, const fg_robo
     return answer_refusal(resp, rc);
   }
   int status;
-  json_t *o = answer_json(req, &v, &status);
+  json_t *o = answer_json(&v, &status);
   if (action && o) {
     json_t *cmd = status < 400 ? o : json_object_get(o, "command");
     json_object_del(cmd, "command");
@@ -306,9 +308,7 @@ static int actuate(fg_req *req, fg_resp *resp, const char *action, const fg_robo
               fg_error_detail());
     free(text);
   }
-  if (status == 202 && v.id)
-    snprintf(resp->location, sizeof resp->location, "/v1/robot/commands/%" PRIu64, v.id);
-  fg_resp_json(resp, status, o);
+  answer_send(resp, o, status, v.id);
   return 0;
 }
 
@@ -343,22 +343,31 @@ static json_t *error_json(const char *msg, double at_s) {
   return json_pack("{s:s, s:o}", "message", msg, "at", time_json(at_s));
 }
 
+/* The keys both peers report: configured, profile, address, unit_id, connected,
+ * last_error, counters. */
+static json_t *peer_json(const fg_peer_view *p, const char *profile) {
+  return json_pack("{s:b, s:s, s:s?, s:i, s:b, s:o, s:{s:I, s:I, s:I, s:I, s:I}}",
+                   "configured", p->configured, "profile", profile, "address",
+                   p->configured ? p->address : NULL, "unit_id", p->unit_id, "connected",
+                   p->connected, "last_error", error_json(p->last_error, p->last_error_s),
+                   "counters", "requests", (json_int_t)p->requests, "errors",
+                   (json_int_t)p->errors, "timeouts", (json_int_t)p->timeouts, "exceptions",
+                   (json_int_t)p->exceptions, "reconnects", (json_int_t)p->reconnects);
+}
+
+static json_t *int_or_null(int v) { return v >= 0 ? json_integer(v) : json_null(); }
+
 int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   fg_robot_state st;
   fg_robot_state_get(req->app->robot, &st);
-  json_t *o = json_pack(
-      "{s:b, s:s, s:s?, s:i, s:i, s:s, s:b, s:b, s:o, s:o, s:o, s:o, s:{s:I, s:I, s:I, s:I, "
-      "s:I}}",
-      "configured", st.configured, "profile", "pose-registers", "address",
-      st.configured ? st.address : NULL, "unit_id", st.unit_id, "base", st.base, "encoding",
-      st.encoding == FG_POSE_FLOAT32 ? "float32" : "int16", "connected", st.connected, "busy",
-      st.busy, "last_seq", st.last_seq ? json_integer(st.last_seq) : json_null(), "ack",
-      st.ack >= 0 ? json_integer(st.ack) : json_null(), "status",
-      st.status >= 0 ? json_integer(st.status) : json_null(), "last_error",
-      error_json(st.last_error, st.last_error_s), "counters", "requests",
-      (json_int_t)st.requests, "errors", (json_int_t)st.errors, "timeouts",
-      (json_int_t)st.timeouts, "exceptions", (json_int_t)st.exceptions, "reconnects",
-      (json_int_t)st.reconnects);
+  json_t *o = peer_json(&st.peer, "pose-registers");
+  json_object_set_new(o, "base", json_integer(st.base));
+  json_object_set_new(o, "encoding",
+                      json_string(st.encoding == FG_POSE_FLOAT32 ? "float32" : "int16"));
+  json_object_set_new(o, "busy", json_boolean(st.busy));
+  json_object_set_new(o, "last_seq", st.last_seq ? json_integer(st.last_seq) : json_null());
+  json_object_set_new(o, "ack", int_or_null(st.ack));
+  json_object_set_new(o, "status", int_or_null(st.status));
   fg_robot_cmd_view v;
   json_object_set_new(o, "last_command",
                       st.last_command && fg_robot_command_get(req->app->robot, st.last_command,
@@ -373,42 +382,29 @@ int fg_api_gripper_get(fg_req *req, fg_resp *resp) {
   fg_gripper_state st;
   fg_gripper_state_get(req->app->robot, &st);
   const fg_robotiq_status *s = &st.status;
-  json_t *o = json_pack("{s:b, s:s, s:s, s:s?, s:i, s:b}", "configured", st.configured,
-                        "profile", "robotiq-2f", "model", st.model, "address",
-                        st.configured ? st.address : NULL, "unit_id", st.unit_id, "connected",
-                        st.connected);
-  if (st.have_status) {
-    json_object_set_new(o, "activated", json_boolean(s->sta == 3 && s->act));
-    json_object_set_new(o, "width", json_real(st.width_m));
-    json_object_set_new(o, "object_detected", json_boolean(fg_robotiq_object_detected(s)));
-    json_object_set_new(o, "fault", s->flt ? json_pack("{s:i, s:s}", "code", s->flt, "name",
-                                                       fg_robotiq_fault_name(s->flt))
-                                           : json_null());
+  json_t *o = peer_json(&st.peer, "robotiq-2f");
+  json_object_set_new(o, "model", json_string(st.model));
+  const int have = st.have_status;
+  json_object_set_new(o, "activated", have ? json_boolean(s->sta == 3 && s->act) : json_null());
+  json_object_set_new(o, "width", have ? json_real(st.width_m) : json_null());
+  json_object_set_new(o, "object_detected",
+                      have ? json_boolean(fg_robotiq_object_detected(s)) : json_null());
+  json_object_set_new(o, "fault", have && s->flt ? json_pack("{s:i, s:s}", "code", s->flt, "name",
+                                                             fg_robotiq_fault_name(s->flt))
+                                                 : json_null());
+  if (have)
     json_object_set_new(o, "registers",
                         json_pack("{s:i, s:i, s:i, s:i, s:i, s:i, s:i, s:i, s:i}", "gACT",
                                   s->act, "gGTO", s->gto, "gSTA", s->sta, "gOBJ", s->obj,
                                   "gFLT", s->flt, "kFLT", s->kflt, "gPR", s->echo, "gPO",
                                   s->position, "gCU", s->current));
-  } else {
-    json_object_set_new(o, "activated", json_null());
-    json_object_set_new(o, "width", json_null());
-    json_object_set_new(o, "object_detected", json_null());
-    json_object_set_new(o, "fault", json_null());
-  }
-  json_object_set_new(o, "state", json_string(!st.configured ? "not_configured"
-                                              : !st.connected ? "disconnected"
-                                              : !st.have_status ? "connected"
+  json_object_set_new(o, "state", json_string(!st.peer.configured ? "not_configured"
+                                              : !st.peer.connected ? "disconnected"
+                                              : !have ? "connected"
                                               : s->flt >= 0x08 ? "fault"
                                               : s->sta == 3 && s->act ? "ready"
                                               : s->sta == 1 ? "activating"
                                                             : "not_activated"));
-  json_object_set_new(o, "last_error", error_json(st.last_error, st.last_error_s));
-  json_object_set_new(o, "counters",
-                      json_pack("{s:I, s:I, s:I, s:I, s:I}", "requests", (json_int_t)st.requests,
-                                "errors", (json_int_t)st.errors, "timeouts",
-                                (json_int_t)st.timeouts, "exceptions",
-                                (json_int_t)st.exceptions, "reconnects",
-                                (json_int_t)st.reconnects));
   fg_resp_json(resp, 200, o);
   return 0;
 }

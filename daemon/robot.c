@@ -654,25 +654,30 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
 
 /* ---------------------------------------------------------------- state and metrics */
 
+/* The connection part of a peer's state; p may be NULL (not configured). */
+static void peer_view(fg_mb_peer *p, int unit_id, fg_peer_view *v) {
+  memset(v, 0, sizeof *v);
+  v->configured = p != NULL;
+  v->unit_id = unit_id;
+  if (!p) return;
+  fg_mb_link_state ls;
+  fg_mb_peer_state(p, &ls);
+  v->connected = ls.connected;
+  snprintf(v->address, sizeof v->address, "%s", fg_mb_peer_address(p));
+  memcpy(v->last_error, ls.last_error, sizeof v->last_error);
+  v->last_error_s = ls.last_error_s;
+  v->requests = ls.requests;
+  v->errors = ls.errors;
+  v->timeouts = ls.timeouts;
+  v->exceptions = ls.exceptions;
+  v->reconnects = ls.reconnects;
+}
+
 void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st) {
   memset(st, 0, sizeof *st);
-  st->configured = svc->robot != NULL;
-  st->unit_id = svc->robot_unit;
+  peer_view(svc->robot, svc->robot_unit, &st->peer);
   st->base = svc->rp.base;
   st->encoding = svc->rp.encoding;
-  if (svc->robot) {
-    fg_mb_link_state ls;
-    fg_mb_peer_state(svc->robot, &ls);
-    st->connected = ls.connected;
-    snprintf(st->address, sizeof st->address, "%s", fg_mb_peer_address(svc->robot));
-    memcpy(st->last_error, ls.last_error, sizeof st->last_error);
-    st->last_error_s = ls.last_error_s;
-    st->requests = ls.requests;
-    st->errors = ls.errors;
-    st->timeouts = ls.timeouts;
-    st->exceptions = ls.exceptions;
-    st->reconnects = ls.reconnects;
-  }
   pthread_mutex_lock(&svc->lock);
   st->last_seq = svc->last_seq;
   st->ack = svc->ack;
@@ -684,24 +689,12 @@ void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st) {
 
 void fg_gripper_state_get(fg_robot_svc *svc, fg_gripper_state *st) {
   memset(st, 0, sizeof *st);
-  st->configured = svc->gripper != NULL;
+  peer_view(svc->gripper, svc->gripper_unit, &st->peer);
   st->model = svc->model->name;
-  st->unit_id = svc->gripper_unit;
   st->width_m = NAN;
   if (!svc->gripper) return;
-  fg_mb_link_state ls;
-  fg_mb_peer_state(svc->gripper, &ls);
-  st->connected = ls.connected;
-  snprintf(st->address, sizeof st->address, "%s", fg_mb_peer_address(svc->gripper));
-  memcpy(st->last_error, ls.last_error, sizeof st->last_error);
-  st->last_error_s = ls.last_error_s;
-  st->requests = ls.requests;
-  st->errors = ls.errors;
-  st->timeouts = ls.timeouts;
-  st->exceptions = ls.exceptions;
-  st->reconnects = ls.reconnects;
   pthread_mutex_lock(&svc->lock);
-  st->have_status = svc->g_have && ls.connected;
+  st->have_status = svc->g_have && st->peer.connected;
   st->status = svc->g_status;
   pthread_mutex_unlock(&svc->lock);
   if (st->have_status) st->width_m = fg_robotiq_position_to_width(svc->model, st->status.position);

@@ -112,35 +112,36 @@ int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cm
 /* The record of command id (the newest 1000 are kept): 0 or FG_ENOENT. */
 int fg_robot_command_get(fg_robot_svc *svc, uint64_t id, fg_robot_cmd_view *v);
 
-/* The robot peer's state for GET /v1/robot. */
-typedef struct fg_robot_state {
+/* What both peers report of their connection. */
+typedef struct fg_peer_view {
   int configured, connected;
   char address[300];
-  int unit_id, base;
+  int unit_id;
+  char last_error[256]; /* "" when none */
+  double last_error_s;  /* CLOCK_REALTIME */
+  uint64_t requests, errors, timeouts, exceptions, reconnects;
+} fg_peer_view;
+
+/* The robot peer's state for GET /v1/robot. */
+typedef struct fg_robot_state {
+  fg_peer_view peer;
+  int base;
   fg_pose_encoding encoding;
   uint16_t last_seq;     /* the last seq sent, 0 when none */
   int ack, status;       /* last read, -1 before any read */
-  char last_error[256];
-  double last_error_s;
   int busy;              /* a command is running */
   uint64_t last_command; /* id of the newest command, 0 when none */
-  uint64_t requests, errors, timeouts, exceptions, reconnects;
 } fg_robot_state;
 
 void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st);
 
 /* The gripper's state for GET /v1/gripper. */
 typedef struct fg_gripper_state {
-  int configured, connected;
-  char address[300];
+  fg_peer_view peer;
   const char *model;     /* robotiq-2f85 / robotiq-2f140 */
-  int unit_id;
   int have_status;       /* a status was read since the connection */
   fg_robotiq_status status;
   double width_m;        /* from gPO */
-  char last_error[256];
-  double last_error_s;
-  uint64_t requests, errors, timeouts, exceptions, reconnects;
 } fg_gripper_state;
 
 void fg_gripper_state_get(fg_robot_svc *svc, fg_gripper_state *st);

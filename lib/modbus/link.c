@@ -254,37 +254,39 @@ static void request_ok(fg_mb_link *l) {
   l->maybe_sent = 1;
 }
 
-int fg_mb_read_registers(fg_mb_link *l, int addr, int n, uint16_t *out) {
+/* One request of function fn (3, 4 or 16) through the common prologue and error sorting. */
+static int request(fg_mb_link *l, int fn, int addr, int n, uint16_t *words) {
   FG_TRY(request_begin(l));
-  if (modbus_read_registers(l->ctx, addr, n, out) != n) {
+  const int got = fn == MODBUS_FC_READ_HOLDING_REGISTERS ? modbus_read_registers(l->ctx, addr, n, words)
+                  : fn == MODBUS_FC_READ_INPUT_REGISTERS
+                      ? modbus_read_input_registers(l->ctx, addr, n, words)
+                      : modbus_write_registers(l->ctx, addr, n, words);
+  if (got != n) {
+    const int e = errno;
     char what[64];
-    snprintf(what, sizeof what, "a read of %d holding registers at %d", n, addr);
-    return request_failed(l, errno, what);
+    snprintf(what, sizeof what, "a %s of %d %sregisters at %d",
+             fn == MODBUS_FC_WRITE_MULTIPLE_REGISTERS ? "write" : "read", n,
+             fn == MODBUS_FC_READ_HOLDING_REGISTERS ? "holding "
+             : fn == MODBUS_FC_READ_INPUT_REGISTERS ? "input "
+                                                     : "",
+             addr);
+    return request_failed(l, e, what);
   }
   request_ok(l);
   return 0;
+}
+
+int fg_mb_read_registers(fg_mb_link *l, int addr, int n, uint16_t *out) {
+  return request(l, MODBUS_FC_READ_HOLDING_REGISTERS, addr, n, out);
 }
 
 int fg_mb_read_input_registers(fg_mb_link *l, int addr, int n, uint16_t *out) {
-  FG_TRY(request_begin(l));
-  if (modbus_read_input_registers(l->ctx, addr, n, out) != n) {
-    char what[64];
-    snprintf(what, sizeof what, "a read of %d input registers at %d", n, addr);
-    return request_failed(l, errno, what);
-  }
-  request_ok(l);
-  return 0;
+  return request(l, MODBUS_FC_READ_INPUT_REGISTERS, addr, n, out);
 }
 
 int fg_mb_write_registers(fg_mb_link *l, int addr, int n, const uint16_t *w) {
-  FG_TRY(request_begin(l));
-  if (modbus_write_registers(l->ctx, addr, n, w) != n) {
-    char what[64];
-    snprintf(what, sizeof what, "a write of %d registers at %d", n, addr);
-    return request_failed(l, errno, what);
-  }
-  request_ok(l);
-  return 0;
+  /* libmodbus only reads the words of a write; its prototype takes them const */
+  return request(l, MODBUS_FC_WRITE_MULTIPLE_REGISTERS, addr, n, (uint16_t *)w);
 }
 
 void fg_mb_link_state_get(fg_mb_link *l, fg_mb_link_state *st) {

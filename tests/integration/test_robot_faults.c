@@ -165,7 +165,7 @@ static void check_killed_mid_command(void) {
   r_config(sim.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
-  h_resp *r = send_move(", \"wait\": false", NULL);
+  h_resp *r = send_move(", \"wait\": false", "k-async");
   r_expect(r, 202, NULL);
   ASSERT_STREQ(state_of(r), "acknowledged");
   ASSERT(h_resp_header(r, "Location"));
@@ -180,6 +180,13 @@ static void check_killed_mid_command(void) {
 
   it_peer_kill(&sim);
   ASSERT(wait_state(id, "unknown", 5));
+  /* its key answered at the acknowledgement; a retry now gets the command as it ended */
+  r = send_move(", \"wait\": false", "k-async");
+  r_expect(r, 502, "robot_unknown");
+  ASSERT(json_is_true(json_object_get(r->json, "replayed")));
+  ASSERT_STREQ(state_of(r), "unknown");
+  ASSERT_EQ(json_integer_value(json_object_get(r_command(r), "id")), id);
+  h_resp_free(r);
   r = h_get("/v1/robot");
   ASSERT(json_is_false(json_object_get(r->json, "connected")));
   ASSERT(json_is_false(json_object_get(r->json, "busy")));
