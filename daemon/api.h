@@ -66,6 +66,11 @@ int fg_api_robot_get(fg_req *req, fg_resp *resp);
 int fg_api_gripper_get(fg_req *req, fg_resp *resp);
 int fg_api_gripper_action(fg_req *req, fg_resp *resp);
 
+/* fg_robot_svc_on_finish hook (ctx: the fg_app): stores the final answer of a command that
+ * came with an Idempotency-Key, so that a retry sees how it ended. */
+struct fg_robot_cmd_view;
+void fg_api_robot_finished(void *ctx, const struct fg_robot_cmd_view *v);
+
 /* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
 #define FG_API_MAX_EVENT_STREAMS 64
 

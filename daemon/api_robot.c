@@ -181,7 +181,7 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
  * beside it. *status gets the HTTP status. */
 static json_t *answer_json(const fg_robot_cmd_view *v, int *status) {
   json_t *cmd = command_json(v);
-  *status = v->req.dry_run ? 200 : v->http_status;
+  *status = v->req.dry_run ? 200 : v->finished_s == 0 ? 202 : v->http_status;
   if (*status < 400) return cmd;
   return json_pack("{s:{s:s, s:s}, s:o}", "error", "code", v->code, "message", v->message,
                    "command", cmd);
@@ -230,23 +230,10 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
     return fg_resp_error(resp, 422, "idempotency_key_reused", "this Idempotency-Key was used "
                          "for a different request; use a new key for a new command"), 1;
   case FG_IDEM_REPLAY: {
+    /* kept current by fg_api_robot_finished: a command answered at its acknowledgement
+     * (202) is replaced by its end once it has one */
     json_t *o = json_loads(body, 0, NULL);
     free(body);
-    /* the command object: the body, or beside an error ("command" is then an object) */
-    json_t *cmd = json_is_object(json_object_get(o, "command")) ? json_object_get(o, "command")
-                                                                : o;
-    json_t *id = json_object_get(cmd, "id");
-    fg_robot_cmd_view v;
-    /* an answer given at the acknowledgement: the command has gone on since */
-    if (status == 202 && json_is_integer(id) && req->app->robot &&
-        fg_robot_command_get(req->app->robot, (uint64_t)json_integer_value(id), &v) == 0) {
-      json_decref(o);
-      int now;
-      o = answer_json(&v, &now);
-      json_object_set_new(o, "replayed", json_true());
-      answer_send(resp, o, now, v.id);
-      return 1;
-    }
     if (json_is_object(o)) json_object_set_new(o, "replayed", json_true());
     fg_resp_json(resp, status, o);
     return 1;
@@ -258,6 +245,19 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
 }
 
 /* ---------------------------------------------------------------- handlers */
+
+void fg_api_robot_finished(void *ctx, const fg_robot_cmd_view *v) {
+  fg_app *app = ctx;
+  if (!v->req.key[0]) return;
+  int status;
+  json_t *o = answer_json(v, &status);
+  char *text = o ? json_dumps(o, JSON_COMPACT) : NULL;
+  json_decref(o);
+  if (!text || fg_idem_update(app->idem, v->req.key, status, text) < 0)
+    fg_warn("robot: the end of command %" PRIu64 " was not stored for its Idempotency-Key "
+            "%s: %s", v->id, v->req.key, text ? fg_error_detail() : "out of memory");
+  free(text);
+}
 
 /* The body as an object; an empty body is {} (a bare POST /v1/gripper/close). */
 static json_t *body_or_empty(fg_req *req, fg_resp *resp) {
@@ -281,12 +281,13 @@ static int run_gripper(fg_req *req, const char *action, const fg_robot_request *
   return fg_gripper_action(req->app->robot, action, r, v);
 }
 
-static int actuate(fg_req *req, fg_resp *resp, const char *action, const fg_robot_request *r,
+static int actuate(fg_req *req, fg_resp *resp, const char *action, fg_robot_request *r,
                    run_fn run) {
   const char *key = NULL;
   if (!r->dry_run) {
     int ir = idem_begin(req, resp, &key);
     if (ir != 0) return 0;
+    if (key) snprintf(r->key, sizeof r->key, "%s", key);
   }
   fg_robot_cmd_view v;
   int rc = run(req, action, r, &v);

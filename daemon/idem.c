@@ -125,8 +125,10 @@ static int load(fg_idem *s) {
     snprintf(e->key, sizeof e->key, "%s", key);
     e->hash = strtoull(hash, NULL, 16);
     e->created = created;
-    e->status = status ? status : 504;
-    e->body = strdup(status && body ? body : interrupted);
+    /* no answer yet, or only "accepted" (202): the command was cut short by the stop */
+    const int final = status != 0 && status != 202 && body;
+    e->status = final ? status : 504;
+    e->body = strdup(final ? body : interrupted);
     if (!e->body) {
       json_decref(doc);
       return FG_ENOMEM;
@@ -227,6 +229,22 @@ int fg_idem_cancel(fg_idem *s, const char *key) {
   if (e && e->status == 0) {
     memmove(e, e + 1, (size_t)(s->e + s->n - (e + 1)) * sizeof *e);
     s->n--;
+    rc = save_locked(s);
+  }
+  pthread_mutex_unlock(&s->lock);
+  return rc;
+}
+
+int fg_idem_update(fg_idem *s, const char *key, int status, const char *body) {
+  pthread_mutex_lock(&s->lock);
+  entry *e = find_locked(s, key);
+  int rc = e ? 0 : fg_fail(FG_ENOENT, "no Idempotency-Key %s", key);
+  char *copy = e ? strdup(body) : NULL;
+  if (e && !copy) rc = FG_ENOMEM;
+  if (copy) {
+    free(e->body);
+    e->body = copy;
+    e->status = status;
     rc = save_locked(s);
   }
   pthread_mutex_unlock(&s->lock);

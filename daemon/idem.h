@@ -2,8 +2,8 @@
  * with a key runs, later ones with the same key get its answer again without running.
  * Keys are kept in one file under the state dir, rewritten atomically when a key is taken
  * and when its answer is known, so a daemon that restarts (or is killed) mid-command does
- * not run a retried command a second time: a key whose command was cut short answers 504
- * outcome_unknown. The newest FG_IDEM_MAX keys of the last 24 hours are kept. */
+ * not run a retried command a second time: a key whose command was cut short (no answer, or
+ * only the 202 of its acknowledgement) answers 504 outcome_unknown after a restart. The newest FG_IDEM_MAX keys of the last 24 hours are kept. */
 #ifndef FG_DAEMON_IDEM_H
 #define FG_DAEMON_IDEM_H
 
@@ -37,6 +37,10 @@ int fg_idem_begin(fg_idem *s, const char *key, uint64_t hash, int *status, char 
 
 /* Stores the answer of a key taken by fg_idem_begin. 0 or FG_EIO. */
 int fg_idem_finish(fg_idem *s, const char *key, int status, const char *body);
+
+/* Replaces the answer of a key (taken or answered) with a later one: a command first
+ * answered 202 at its acknowledgement, now ended. 0, FG_ENOENT (the key is gone) or FG_EIO. */
+int fg_idem_update(fg_idem *s, const char *key, int status, const char *body);
 
 /* Releases a key taken by fg_idem_begin whose request did not run (refused before it
  * started), so that a retry with the key runs. 0 or FG_EIO. */

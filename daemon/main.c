@@ -256,6 +256,7 @@ int main(int argc, char **argv) {
   int robot_rc = !idem_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
   if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
+  if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
   free(robot_dir);
   free(idem_path);
   if (robot_rc != 0) {

@@ -47,7 +47,17 @@ struct fg_robot_svc {
   fg_robotiq_status g_status;
   unsigned g_gen;       /* link generation of g_status */
   uint64_t by_state[FG_CMD_STATES];
+  void (*on_finish)(void *ctx, const fg_robot_cmd_view *v); /* set before any command */
+  void *on_finish_ctx;
 };
+
+void fg_robot_svc_on_finish(fg_robot_svc *svc, void (*fn)(void *ctx, const fg_robot_cmd_view *v),
+                            void *ctx) {
+  svc->on_finish = fn;
+  svc->on_finish_ctx = ctx;
+}
+
+static const char *const command_names[] = {"?", "pick", "place", "open", "close", "move"};
 
 static const char *const state_names[FG_CMD_STATES] = {
     "pending", "acknowledged", "done", "failed", "unknown", "error"};
@@ -307,10 +317,10 @@ static void finish(rec *r, fg_cmd_state state, int http, const char *code, const
   if (svc->active == r) svc->active = NULL;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
-  static const char *const commands[] = {"?", "pick", "place", "open", "close", "move"};
   if (state != FG_CMD_DONE)
     fg_warn("robot: command %llu (%s, seq %u) ended %s: %s", (unsigned long long)r->v.id,
-            commands[r->v.command], r->v.seq, state_names[state], r->v.message);
+            command_names[r->v.command], r->v.seq, state_names[state], r->v.message);
+  if (svc->on_finish) svc->on_finish(svc->on_finish_ctx, &r->v);
 }
 
 static void set_stage(rec *r, const char *stage) {
@@ -366,10 +376,11 @@ static void gripper_outcome(int rc, int *http, const char **code) {
 static int run_gripper_step(rec *r, int i, int robot_moved, fg_mb_link *gl) {
   fg_robot_svc *svc = r->svc;
   set_stage(r, r->v.steps[i].name);
-  grip_job g = {.svc = svc, .step = &r->v.steps[i]};
+  grip_job g = {.svc = svc, .step = &r->v.steps[i], .status.position = -1};
   int rc = gl ? grip_run(gl, &g) : fg_mb_peer_call(svc->gripper, grip_run, &g);
   pthread_mutex_lock(&svc->lock);
-  r->v.gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
+  if (g.status.position >= 0) /* a status was read */
+    r->v.gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
   if (rc == 0 && strcmp(r->v.steps[i].name, "gripper_close") == 0)
     r->v.object_detected = fg_robotiq_object_detected(&g.status);
   pthread_mutex_unlock(&svc->lock);
@@ -526,7 +537,7 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
     const fg_robot_cmd_view *a = &svc->active->v;
     int rc = fg_fail(FG_EBUSY, "command %llu (%s) is still running (stage %s); wait for it: GET "
                      "/v1/robot/commands/%llu", (unsigned long long)a->id,
-                     a->n_steps ? a->steps[0].name : "?", a->stage, (unsigned long long)a->id);
+                     command_names[a->command], a->stage, (unsigned long long)a->id);
     pthread_mutex_unlock(&svc->lock);
     free(r);
     return rc;
@@ -573,7 +584,7 @@ int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cm
   const int gripper_only = svc->gripper && (c == FG_ROBOT_OPEN || c == FG_ROBOT_CLOSE);
   if (!gripper_only && !svc->robot)
     return fg_fail(FG_EUNAVAIL, "no robot is configured: set [robot] transport = tcp (host, "
-                   "port) or rtu (device) in the configuration file and reload");
+                   "port) or rtu (device) in the configuration file and restart the daemon");
   return start_and_wait(svc, req, gripper_only ? svc->gripper : svc->robot,
                         gripper_only ? run_gripper_command : run_command, v);
 }
@@ -626,29 +637,48 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   v->ack_ms = -1;
   v->stage = "queued";
   const int activate = strcmp(action, "activate") == 0;
-  if (activate) v->steps[0].name = "gripper_activate";
+  if (activate) { /* the write that starts it (after a reset to all zeros) */
+    v->steps[0].name = "gripper_activate";
+    v->steps[0].position = v->steps[0].speed = v->steps[0].force = 0;
+    fg_robotiq_request(FG_ROBOTIQ_ACT, 0, 0, 0, v->steps[0].words);
+  }
   if (req->dry_run) return 0;
   if (!svc->gripper)
     return fg_fail(FG_EUNAVAIL, "no gripper is configured: set [gripper.modbus] transport = "
-                   "rtu (device, baud) or tcp (host, port) and reload");
-  grip_job g = {.svc = svc, .step = &v->steps[0], .activate_only = activate};
+                   "rtu (device, baud) or tcp (host, port) and restart the daemon");
+  pthread_mutex_lock(&svc->lock);
+  if (svc->active) {
+    /* not between the steps of a pick or place */
+    const fg_robot_cmd_view *a = &svc->active->v;
+    rc = fg_fail(FG_EBUSY, "command %llu (%s) is running (stage %s); the gripper is part of "
+                 "it: wait for it: GET /v1/robot/commands/%llu", (unsigned long long)a->id,
+                 command_names[a->command], a->stage, (unsigned long long)a->id);
+  }
+  pthread_mutex_unlock(&svc->lock);
+  if (rc < 0) return rc;
+  grip_job g = {.svc = svc, .step = &v->steps[0], .activate_only = activate,
+                .status.position = -1};
   v->created_s = now_real();
   rc = fg_mb_peer_call(svc->gripper, grip_run, &g);
   v->finished_s = now_real();
   v->stage = "finished";
-  v->gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
+  if (g.status.position >= 0)
+    v->gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);
   if (r.command == FG_ROBOT_CLOSE && rc == 0)
     v->object_detected = fg_robotiq_object_detected(&g.status);
   if (rc == 0) {
     v->state = FG_CMD_DONE;
     v->http_status = 200;
-    return 0;
+  } else {
+    const char *code;
+    gripper_outcome(rc, &v->http_status, &code);
+    v->state = FG_CMD_ERROR;
+    snprintf(v->code, sizeof v->code, "%s", code);
+    snprintf(v->message, sizeof v->message, "%s", fg_error_detail());
   }
-  const char *code;
-  gripper_outcome(rc, &v->http_status, &code);
-  v->state = FG_CMD_ERROR;
-  snprintf(v->code, sizeof v->code, "%s", code);
-  snprintf(v->message, sizeof v->message, "%s", fg_error_detail());
+  pthread_mutex_lock(&svc->lock);
+  svc->by_state[v->state]++;
+  pthread_mutex_unlock(&svc->lock);
   return 0;
 }
 

@@ -31,6 +31,7 @@ typedef struct fg_robot_request {
   double force_n;       /* whole newtons for the robot block; the gripper's grip force */
   double speed_mps;     /* gripper finger speed */
   int dry_run, wait;
+  char key[204];        /* the request's Idempotency-Key, "" when none (for on_finish) */
 } fg_robot_request;
 
 typedef enum {
@@ -94,6 +95,12 @@ void fg_robot_svc_stop(fg_robot_svc *svc);
  * fine. */
 void fg_robot_svc_free(fg_robot_svc *svc);
 
+/* Calls fn(ctx, v) on the worker each time a command of fg_robot_execute ends, with its
+ * final record, after the waiters are woken (the daemon keeps Idempotency-Key answers
+ * current with it). Set before the first command. */
+void fg_robot_svc_on_finish(fg_robot_svc *svc, void (*fn)(void *ctx, const fg_robot_cmd_view *v),
+                            void *ctx);
+
 /* Whether [robot] / [gripper.modbus] are configured (transport != none). */
 int fg_robot_svc_has_robot(const fg_robot_svc *svc);
 int fg_robot_svc_has_gripper(const fg_robot_svc *svc);
@@ -149,7 +156,8 @@ void fg_gripper_state_get(fg_robot_svc *svc, fg_gripper_state *st);
 /* Gripper actions of /v1/gripper/...: action "open" (to width, else fully), "close", "move"
  * (to width), "activate". Plans like fg_robot_plan, runs on the gripper's worker and waits;
  * req->dry_run returns the plan only. 0 when it ran (outcome in *v as for commands); the
- * plan's errors otherwise. */
+ * plan's errors otherwise, FG_EBUSY while a command runs (the gripper may be one of its
+ * steps). */
 int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_request *req,
                       fg_robot_cmd_view *v);
 
