@@ -4,7 +4,6 @@
 #define FG_IT_ROBOT_UTIL_H
 
 #include "harness.h"
-#include "peers.h"
 
 /* Writes a configuration with [robot] on robot_port and [gripper.modbus] on gripper_port
  * (0 leaves the section out), model robotiq-2f85, plus extra lines appended to [robot]

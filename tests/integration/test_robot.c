@@ -4,19 +4,18 @@
  * requests, and Idempotency-Key replays, also across a restart.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
+#include "simproc.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 
-static const char *g_sim;
-
 #define MAXW 256
-static it_write g_w[MAXW];
+static simproc_write g_w[MAXW];
 
-static int writes(const it_peer *p, int unit) { return it_peer_writes(p, unit, g_w, MAXW); }
+static int writes(const simproc *p, int unit) { return simproc_writes(p, unit, g_w, MAXW); }
 
-static void expect_words(const it_write *w, int addr, const uint16_t *words, int n) {
+static void expect_words(const simproc_write *w, int addr, const uint16_t *words, int n) {
   ASSERT_EQ(w->fn, 16);
   ASSERT_EQ(w->addr, addr);
   ASSERT_EQ(w->n, n);
@@ -34,9 +33,9 @@ static void expect_reply_words(const h_resp *r, const uint16_t *words, int n) {
 
 /* The worked example, dry run and sent, in one encoding. */
 static void check_example(const char *encoding, const uint16_t *words, int n) {
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--ack-init", "6", "--encoding", encoding, NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   char extra[64];
   snprintf(extra, sizeof extra, "encoding = %s", encoding);
   r_config(sim.port, extra, 0, NULL);
@@ -73,14 +72,14 @@ static void check_example(const char *encoding, const uint16_t *words, int n) {
                    json_object_get(r->json, "last_command"), "state")), "done");
   h_resp_free(r);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 /* Pick with an object between the fingers, place, and the gripper endpoints. */
 static void check_gripper(void) {
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--object-width-mm", "40", "--activation-ms", "50", NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   r_config(sim.port, NULL, sim.port, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/gripper", "connected", 5));
@@ -169,14 +168,14 @@ static void check_gripper(void) {
   h_resp_free(r);
   ASSERT_EQ(writes(&sim, -1), total);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 /* Negative coordinates and rotations survive the int16 encoding; bad requests are refused
  * and send nothing. */
 static void check_values(void) {
-  it_peer sim = {0};
-  it_sim_start(&sim, g_sim, 0, NULL);
+  simproc sim;
+  simproc_start(&sim, 0, NULL);
   r_config(sim.port, NULL, sim.port, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -248,13 +247,13 @@ static void check_values(void) {
   h_resp_free(r);
   ASSERT(h_alive());
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 /* The same Idempotency-Key twice actuates once, also after a restart of the daemon. */
 static void check_idempotency(void) {
-  it_peer sim = {0};
-  it_sim_start(&sim, g_sim, 0, NULL);
+  simproc sim;
+  simproc_start(&sim, 0, NULL);
   r_config(sim.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -304,13 +303,13 @@ static void check_idempotency(void) {
   ASSERT_EQ(writes(&sim, 1), 2);
   ASSERT_EQ(g_w[1].words[0], seq + 1);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
-  g_sim = argv[2];
+  simproc_init(argv[2], h_tmpdir());
   check_example("int16", r_example_int16, 10);
   check_example("float32", r_example_float32, 17);
   check_gripper();

@@ -5,6 +5,7 @@
  * one runs (409), no [robot] at all, and the Modbus lines of /metrics.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
+#include "simproc.h"
 
 #include <netinet/in.h>
 #include <signal.h>
@@ -14,8 +15,7 @@
 #include <time.h>
 #include <unistd.h>
 
-static const char *g_sim;
-static it_write g_w[64];
+static simproc_write g_w[64];
 
 static const char move[] = "{\"command\": \"move\", \"pose\": {\"position\": [0.4, -0.2, 0.1], "
                            "\"quaternion\": [0, 1, 0, 0]}";
@@ -57,9 +57,9 @@ static int closed_port(void) {
 }
 
 static void check_no_ack(void) {
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--never-ack", NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   r_config(sim.port, "ack_timeout_ms = 300", 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -76,20 +76,20 @@ static void check_no_ack(void) {
   r_expect(r, 504, "ack_timeout");
   ASSERT(json_is_true(json_object_get(r->json, "replayed")));
   h_resp_free(r);
-  ASSERT_EQ(it_peer_writes(&sim, 1, g_w, 64), 1);
+  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 1);
   r = h_get("/metrics");
   ASSERT(strstr(r->body, "fieldgrip_robot_commands_total{state=\"unknown\"} 1"));
   ASSERT(strstr(r->body, "fieldgrip_modbus_connected{peer=\"robot\"} 1"));
   ASSERT(!strstr(r->body, "peer=\"gripper\""));
   h_resp_free(r);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 static void check_exception_and_failure(void) {
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--exception", "2", NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   r_config(sim.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -102,11 +102,11 @@ static void check_exception_and_failure(void) {
   ASSERT(strstr(r->body, "fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"exception\"} 1"));
   h_resp_free(r);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 
-  it_peer fail = {0};
+  simproc fail;
   const char *fargs[] = {"--fail", "--done-delay-ms", "20", NULL};
-  it_sim_start(&fail, g_sim, 0, fargs);
+  simproc_start(&fail, 0, fargs);
   r_config(fail.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -116,7 +116,7 @@ static void check_exception_and_failure(void) {
   ASSERT_EQ(json_integer_value(json_object_get(r_command(r), "robot_status")), 3);
   h_resp_free(r);
   h_stop();
-  it_peer_stop(&fail);
+  simproc_stop(&fail);
 }
 
 /* Peers down at start: the daemon serves; commands say the peer is down; once the peer is
@@ -144,24 +144,24 @@ static void check_down_at_start(void) {
   r_expect(r, 503, "gripper_disconnected");
   h_resp_free(r);
 
-  it_peer sim = {0};
-  it_sim_start(&sim, g_sim, port, NULL);
+  simproc sim;
+  simproc_start(&sim, port, NULL);
   ASSERT(r_wait_true("/v1/robot", "connected", 10));
   ASSERT(r_wait_true("/v1/gripper", "connected", 10));
   r = send_move(NULL, NULL);
   r_expect(r, 200, NULL);
   h_resp_free(r);
-  ASSERT_EQ(it_peer_writes(&sim, 1, g_w, 64), 1);
+  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 1);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 /* The robot dies while a command runs: the command ends unknown; the robot comes back and the
  * next command works. Meanwhile a second command is refused. */
 static void check_killed_mid_command(void) {
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--done-delay-ms", "3000", NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   r_config(sim.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
@@ -178,7 +178,7 @@ static void check_killed_mid_command(void) {
   ASSERT(json_is_true(json_object_get(r->json, "busy")));
   h_resp_free(r);
 
-  it_peer_kill(&sim);
+  simproc_kill(&sim);
   ASSERT(wait_state(id, "unknown", 5));
   /* its key answered at the acknowledgement; a retry now gets the command as it ended */
   r = send_move(", \"wait\": false", "k-async");
@@ -194,7 +194,7 @@ static void check_killed_mid_command(void) {
   h_resp_free(r);
 
   const char *fast[] = {"--done-delay-ms", "10", NULL};
-  it_sim_start(&sim, g_sim, sim.port, fast);
+  simproc_restart(&sim, fast);
   ASSERT(r_wait_true("/v1/robot", "connected", 10));
   r = send_move(NULL, NULL);
   r_expect(r, 200, NULL);
@@ -205,7 +205,7 @@ static void check_killed_mid_command(void) {
                                             "reconnects")) >= 1);
   h_resp_free(r);
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
 }
 
 static void check_not_configured(void) {
@@ -240,7 +240,7 @@ static void check_not_configured(void) {
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
-  g_sim = argv[2];
+  simproc_init(argv[2], h_tmpdir());
   check_no_ack();
   check_exception_and_failure();
   check_down_at_start();

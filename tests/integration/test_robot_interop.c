@@ -4,6 +4,7 @@
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. Needs /usr/bin/python3 with pymodbus and
  * /usr/bin/socat (the CI script installs both). */
 #include "robot_util.h"
+#include "simproc.h"
 
 #include <signal.h>
 #include <stdio.h>
@@ -14,8 +15,7 @@
 #include <time.h>
 #include <unistd.h>
 
-static const char *g_sim;
-static it_write g_w[16];
+static simproc_write g_w[16];
 static pid_t g_socat = -1;
 
 static void stop_socat(void) {
@@ -34,8 +34,8 @@ static void check_pymodbus(void) {
   snprintf(script, sizeof script, "%s/tests/sim/pymodbus_server.py", src);
   ASSERT(access("/usr/bin/python3", X_OK) == 0);
   const char *argv[] = {"/usr/bin/python3", script, "--base", "128", "--unit", "1", NULL};
-  it_peer peer = {0};
-  it_proc_start(&peer, argv);
+  simproc peer;
+  simproc_start_argv(&peer, argv);
   r_config(peer.port, NULL, 0, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 10));
@@ -47,7 +47,7 @@ static void check_pymodbus(void) {
   r_expect(r, 200, NULL);
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "done");
   h_resp_free(r);
-  ASSERT_EQ(it_peer_writes(&peer, 1, g_w, 16), 1);
+  ASSERT_EQ(simproc_writes(&peer, 1, g_w, 16), 1);
   ASSERT_EQ(g_w[0].fn, 16);
   ASSERT_EQ(g_w[0].addr, 128);
   ASSERT_EQ(g_w[0].n, 10);
@@ -61,11 +61,11 @@ static void check_pymodbus(void) {
              "0.3], \"quaternion\": [1, 0, 0, 0]}}", NULL);
   r_expect(r, 200, NULL);
   h_resp_free(r);
-  ASSERT_EQ(it_peer_writes(&peer, 1, g_w, 16), 2);
+  ASSERT_EQ(simproc_writes(&peer, 1, g_w, 16), 2);
   ASSERT_EQ(g_w[1].words[0], 2);
   ASSERT_EQ((int16_t)g_w[1].words[2], -1000);
   h_stop();
-  it_peer_stop(&peer);
+  simproc_stop(&peer);
 }
 
 /* The gripper on a serial line: socat links two pseudo-terminals; the simulator serves one,
@@ -94,9 +94,9 @@ static void check_rtu(void) {
   }
   ASSERT(stat(a, &st) == 0 && stat(b, &st) == 0);
 
-  it_peer sim = {0};
+  simproc sim;
   const char *args[] = {"--rtu", a, "--object-width-mm", "30", "--activation-ms", "50", NULL};
-  it_sim_start(&sim, g_sim, 0, args);
+  simproc_start(&sim, 0, args);
   char text[1024];
   snprintf(text, sizeof text,
            "[gripper]\nmodel = robotiq-2f85\n[gripper.modbus]\ntransport = rtu\ndevice = %s\n"
@@ -119,20 +119,20 @@ static void check_rtu(void) {
             0);
   h_resp_free(r);
   /* reset, activate, close, move: each once, as written */
-  ASSERT_EQ(it_peer_writes(&sim, 9, g_w, 16), 4);
+  ASSERT_EQ(simproc_writes(&sim, 9, g_w, 16), 4);
   ASSERT_EQ(g_w[0].words[0], 0);
   ASSERT_EQ(g_w[1].words[0], 0x0100);
   ASSERT_EQ(g_w[2].words[1], 255);
   ASSERT_EQ(g_w[3].words[1], 45); /* round(255 x 0.015 / 0.085) */
   h_stop();
-  it_peer_stop(&sim);
+  simproc_stop(&sim);
   stop_socat();
 }
 
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
-  g_sim = argv[2];
+  simproc_init(argv[2], h_tmpdir());
   check_pymodbus();
   check_rtu();
   h_done();

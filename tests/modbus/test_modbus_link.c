@@ -6,20 +6,14 @@
  * a full queue, cancellation at shutdown, the idle job). Each case starts its own
  * simulator. An optional second argument runs one case. */
 #include <errno.h>
-#include <fcntl.h>
-#include <ftw.h>
-#include <limits.h>
 #include <netinet/in.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
-#include <sys/prctl.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <time.h>
 #include <unistd.h>
 
+#include "simproc.h"
 #include "test.h"
 
 #include "core/error.h"
@@ -29,178 +23,16 @@
 #include "modbus/peer.h"
 #include "modbus/regs.h"
 
-#define MAX_PROCS 64
-#define MAX_ARGS 40
 #define SLACK_MS 1500 /* upper bounds on timings: 2 shared cores, maybe AddressSanitizer */
 #define BASE 128
 #define ROBOT 1
 #define GRIPPER 9
 
-typedef struct {
-  pid_t pid;
-  int port;
-  char port_file[PATH_MAX];
-  char log[PATH_MAX];
-  char err[PATH_MAX];
-} sim_proc;
-
-static char g_sim[PATH_MAX];
-static char g_tmp[64]; /* /tmp/fg-mb-XXXXXX */
-static pid_t g_pids[MAX_PROCS];
-static int g_n_procs;
-
 /* ---------------------------------------------------------------- simulator processes */
 
-static double now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static void sleep_ms(int ms) {
-  struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {
-  }
-}
-
-static int rm_cb(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
-  (void)sb;
-  (void)flag;
-  (void)ftw;
-  remove(path);
-  return 0;
-}
-
-/* Kills every simulator still running and removes the temp dir; runs at exit, also after a
- * failed ASSERT. */
-static void cleanup(void) {
-  for (int i = 0; i < g_n_procs; i++) {
-    if (g_pids[i] > 0) {
-      kill(g_pids[i], SIGKILL);
-      waitpid(g_pids[i], NULL, 0);
-      g_pids[i] = -1;
-    }
-  }
-  if (g_tmp[0]) nftw(g_tmp, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
-}
-
-static void forget_pid(pid_t pid) {
-  for (int i = 0; i < g_n_procs; i++)
-    if (g_pids[i] == pid) g_pids[i] = -1;
-}
-
-static char *read_file(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  size_t cap = 4096, len = 0;
-  char *buf = malloc(cap);
-  ASSERT(buf != NULL);
-  size_t got;
-  while ((got = fread(buf + len, 1, cap - len - 1, f)) > 0) {
-    len += got;
-    if (cap - len < 2) {
-      cap *= 2;
-      buf = realloc(buf, cap);
-      ASSERT(buf != NULL);
-    }
-  }
-  fclose(f);
-  buf[len] = '\0';
-  return buf;
-}
-
-/* Forks and execs the simulator with the given extra arguments (NULL-terminated). */
-static pid_t spawn(sim_proc *p, const char *listen, const char *const *extra) {
-  const char *argv[MAX_ARGS];
-  int n = 0;
-  argv[n++] = g_sim;
-  argv[n++] = "--listen";
-  argv[n++] = listen;
-  argv[n++] = "--port-file";
-  argv[n++] = p->port_file;
-  argv[n++] = "--log";
-  argv[n++] = p->log;
-  for (int i = 0; extra && extra[i]; i++) {
-    ASSERT(n < MAX_ARGS - 1);
-    argv[n++] = extra[i];
-  }
-  argv[n] = NULL;
-  int efd = open(p->err, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
-  ASSERT(efd >= 0);
-  ASSERT(g_n_procs < MAX_PROCS);
-  pid_t parent = getpid();
-  pid_t pid = fork();
-  ASSERT(pid >= 0);
-  if (pid == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(127);
-    dup2(efd, 2);
-    execv(g_sim, (char *const *)argv);
-    _exit(127);
-  }
-  close(efd);
-  g_pids[g_n_procs++] = pid;
-  return pid;
-}
-
-/* Starts a simulator on 127.0.0.1:port (0: a free one) and waits for its port file. */
-static void sim_start_on(sim_proc *p, int port, const char *const *extra) {
-  static int counter;
-  memset(p, 0, sizeof *p);
-  int k = counter++;
-  snprintf(p->port_file, sizeof p->port_file, "%s/port.%d", g_tmp, k);
-  snprintf(p->log, sizeof p->log, "%s/log.%d", g_tmp, k);
-  snprintf(p->err, sizeof p->err, "%s/err.%d", g_tmp, k);
-  char listen[64];
-  snprintf(listen, sizeof listen, "127.0.0.1:%d", port);
-  p->pid = spawn(p, listen, extra);
-  double deadline = now_ms() + 10000;
-  for (;;) {
-    char *s = read_file(p->port_file);
-    if (s) {
-      p->port = atoi(s);
-      free(s);
-      ASSERT(p->port > 0 && p->port < 65536);
-      return;
-    }
-    int status;
-    if (waitpid(p->pid, &status, WNOHANG) == p->pid) {
-      forget_pid(p->pid);
-      char *err = read_file(p->err);
-      FG_TEST_FAIL("simulator exited (status 0x%x) before listening: %s", status,
-                   err ? err : "");
-    }
-    if (now_ms() > deadline) FG_TEST_FAIL("no port file %s within 10 s", p->port_file);
-    sleep_ms(2);
-  }
-}
-
-static void sim_start(sim_proc *p, const char *const *extra) { sim_start_on(p, 0, extra); }
-
-/* SIGTERM; the simulator must exit with status 0. */
-static void sim_stop(sim_proc *p) {
-  kill(p->pid, SIGCONT);
-  ASSERT_EQ(kill(p->pid, SIGTERM), 0);
-  int status;
-  ASSERT_EQ(waitpid(p->pid, &status, 0), p->pid);
-  forget_pid(p->pid);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    char *err = read_file(p->err);
-    FG_TEST_FAIL("simulator did not exit 0 on SIGTERM (status 0x%x): %s", status,
-                 err ? err : "");
-  }
-}
-
-/* SIGKILL, as a crashed or powered-off peer. */
-static void sim_kill(sim_proc *p) {
-  ASSERT_EQ(kill(p->pid, SIGKILL), 0);
-  ASSERT_EQ(waitpid(p->pid, NULL, 0), p->pid);
-  forget_pid(p->pid);
-}
-
 /* The simulator's request log so far (one line per write received). */
-static void assert_log(const sim_proc *p, const char *want) {
-  char *log = read_file(p->log);
+static void assert_log(const simproc *p, const char *want) {
+  char *log = simproc_read(p->log);
   ASSERT_STREQ(log, want);
   free(log);
 }
@@ -266,13 +98,13 @@ static int next_attempt_ms(void) {
 /* Calls fg_mb_link_ensure every 2 ms until it connects; each refusal must be the backoff's.
  * Returns the milliseconds it took; fails after limit_ms. */
 static double ensure_until_connected(fg_mb_link *l, double limit_ms) {
-  const double t0 = now_ms();
+  const double t0 = simproc_now_ms();
   while (fg_mb_link_ensure(l) != 0) {
-    if (now_ms() - t0 > limit_ms)
+    if (simproc_now_ms() - t0 > limit_ms)
       FG_TEST_FAIL("no connection within %.0f ms: %s", limit_ms, fg_error_detail());
-    sleep_ms(2);
+    simproc_sleep_ms(2);
   }
-  return now_ms() - t0;
+  return simproc_now_ms() - t0;
 }
 
 /* The block of proto/modbus.md's worked example with sequence number seq. */
@@ -292,8 +124,8 @@ static const char *const k_example_log =
 /* ---------------------------------------------------------------- link */
 
 static void test_connect_rw(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   char addr[64];
   snprintf(addr, sizeof addr, "127.0.0.1:%d", p.port);
@@ -354,7 +186,7 @@ static void test_connect_rw(void) {
   ASSERT_EQ(link_state(l).reconnects, 1);
   fg_mb_link_free(l);
   fg_mb_link_free(NULL);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_bad_config(void) {
@@ -400,8 +232,8 @@ static void test_bad_config(void) {
 }
 
 static void test_exception(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--exception", "2", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--exception", "2", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
   example_words(5, FG_POSE_INT16, w);
@@ -426,7 +258,7 @@ static void test_exception(void) {
   ASSERT_EQ(st.requests, 3);
   ASSERT_EQ(st.reconnects, 0);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 
   ASSERT_STREQ(fg_mb_exception_name(1), "illegal function");
   ASSERT_STREQ(fg_mb_exception_name(2), "illegal data address");
@@ -442,25 +274,25 @@ static void test_timeout(void) {
   fg_mb_link *l = link_open("robot", port, ROBOT, timeout_ms);
   ASSERT_OK(fg_mb_link_ensure(l));
   uint16_t v[2] = {0, 0};
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 2, v), FG_ETIMEDOUT, "did not answer");
-  double ms = now_ms() - t0;
+  double ms = simproc_now_ms() - t0;
   ASSERT_STRCONTAINS(fg_error_detail(), "within 100 ms");
   ASSERT(ms >= timeout_ms - 1 && ms < timeout_ms + SLACK_MS);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   /* One timeout keeps the connection. */
   ASSERT_EQ(link_state(l).connected, 1);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_write_registers(l, BASE, 2, v), FG_ETIMEDOUT, "did not answer");
-  ms = now_ms() - t0;
+  ms = simproc_now_ms() - t0;
   ASSERT(ms >= timeout_ms - 1 && ms < timeout_ms + SLACK_MS);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   /* The second in a row closes it; the reconnection is not held back by a backoff. */
   ASSERT_EQ(link_state(l).connected, 0);
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_OK(fg_mb_link_ensure(l));
-  ASSERT(now_ms() - t0 < 50);
+  ASSERT(simproc_now_ms() - t0 < 50);
   ASSERT_EQ(fg_mb_link_generation(l), 2);
   fg_mb_link_state st = link_state(l);
   ASSERT_EQ(st.timeouts, 2);
@@ -478,8 +310,8 @@ static void test_timeout(void) {
 /* A peer that answers late: the timed-out request's reply must not spoil the next request,
  * and a success in between means two timeouts are not "in a row". */
 static void test_late_reply(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 150);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
   example_words(7, FG_POSE_INT16, w);
@@ -495,7 +327,7 @@ static void test_late_reply(void) {
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
   ASSERT_OK(fg_mb_read_registers(probe, BASE, 1, v)); /* the late reply is on its way */
-  sleep_ms(10);
+  simproc_sleep_ms(10);
   memset(v, 0, sizeof v);
   ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
   ASSERT_EQ(v[0], 7);
@@ -507,13 +339,13 @@ static void test_late_reply(void) {
   ASSERT_EQ(link_state(l).connected, 1); /* the first timeout since the success */
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
   ASSERT_OK(fg_mb_read_registers(probe, BASE, 1, v));
-  sleep_ms(10);
+  simproc_sleep_ms(10);
   ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
   fg_mb_link_free(probe);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* Nothing listens at first: refusals, a backoff that doubles and refuses without trying,
@@ -524,7 +356,7 @@ static void test_peer_down_then_up(void) {
   char want[96];
   snprintf(want, sizeof want, "robot 127.0.0.1:%d", port);
   const char *who = want;
-  double t_fail = now_ms();
+  double t_fail = simproc_now_ms();
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
   ASSERT_STRCONTAINS(fg_error_detail(), "refused");
   fg_mb_link_state st = link_state(l);
@@ -534,9 +366,9 @@ static void test_peer_down_then_up(void) {
   ASSERT(st.last_error_s > 1.5e9);
 
   /* At once again: refused by the backoff, without a connection attempt. */
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
-  ASSERT(now_ms() - t0 < 20);
+  ASSERT(simproc_now_ms() - t0 < 20);
   int ms = next_attempt_ms();
   ASSERT(ms > 0 && ms <= 100);
   ASSERT_STRCONTAINS(fg_error_detail(), "refused"); /* the cause is still told */
@@ -549,19 +381,19 @@ static void test_peer_down_then_up(void) {
   ASSERT_EQ(link_state(l).connect_failures, 1);
 
   /* After the first backoff (100 ms) a real attempt, refused again: the backoff doubles. */
-  while (now_ms() - t_fail < 105) sleep_ms(2);
+  while (simproc_now_ms() - t_fail < 105) simproc_sleep_ms(2);
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, "refused");
   ASSERT_EQ(link_state(l).connect_failures, 2);
-  t_fail = now_ms();
+  t_fail = simproc_now_ms();
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, "next attempt in");
   ms = next_attempt_ms();
   ASSERT(ms > 150 && ms <= 200);
 
-  sim_proc p;
-  sim_start_on(&p, port, NULL);
-  const double up_ms = now_ms() - t_fail;
+  simproc p;
+  simproc_start(&p, port, NULL);
+  const double up_ms = simproc_now_ms() - t_fail;
   ensure_until_connected(l, 200 + SLACK_MS);
-  const double connected_ms = now_ms() - t_fail;
+  const double connected_ms = simproc_now_ms() - t_fail;
   fprintf(stderr, "peer up %.0f ms after the second refusal, connected after %.0f ms\n", up_ms,
           connected_ms);
   ASSERT(connected_ms >= 195);
@@ -573,13 +405,13 @@ static void test_peer_down_then_up(void) {
   ASSERT_EQ(fg_mb_link_generation(l), 1);
   ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* The peer dies mid-session (SIGKILL) and a new one starts on the same port. */
 static void test_peer_killed_restart(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   const int port = p.port;
   fg_mb_link *l = link_open("robot", port, ROBOT, 1000);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
@@ -587,12 +419,12 @@ static void test_peer_killed_restart(void) {
   ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
   ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
   ASSERT_EQ(v[10], 7);
-  sim_kill(&p);
+  simproc_kill(&p);
 
   /* The request went out on what looked like a live connection: it may have been sent. */
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL, "connection lost");
-  ASSERT(now_ms() - t0 < 500); /* noticed at once, not after the response timeout */
+  ASSERT(simproc_now_ms() - t0 < 500); /* noticed at once, not after the response timeout */
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(link_state(l).connected, 0);
   /* The next one is refused by the backoff and cannot have been sent. */
@@ -600,7 +432,7 @@ static void test_peer_killed_restart(void) {
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 0);
   ASSERT(next_attempt_ms() <= 100);
 
-  sim_start_on(&p, port, NULL);
+  simproc_start(&p, port, NULL);
   ASSERT_EQ(p.port, port);
   ensure_until_connected(l, 100 + SLACK_MS);
   ASSERT_EQ(fg_mb_link_generation(l), 2);
@@ -612,21 +444,21 @@ static void test_peer_killed_restart(void) {
   ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
   assert_log(&p, k_example_log);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* The peer applies a write and drops the connection without answering: the write fails,
  * says it may have been sent, and indeed was applied. */
 static void test_drop_write(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--drop-after", "2", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--drop-after", "2", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
   ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v)); /* request 1 */
   example_words(7, FG_POSE_INT16, w);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL, "connection lost during");
-  ASSERT(now_ms() - t0 < 500);
+  ASSERT(simproc_now_ms() - t0 < 500);
   ASSERT_STRCONTAINS(fg_error_detail(), "write of 10 registers at 128");
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(fg_mb_link_exception(l), 0);
@@ -637,7 +469,7 @@ static void test_drop_write(void) {
   ASSERT_EQ(v[10], 7); /* the robot accepted the "failed" write */
   assert_log(&p, k_example_log);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* ---------------------------------------------------------------- robot */
@@ -650,8 +482,9 @@ static int cancel_after_three(void *arg) {
 }
 
 static void test_robot_handshake(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--ack-delay-ms", "50", "--done-delay-ms", "50", NULL});
+  simproc p;
+  simproc_start(&p, 0,
+                (const char *const[]){"--ack-delay-ms", "50", "--done-delay-ms", "50", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 1000,
                                .done_timeout_ms = 2000};
@@ -665,14 +498,14 @@ static void test_robot_handshake(void) {
 
   uint16_t w[FG_POSE_MAX_WORDS];
   example_words(seq, FG_POSE_INT16, w);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_OK(fg_robot_write(l, &rp, w));
   ASSERT_OK(fg_robot_wait_ack(l, &rp, seq, &status, NULL, NULL));
-  double t_ack = now_ms() - t0;
+  double t_ack = simproc_now_ms() - t0;
   ASSERT(t_ack >= 50 - 1 && t_ack < 50 + SLACK_MS);
   ASSERT_EQ(status, FG_ROBOT_BUSY);
   ASSERT_OK(fg_robot_wait_done(l, &rp, seq, &status, NULL, NULL));
-  double t_done = now_ms() - t0;
+  double t_done = simproc_now_ms() - t0;
   ASSERT(t_done >= 100 - 1 && t_done < 100 + SLACK_MS);
   ASSERT_EQ(status, FG_ROBOT_DONE);
   fprintf(stderr, "robot ack after %.1f ms (delay 50), done after %.1f ms (50 + 50)\n", t_ack,
@@ -688,17 +521,17 @@ static void test_robot_handshake(void) {
   ASSERT_OK(fg_robot_write(l, &rp, w));
   ASSERT_ERR(fg_robot_wait_done(l, &rp, 2, &status, NULL, NULL), FG_EINVAL, "from 2 to 3");
   /* ... and seq 3 itself completes as usual. */
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_OK(fg_robot_wait_done(l, &rp, 3, &status, NULL, NULL));
   ASSERT_EQ(status, FG_ROBOT_DONE);
-  ASSERT(now_ms() - t0 < 50 + SLACK_MS);
+  ASSERT(simproc_now_ms() - t0 < 50 + SLACK_MS);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_never_ack(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--never-ack", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--never-ack", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 200,
                                .done_timeout_ms = 2000};
@@ -706,10 +539,10 @@ static void test_robot_never_ack(void) {
   example_words(1, FG_POSE_INT16, w);
   ASSERT_OK(fg_robot_write(l, &rp, w));
   int status = -1;
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_robot_wait_ack(l, &rp, 1, &status, NULL, NULL), FG_ETIMEDOUT,
              "did not acknowledge seq 1 within 200 ms");
-  double ms = now_ms() - t0;
+  double ms = simproc_now_ms() - t0;
   ASSERT_STRCONTAINS(fg_error_detail(), "ack register 138 holds 0");
   ASSERT(ms >= 200 - 1 && ms < 200 + 100);
   ASSERT_EQ(status, FG_ROBOT_IDLE);
@@ -723,18 +556,18 @@ static void test_robot_never_ack(void) {
 
   /* A cancel function stops the wait early. */
   g_cancel_calls = 0;
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_ERR(fg_robot_wait_ack(l, &rp, 1, &status, cancel_after_three, NULL), FG_ECANCELED,
              "stopped");
   ASSERT_EQ(g_cancel_calls, 3);
-  ASSERT(now_ms() - t0 < 150);
+  ASSERT(simproc_now_ms() - t0 < 150);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_fail(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--fail", "--done-delay-ms", "30", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--fail", "--done-delay-ms", "30", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 1000,
                                .done_timeout_ms = 2000};
@@ -747,30 +580,30 @@ static void test_robot_fail(void) {
   ASSERT_OK(fg_robot_wait_done(l, &rp, 9, &status, NULL, NULL));
   ASSERT_EQ(status, FG_ROBOT_FAILED);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 
   /* A robot that stays busy: done_timeout_ms. */
-  sim_start(&p, (const char *const[]){"--done-delay-ms", "60000", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--done-delay-ms", "60000", NULL});
   l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp2 = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 1000,
                                 .done_timeout_ms = 150};
   example_words(4, FG_POSE_INT16, w);
   ASSERT_OK(fg_robot_write(l, &rp2, w));
   ASSERT_OK(fg_robot_wait_ack(l, &rp2, 4, &status, NULL, NULL));
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_ERR(fg_robot_wait_done(l, &rp2, 4, &status, NULL, NULL), FG_ETIMEDOUT,
              "did not report seq 4 done within 150 ms");
-  double ms = now_ms() - t0;
+  double ms = simproc_now_ms() - t0;
   ASSERT(ms >= 150 - 1 && ms < 150 + 100);
   ASSERT_EQ(status, FG_ROBOT_BUSY);
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_float32(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--encoding", "float32", "--base", "200", "--ack-init",
-                                      "6", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--encoding", "float32", "--base", "200",
+                                              "--ack-init", "6", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = 200, .encoding = FG_POSE_FLOAT32, .ack_timeout_ms = 1000,
                                .done_timeout_ms = 2000};
@@ -802,15 +635,15 @@ static void test_robot_float32(void) {
   assert_log(&p, "write unit=1 fn=16 addr=200 n=17 words=7,1,16103,37854,48631,12688,15631,"
                  "23593,16441,49611,49049,58074,0,0,15779,55050,40\n");
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* ---------------------------------------------------------------- gripper */
 
 static void test_gripper(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--activation-ms", "100", "--stroke-ms", "100",
-                                      "--object-width-mm", "40", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "100", "--stroke-ms", "100",
+                                              "--object-width-mm", "40", NULL});
   fg_mb_link *l = link_open("gripper", p.port, GRIPPER, 1000);
   fg_robotiq_status s;
   ASSERT_OK(fg_gripper_read(l, &s));
@@ -820,9 +653,9 @@ static void test_gripper(void) {
   ASSERT_ERR(fg_gripper_move(l, 255, 255, 255, 1000, &s), FG_EBUSY, "not activated");
   assert_log(&p, "");
 
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_OK(fg_gripper_activate(l, 2000, &s));
-  double t_act = now_ms() - t0;
+  double t_act = simproc_now_ms() - t0;
   ASSERT(t_act >= 100 - 1 && t_act < 100 + SLACK_MS);
   ASSERT_EQ(s.sta, 3);
   ASSERT_EQ(s.act, 1);
@@ -834,9 +667,9 @@ static void test_gripper(void) {
   int obj_pos;
   ASSERT_OK(fg_robotiq_width_to_position(&fg_robotiq_2f85, 0.040, &obj_pos));
   ASSERT_EQ(obj_pos, 135);
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_OK(fg_gripper_move(l, 255, 255, 255, 2000, &s));
-  double t_close = now_ms() - t0;
+  double t_close = simproc_now_ms() - t0;
   ASSERT_EQ(s.obj, 2);
   ASSERT(fg_robotiq_object_detected(&s));
   ASSERT_EQ(s.echo, 255);
@@ -862,19 +695,19 @@ static void test_gripper(void) {
                  "write unit=9 fn=16 addr=1000 n=3 words=2304,0,65280\n"
                  "write unit=9 fn=16 addr=1000 n=3 words=2304,100,32768\n");
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 
   /* An activation that takes longer than allowed; a move meanwhile is refused. */
-  sim_start(&p, (const char *const[]){"--activation-ms", "5000", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "5000", NULL});
   l = link_open("gripper", p.port, GRIPPER, 1000);
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   ASSERT_ERR(fg_gripper_activate(l, 100, &s), FG_ETIMEDOUT, "did not finish its activation");
-  double ms = now_ms() - t0;
+  double ms = simproc_now_ms() - t0;
   ASSERT(ms >= 100 - 1 && ms < 100 + 100);
   ASSERT_EQ(s.sta, 1);
   ASSERT_ERR(fg_gripper_move(l, 255, 255, 255, 1000, &s), FG_EBUSY, "gSTA 1");
   fg_mb_link_free(l);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* ---------------------------------------------------------------- peer */
@@ -908,8 +741,8 @@ static int job_fail(fg_mb_link *l, void *arg) {
 }
 
 static void test_peer_call(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   const fg_mb_link_config cfg = tcp_config("robot", p.port, ROBOT, 1000);
   fg_mb_peer *peer = NULL;
   ASSERT_OK(fg_mb_peer_new(&peer, &cfg, 1000, NULL, NULL));
@@ -948,7 +781,7 @@ static void test_peer_call(void) {
   fg_mb_peer_free(peer);
   fg_mb_peer_free(NULL);
   assert_log(&p, k_example_log);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* A job that blocks until released, and jobs that record the order they ran in. */
@@ -1100,8 +933,8 @@ static void test_peer_free_cancels(void) {
   atomic_init(&c.calling, 0);
   pthread_t ct, ft;
   ASSERT_EQ(pthread_create(&ct, NULL, call_thread, &c), 0);
-  while (!atomic_load(&c.calling)) sleep_ms(1);
-  sleep_ms(100); /* it queues its job meanwhile */
+  while (!atomic_load(&c.calling)) simproc_sleep_ms(1);
+  simproc_sleep_ms(100); /* it queues its job meanwhile */
 
   ASSERT_EQ(pthread_create(&ft, NULL, free_thread, peer), 0);
   /* Once the peer is stopping, posts are refused; until then they queue (and are cancelled
@@ -1113,7 +946,7 @@ static void test_peer_free_cancels(void) {
     if (rc == FG_EBUSY || rc == FG_ECANCELED) break;
     ASSERT_OK(rc);
     extra++;
-    sleep_ms(1);
+    simproc_sleep_ms(1);
   }
   board_release(&b);
   ASSERT_EQ(pthread_join(ft, NULL), 0);
@@ -1148,8 +981,8 @@ static int idle_job(fg_mb_link *l, void *arg) {
 /* The idle job runs every idle_ms while nothing is queued and only while connected; the
  * worker reconnects by itself after the peer comes back. */
 static void test_peer_idle(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   const int port = p.port;
   idle_count ic;
   atomic_init(&ic.calls, 0);
@@ -1158,10 +991,10 @@ static void test_peer_idle(void) {
   ic.main_thread = pthread_self();
   const fg_mb_link_config cfg = tcp_config("gripper", port, GRIPPER, 500);
   fg_mb_peer *peer = NULL;
-  const double t0 = now_ms();
+  const double t0 = simproc_now_ms();
   ASSERT_OK(fg_mb_peer_new(&peer, &cfg, 20, idle_job, &ic));
-  sleep_ms(300);
-  const double span = now_ms() - t0;
+  simproc_sleep_ms(300);
+  const double span = simproc_now_ms() - t0;
   int calls = atomic_load(&ic.calls);
   fprintf(stderr, "idle job: %d calls in %.0f ms (idle_ms 20)\n", calls, span);
   ASSERT(calls >= 5);
@@ -1170,38 +1003,36 @@ static void test_peer_idle(void) {
   ASSERT_EQ(atomic_load(&ic.other_thread), 1);
 
   /* Peer gone: the idle job fails once, then is not run while the link is down. */
-  sim_kill(&p);
-  sleep_ms(60);
+  simproc_kill(&p);
+  simproc_sleep_ms(60);
   const int calls_down = atomic_load(&ic.calls);
   ASSERT(atomic_load(&ic.ok) < calls_down);
   fg_mb_link_state st;
   fg_mb_peer_state(peer, &st);
   ASSERT_EQ(st.connected, 0);
-  sleep_ms(60);
+  simproc_sleep_ms(60);
   ASSERT_EQ(atomic_load(&ic.calls), calls_down);
 
   /* Back on the same port: the worker reconnects after the backoff, without a request. */
-  sim_start_on(&p, port, NULL);
-  const double t_up = now_ms();
+  simproc_start(&p, port, NULL);
+  const double t_up = simproc_now_ms();
   const int ok_before = atomic_load(&ic.ok);
   while (atomic_load(&ic.ok) <= ok_before) {
-    if (now_ms() - t_up > 1000 + SLACK_MS) FG_TEST_FAIL("no idle job after the peer came back");
-    sleep_ms(5);
+    if (simproc_now_ms() - t_up > 1000 + SLACK_MS)
+      FG_TEST_FAIL("no idle job after the peer came back");
+    simproc_sleep_ms(5);
   }
   fg_mb_peer_state(peer, &st);
   ASSERT_EQ(st.connected, 1);
   ASSERT_EQ(st.reconnects, 1);
   fg_mb_peer_free(peer);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 int main(int argc, char **argv) {
   const char *s = argc > 1 ? argv[1] : getenv("FG_SIM");
   if (!s || !*s) FG_TEST_FAIL("usage: %s PATH-TO-fieldgrip-sim [CASE]", argv[0]);
-  if (!realpath(s, g_sim)) FG_TEST_FAIL("%s: %s", s, strerror(errno));
-  snprintf(g_tmp, sizeof g_tmp, "/tmp/fg-mb-XXXXXX");
-  if (!mkdtemp(g_tmp)) FG_TEST_FAIL("mkdtemp: %s", strerror(errno));
-  atexit(cleanup);
+  simproc_init(s, NULL);
   signal(SIGPIPE, SIG_IGN);
   fg_log_set_level(FG_LOG_WARN);
 
@@ -1231,10 +1062,10 @@ int main(int argc, char **argv) {
   int ran = 0;
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
     if (only && strcmp(only, cases[i].name) != 0) continue;
-    double t0 = now_ms();
+    double t0 = simproc_now_ms();
     cases[i].fn();
     ran++;
-    fprintf(stderr, "ok %s (%.0f ms)\n", cases[i].name, now_ms() - t0);
+    fprintf(stderr, "ok %s (%.0f ms)\n", cases[i].name, simproc_now_ms() - t0);
   }
   if (only && !ran) FG_TEST_FAIL("no case named %s", only);
   return 0;

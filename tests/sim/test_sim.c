@@ -3,196 +3,19 @@
  * motion and object detection, several clients at once, the request log, and a restart on
  * the same port right after SIGKILL. Each case starts its own simulator. */
 #include <errno.h>
-#include <fcntl.h>
-#include <ftw.h>
 #include <limits.h>
 #include <modbus.h>
 #include <signal.h>
-#include <sys/prctl.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <time.h>
-#include <unistd.h>
 
+#include "simproc.h"
 #include "test.h"
 
-#define MAX_PROCS 64
-#define MAX_ARGS 40
 #define SLACK_MS 1500 /* upper bounds on timings: 2 shared cores, maybe AddressSanitizer */
 #define BASE 128
 #define ROBOT 1
 #define GRIPPER 9
 
-typedef struct {
-  pid_t pid;
-  int port;
-  char port_file[PATH_MAX];
-  char log[PATH_MAX];
-  char err[PATH_MAX];
-} sim_proc;
-
-static char g_sim[PATH_MAX];
-static char g_tmp[64]; /* /tmp/fg-sim-XXXXXX */
-static pid_t g_pids[MAX_PROCS];
-static int g_n_procs;
-
 /* ---------------------------------------------------------------- helpers */
-
-static double now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-static void sleep_ms(int ms) {
-  struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-  while (nanosleep(&ts, &ts) != 0 && errno == EINTR) {
-  }
-}
-
-static int rm_cb(const char *path, const struct stat *sb, int flag, struct FTW *ftw) {
-  (void)sb;
-  (void)flag;
-  (void)ftw;
-  remove(path);
-  return 0;
-}
-
-/* Kills every simulator still running and removes the temp dir; runs at exit, also after a
- * failed ASSERT. */
-static void cleanup(void) {
-  for (int i = 0; i < g_n_procs; i++) {
-    if (g_pids[i] > 0) {
-      kill(g_pids[i], SIGKILL);
-      waitpid(g_pids[i], NULL, 0);
-      g_pids[i] = -1;
-    }
-  }
-  if (g_tmp[0]) nftw(g_tmp, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
-}
-
-static void forget_pid(pid_t pid) {
-  for (int i = 0; i < g_n_procs; i++)
-    if (g_pids[i] == pid) g_pids[i] = -1;
-}
-
-static char *read_file(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  size_t cap = 4096, len = 0;
-  char *buf = malloc(cap);
-  ASSERT(buf != NULL);
-  size_t got;
-  while ((got = fread(buf + len, 1, cap - len - 1, f)) > 0) {
-    len += got;
-    if (cap - len < 2) {
-      cap *= 2;
-      buf = realloc(buf, cap);
-      ASSERT(buf != NULL);
-    }
-  }
-  fclose(f);
-  buf[len] = '\0';
-  return buf;
-}
-
-/* Forks and execs the simulator with the given extra arguments (NULL-terminated). */
-static pid_t spawn(sim_proc *p, const char *listen, const char *const *extra) {
-  const char *argv[MAX_ARGS];
-  int n = 0;
-  argv[n++] = g_sim;
-  argv[n++] = "--listen";
-  argv[n++] = listen;
-  argv[n++] = "--port-file";
-  argv[n++] = p->port_file;
-  argv[n++] = "--log";
-  argv[n++] = p->log;
-  for (int i = 0; extra && extra[i]; i++) {
-    ASSERT(n < MAX_ARGS - 1);
-    argv[n++] = extra[i];
-  }
-  argv[n] = NULL;
-  int efd = open(p->err, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
-  ASSERT(efd >= 0);
-  ASSERT(g_n_procs < MAX_PROCS);
-  pid_t parent = getpid();
-  pid_t pid = fork();
-  ASSERT(pid >= 0);
-  if (pid == 0) {
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(127);
-    dup2(efd, 2);
-    execv(g_sim, (char *const *)argv);
-    _exit(127);
-  }
-  close(efd);
-  g_pids[g_n_procs++] = pid;
-  return pid;
-}
-
-/* Starts a simulator on 127.0.0.1:port (0: a free one) and waits for its port file. */
-static void sim_start_on(sim_proc *p, int port, const char *const *extra) {
-  static int counter;
-  memset(p, 0, sizeof *p);
-  int k = counter++;
-  snprintf(p->port_file, sizeof p->port_file, "%s/port.%d", g_tmp, k);
-  snprintf(p->log, sizeof p->log, "%s/log.%d", g_tmp, k);
-  snprintf(p->err, sizeof p->err, "%s/err.%d", g_tmp, k);
-  char listen[64];
-  snprintf(listen, sizeof listen, "127.0.0.1:%d", port);
-  p->pid = spawn(p, listen, extra);
-  double deadline = now_ms() + 10000;
-  for (;;) {
-    char *s = read_file(p->port_file);
-    if (s) {
-      p->port = atoi(s);
-      size_t len = strlen(s);
-      ASSERT(len > 0 && s[len - 1] == '\n');
-      free(s);
-      ASSERT(p->port > 0 && p->port < 65536);
-      return;
-    }
-    int status;
-    if (waitpid(p->pid, &status, WNOHANG) == p->pid) {
-      forget_pid(p->pid);
-      char *err = read_file(p->err);
-      FG_TEST_FAIL("simulator exited (status 0x%x) before listening: %s", status,
-                   err ? err : "");
-    }
-    if (now_ms() > deadline) FG_TEST_FAIL("no port file %s within 10 s", p->port_file);
-    sleep_ms(2);
-  }
-}
-
-static void sim_start(sim_proc *p, const char *const *extra) { sim_start_on(p, 0, extra); }
-
-/* SIGTERM; the simulator must exit with status 0. */
-static void sim_stop(sim_proc *p) {
-  ASSERT_EQ(kill(p->pid, SIGTERM), 0);
-  int status;
-  ASSERT_EQ(waitpid(p->pid, &status, 0), p->pid);
-  forget_pid(p->pid);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    char *err = read_file(p->err);
-    FG_TEST_FAIL("simulator did not exit 0 on SIGTERM (status 0x%x): %s", status,
-                 err ? err : "");
-  }
-}
-
-/* Runs the simulator with bad arguments; returns its exit status. */
-static int sim_exit_code(const char *const *extra) {
-  sim_proc p;
-  memset(&p, 0, sizeof p);
-  snprintf(p.port_file, sizeof p.port_file, "%s/port.bad", g_tmp);
-  snprintf(p.log, sizeof p.log, "%s/log.bad", g_tmp);
-  snprintf(p.err, sizeof p.err, "%s/err.bad", g_tmp);
-  pid_t pid = spawn(&p, "127.0.0.1:0", extra);
-  int status;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  forget_pid(pid);
-  ASSERT(WIFEXITED(status));
-  return WEXITSTATUS(status);
-}
 
 static modbus_t *client(int port, int unit) {
   modbus_t *c = modbus_new_tcp("127.0.0.1", port);
@@ -285,10 +108,10 @@ static void grip_write(modbus_t *c, uint16_t action, uint16_t pos, uint16_t spee
 static void grip_activate(modbus_t *c) {
   grip_write(c, 0, 0, 0);
   grip_write(c, 0x0100, 0, 0);
-  double deadline = now_ms() + 10000;
+  double deadline = simproc_now_ms() + 10000;
   while (grip_read(c).sta != 3) {
-    ASSERT(now_ms() < deadline);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() < deadline);
+    simproc_sleep_ms(2);
   }
 }
 
@@ -297,7 +120,7 @@ static void grip_activate(modbus_t *c) {
 static grip_status grip_move(modbus_t *c, int pos, int speed, int force, double *elapsed_ms,
                              int *saw_between) {
   grip_status start = grip_read(c);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   grip_write(c, 0x0900, (uint16_t)pos, (uint16_t)(speed << 8 | force));
   grip_status st = grip_read(c);
   ASSERT_EQ(st.pr, pos);
@@ -309,11 +132,11 @@ static grip_status grip_move(modbus_t *c, int pos, int speed, int force, double 
     ASSERT((st.po - last) * dir >= 0);
     if (st.po != start.po && st.po != pos) *saw_between = 1;
     last = st.po;
-    ASSERT(now_ms() - t0 < 10000);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < 10000);
+    simproc_sleep_ms(2);
     st = grip_read(c);
   }
-  *elapsed_ms = now_ms() - t0;
+  *elapsed_ms = simproc_now_ms() - t0;
   ASSERT_EQ(st.pr, pos);
   return st;
 }
@@ -321,17 +144,17 @@ static grip_status grip_move(modbus_t *c, int pos, int speed, int force, double 
 /* ---------------------------------------------------------------- robot block */
 
 static void test_args(void) {
-  ASSERT_EQ(sim_exit_code((const char *const[]){"--encoding", "int32", NULL}), 2);
-  ASSERT_EQ(sim_exit_code((const char *const[]){"--exception", "12", NULL}), 2);
-  ASSERT_EQ(sim_exit_code((const char *const[]){"--robot-unit", "9", NULL}), 2);
-  ASSERT_EQ(sim_exit_code((const char *const[]){"--bogus", NULL}), 2);
-  ASSERT_EQ(sim_exit_code((const char *const[]){"--listen", "127.0.0.1", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--encoding", "int32", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--exception", "12", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--robot-unit", "9", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--bogus", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--listen", "127.0.0.1", NULL}), 2);
 }
 
 static void test_robot_immediate(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
-  char *err = read_file(p.err);
+  simproc p;
+  simproc_start(&p, 0, NULL);
+  char *err = simproc_read(p.err);
   char want[96];
   snprintf(want, sizeof want, "fieldgrip-sim: listening on 127.0.0.1:%d\n", p.port);
   ASSERT_STREQ(err, want);
@@ -383,83 +206,84 @@ static void test_robot_immediate(void) {
   rd(c, BASE, 1, v); /* the connection survived every exception */
   ASSERT_EQ(v[0], 0);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_delays(void) {
-  sim_proc p;
+  simproc p;
   const int ack_ms = 150, done_ms = 400;
-  sim_start(&p, (const char *const[]){"--ack-delay-ms", "150", "--done-delay-ms", "400", NULL});
+  simproc_start(&p, 0,
+                (const char *const[]){"--ack-delay-ms", "150", "--done-delay-ms", "400", NULL});
   modbus_t *c = client(p.port, ROBOT);
   uint16_t ack, status;
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   write_seq(c, 1);
   ack_status(c, &ack, &status);
-  double t_first = now_ms();
+  double t_first = simproc_now_ms();
   if (t_first - t0 < ack_ms) {
     ASSERT_EQ(ack, 0);
     ASSERT_EQ(status, 0);
   }
   while (ack != 1) {
     ASSERT_EQ(ack, 0);
-    ASSERT(now_ms() - t0 < ack_ms + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < ack_ms + SLACK_MS);
+    simproc_sleep_ms(2);
     ack_status(c, &ack, &status);
   }
-  double t_ack = now_ms() - t0;
+  double t_ack = simproc_now_ms() - t0;
   ASSERT(t_ack >= ack_ms);
   ASSERT_EQ(status, 1); /* busy: the done is 400 ms later */
   while (status != 2) {
     ASSERT_EQ(status, 1);
     ASSERT_EQ(ack, 1);
-    ASSERT(now_ms() - t0 < ack_ms + done_ms + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < ack_ms + done_ms + SLACK_MS);
+    simproc_sleep_ms(2);
     ack_status(c, &ack, &status);
   }
-  double t_done = now_ms() - t0;
+  double t_done = simproc_now_ms() - t0;
   ASSERT(t_done >= ack_ms + done_ms);
   fprintf(stderr, "ack after %.1f ms (delay %d), done after %.1f ms (delay %d + %d)\n", t_ack,
           ack_ms, t_done, ack_ms, done_ms);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* A newer seq written before the older one was acknowledged supersedes it. */
 static void test_robot_supersede(void) {
-  sim_proc p;
+  simproc p;
   const int ack_ms = 300;
-  sim_start(&p, (const char *const[]){"--ack-delay-ms", "300", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--ack-delay-ms", "300", NULL});
   modbus_t *c = client(p.port, ROBOT);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   write_seq(c, 1);
-  sleep_ms(20);
+  simproc_sleep_ms(20);
   write_seq(c, 2);
-  double t1 = now_ms();
+  double t1 = simproc_now_ms();
   uint16_t ack, status;
   int saw_one = 0;
   do {
-    ASSERT(now_ms() - t0 < ack_ms + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < ack_ms + SLACK_MS);
+    simproc_sleep_ms(2);
     ack_status(c, &ack, &status);
     if (ack == 1) saw_one = 1;
   } while (ack != 2);
   ASSERT_EQ(status, 2);
-  double t_ack = now_ms() - t1;
+  double t_ack = simproc_now_ms() - t1;
   ASSERT(t_ack >= ack_ms - (t1 - t0)); /* due 300 ms after the second write was received */
   if (t1 - t0 < ack_ms)
     ASSERT_EQ(saw_one, 0);
   else
     fprintf(stderr, "note: the two writes were %.0f ms apart, supersede not checked\n", t1 - t0);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_never_ack(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--never-ack", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--never-ack", NULL});
   modbus_t *c = client(p.port, ROBOT);
   write_seq(c, 1);
-  sleep_ms(250);
+  simproc_sleep_ms(250);
   uint16_t ack, status;
   ack_status(c, &ack, &status);
   ASSERT_EQ(ack, 0);
@@ -468,31 +292,31 @@ static void test_robot_never_ack(void) {
   rd(c, BASE, 1, v);
   ASSERT_EQ(v[0], 1);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_fail(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--fail", "--done-delay-ms", "50", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--fail", "--done-delay-ms", "50", NULL});
   modbus_t *c = client(p.port, ROBOT);
   write_seq(c, 3);
   uint16_t ack, status;
   ack_status(c, &ack, &status);
   ASSERT_EQ(ack, 3);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   while (status != 3) {
     ASSERT_EQ(status, 1);
-    ASSERT(now_ms() - t0 < 50 + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < 50 + SLACK_MS);
+    simproc_sleep_ms(2);
     ack_status(c, &ack, &status);
   }
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_exception(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--exception", "4", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--exception", "4", NULL});
   modbus_t *c = client(p.port, ROBOT);
   uint16_t w[10], v[12];
   block_int16(5, w);
@@ -505,20 +329,20 @@ static void test_robot_exception(void) {
   grip_write(c, 0x0100, 0, 0);
   ASSERT_EQ(grip_read(c).act, 1);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 
-  sim_start(&p, (const char *const[]){"--exception", "11", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--exception", "11", NULL});
   c = client(p.port, ROBOT);
   ASSERT_FAILS_WITH(modbus_write_registers(c, BASE, 10, w), EMBXGTAR);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* The third request is applied and its connection closed unanswered; the count runs over
  * all connections and only that one request is dropped. */
 static void test_robot_drop(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--drop-after", "3", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--drop-after", "3", NULL});
   modbus_t *a = client(p.port, ROBOT);
   modbus_t *b = client(p.port, ROBOT);
   uint16_t v[12];
@@ -526,9 +350,9 @@ static void test_robot_drop(void) {
   rd(b, BASE, 1, v); /* 2 */
   uint16_t w[10];
   block_int16(5, w);
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   ASSERT_FAILS_WITH(modbus_write_registers(a, BASE, 10, w), ECONNRESET); /* 3 */
-  ASSERT(now_ms() - t0 < 2500); /* closed, not a response timeout */
+  ASSERT(simproc_now_ms() - t0 < 2500); /* closed, not a response timeout */
   rd(b, BASE, 12, v); /* 4: the other connection is still served */
   for (int i = 0; i < 10; i++) ASSERT_EQ(v[i], w[i]);
   ASSERT_EQ(v[10], 5);
@@ -540,12 +364,12 @@ static void test_robot_drop(void) {
   write_seq(a, 6);
   client_free(a);
   client_free(b);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_ack_init(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--ack-init", "41", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--ack-init", "41", NULL});
   modbus_t *c = client(p.port, ROBOT);
   uint16_t ack, status;
   ack_status(c, &ack, &status);
@@ -560,12 +384,12 @@ static void test_robot_ack_init(void) {
   ASSERT_EQ(ack, 42);
   ASSERT_EQ(status, 2);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_robot_float32(void) {
-  sim_proc p;
-  sim_start(&p, (const char *const[]){"--encoding", "float32", "--base", "200", NULL});
+  simproc p;
+  simproc_start(&p, 0, (const char *const[]){"--encoding", "float32", "--base", "200", NULL});
   modbus_t *c = client(p.port, ROBOT);
   uint16_t v[19];
   rd(c, 200, 19, v);
@@ -579,23 +403,23 @@ static void test_robot_float32(void) {
   ASSERT_EQ(v[17], 9);
   ASSERT_EQ(v[18], 2);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 
   /* The int16 layout ends at offset 11. */
-  sim_start(&p, (const char *const[]){"--encoding", "int16", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--encoding", "int16", NULL});
   c = client(p.port, ROBOT);
   rd(c, BASE, 12, v);
   ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 19, v), EMBXILADD);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* ---------------------------------------------------------------- gripper */
 
 static void test_gripper_activation_and_moves(void) {
-  sim_proc p;
+  simproc p;
   const int act_ms = 200, stroke_ms = 100;
-  sim_start(&p, (const char *const[]){"--activation-ms", "200", "--stroke-ms", "100", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "200", "--stroke-ms", "100", NULL});
   modbus_t *c = client(p.port, GRIPPER);
   grip_status st = grip_read(c);
   ASSERT_EQ(st.act + st.gto + st.sta + st.obj + st.flt + st.pr + st.po + st.cu, 0);
@@ -619,19 +443,19 @@ static void test_gripper_activation_and_moves(void) {
   ASSERT_EQ(st.gto, 0);
 
   /* Activation: gSTA 1 for activation-ms, then 3 with the fingers open. */
-  double t0 = now_ms();
+  double t0 = simproc_now_ms();
   grip_write(c, 0x0100, 0, 0);
   st = grip_read(c);
-  double t_first = now_ms() - t0;
+  double t_first = simproc_now_ms() - t0;
   ASSERT_EQ(st.act, 1);
   if (t_first < act_ms) ASSERT_EQ(st.sta, 1);
   while (st.sta != 3) {
     ASSERT_EQ(st.sta, 1);
-    ASSERT(now_ms() - t0 < act_ms + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < act_ms + SLACK_MS);
+    simproc_sleep_ms(2);
     st = grip_read(c);
   }
-  double t_act = now_ms() - t0;
+  double t_act = simproc_now_ms() - t0;
   ASSERT(t_act >= act_ms);
   ASSERT_EQ(st.act, 1);
   ASSERT_EQ(st.po, 0);
@@ -671,31 +495,31 @@ static void test_gripper_activation_and_moves(void) {
   st = grip_read(c);
   ASSERT_EQ(st.sta, 0);
   ASSERT_EQ(st.act, 0);
-  t0 = now_ms();
+  t0 = simproc_now_ms();
   grip_write(c, 0x0900, 255, 0xFF00);
   st = grip_read(c);
-  if (now_ms() - t0 < act_ms) {
+  if (simproc_now_ms() - t0 < act_ms) {
     ASSERT_EQ(st.sta, 1);
     ASSERT_EQ(st.flt, 0x05);
   }
   while (!(st.sta == 3 && st.obj == 3)) {
-    ASSERT(now_ms() - t0 < act_ms + stroke_ms + SLACK_MS);
-    sleep_ms(2);
+    ASSERT(simproc_now_ms() - t0 < act_ms + stroke_ms + SLACK_MS);
+    simproc_sleep_ms(2);
     st = grip_read(c);
   }
-  ASSERT(now_ms() - t0 >= act_ms + stroke_ms - 1);
+  ASSERT(simproc_now_ms() - t0 >= act_ms + stroke_ms - 1);
   ASSERT_EQ(st.flt, 0);
   ASSERT_EQ(st.po, 255);
   ASSERT_EQ(st.pr, 255);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_gripper_object(void) {
-  sim_proc p;
+  simproc p;
   /* 40 mm in an 85 mm stroke: P = round(255 * 45 / 85) = 135. */
-  sim_start(&p, (const char *const[]){"--object-width-mm", "40", "--activation-ms", "0",
-                                      "--stroke-ms", "100", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--object-width-mm", "40", "--activation-ms", "0",
+                                              "--stroke-ms", "100", NULL});
   modbus_t *c = client(p.port, GRIPPER);
   grip_write(c, 0x0100, 0, 0);
   grip_status st = grip_read(c);
@@ -726,25 +550,25 @@ static void test_gripper_object(void) {
   ASSERT_EQ(st.obj, 2);
   ASSERT_EQ(st.po, 135);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 
   /* 2F-140 holding 70 mm: P = round(255 * 70 / 140) = round(127.5) = 128. */
-  sim_start(&p, (const char *const[]){"--stroke-mm", "140", "--object-width-mm", "70",
-                                      "--activation-ms", "0", "--stroke-ms", "50", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--stroke-mm", "140", "--object-width-mm", "70",
+                                              "--activation-ms", "0", "--stroke-ms", "50", NULL});
   c = client(p.port, GRIPPER);
   grip_write(c, 0x0100, 0, 0);
   st = grip_move(c, 255, 255, 0, &ms, &between);
   ASSERT_EQ(st.obj, 2);
   ASSERT_EQ(st.po, 128);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* ---------------------------------------------------------------- server */
 
 static void test_two_clients(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   modbus_t *idle = client(p.port, ROBOT); /* connected, never sends */
   modbus_t *robot = client(p.port, ROBOT);
   modbus_t *grip = client(p.port, GRIPPER);
@@ -766,12 +590,12 @@ static void test_two_clients(void) {
   ASSERT_EQ(v[0], 50);
   client_free(idle);
   client_free(grip);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 static void test_log(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   modbus_t *c = client(p.port, ROBOT);
   uint16_t w[10], v[12];
   block_int16(7, w);
@@ -792,7 +616,7 @@ static void test_log(void) {
   ASSERT_EQ(modbus_set_slave(c, ROBOT), 0);
   ASSERT_EQ(modbus_write_register(c, BASE, 8), 1);
 
-  char *log = read_file(rotated);
+  char *log = simproc_read(rotated);
   ASSERT_STREQ(log, "write unit=1 fn=16 addr=128 n=10 "
                     "words=7,1,4523,64329,350,2902,64334,0,800,40\n"
                     "write unit=1 fn=6 addr=129 n=1 words=3\n"
@@ -800,47 +624,42 @@ static void test_log(void) {
                     "write unit=9 fn=16 addr=1000 n=3 words=2304,255,65344\n"
                     "write unit=5 fn=6 addr=1 n=1 words=65535\n");
   free(log);
-  log = read_file(p.log);
+  log = simproc_read(p.log);
   ASSERT_STREQ(log, "write unit=1 fn=6 addr=128 n=1 words=8\n");
   free(log);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 /* A simulator killed with an established connection leaves the port in TIME_WAIT; the next
  * one binds the same port at once (SO_REUSEADDR) and starts from a fresh state. */
 static void test_restart_same_port(void) {
-  sim_proc p;
-  sim_start(&p, NULL);
+  simproc p;
+  simproc_start(&p, 0, NULL);
   int port = p.port;
   modbus_t *c = client(port, ROBOT);
   write_seq(c, 4);
-  ASSERT_EQ(kill(p.pid, SIGKILL), 0);
-  ASSERT_EQ(waitpid(p.pid, NULL, 0), p.pid);
-  forget_pid(p.pid);
+  simproc_kill(&p);
   uint16_t v[12];
   ASSERT_EQ(modbus_read_registers(c, BASE, 1, v), -1);
   client_free(c);
 
-  double t0 = now_ms();
-  sim_start_on(&p, port, NULL);
+  double t0 = simproc_now_ms();
+  simproc_start(&p, port, NULL);
   ASSERT_EQ(p.port, port);
-  fprintf(stderr, "restart on port %d took %.1f ms\n", port, now_ms() - t0);
+  fprintf(stderr, "restart on port %d took %.1f ms\n", port, simproc_now_ms() - t0);
   c = client(port, ROBOT);
   rd(c, BASE, 12, v);
   ASSERT_EQ(v[0], 0);
   ASSERT_EQ(v[10], 0);
   client_free(c);
-  sim_stop(&p);
+  simproc_stop(&p);
 }
 
 int main(int argc, char **argv) {
   const char *s = argc > 1 ? argv[1] : getenv("FG_SIM");
   if (!s || !*s) FG_TEST_FAIL("usage: %s PATH-TO-fieldgrip-sim", argv[0]);
-  if (!realpath(s, g_sim)) FG_TEST_FAIL("%s: %s", s, strerror(errno));
-  snprintf(g_tmp, sizeof g_tmp, "/tmp/fg-sim-XXXXXX");
-  if (!mkdtemp(g_tmp)) FG_TEST_FAIL("mkdtemp: %s", strerror(errno));
-  atexit(cleanup);
+  simproc_init(s, NULL);
   signal(SIGPIPE, SIG_IGN);
 
   static const struct {
@@ -866,9 +685,9 @@ int main(int argc, char **argv) {
   const char *only = argc > 2 ? argv[2] : NULL;
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
     if (only && strcmp(only, cases[i].name) != 0) continue;
-    double t0 = now_ms();
+    double t0 = simproc_now_ms();
     cases[i].fn();
-    fprintf(stderr, "ok %s (%.0f ms)\n", cases[i].name, now_ms() - t0);
+    fprintf(stderr, "ok %s (%.0f ms)\n", cases[i].name, simproc_now_ms() - t0);
   }
   return 0;
 }
