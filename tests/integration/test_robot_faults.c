@@ -1,8 +1,10 @@
 /* Failures of the robot and gripper peers, each reported and none re-sent: no acknowledgement
  * (504, unknown), a Modbus exception (502 naming it), a robot that reports failure, peers
  * down at start (the daemon serves, commands answer 503) and coming up later, a peer killed
- * mid-command and restarted (unknown, then the next command works), a second command while
- * one runs (409), no [robot] at all, and the Modbus lines of /metrics.
+ * mid-command and restarted (unknown, then the next command works), a second command or a
+ * gripper action while one runs (409), Idempotency-Key replays of a running command and of
+ * one cut short by a daemon that was killed, no [robot] at all, and the Modbus lines of
+ * /metrics.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
 #include "simproc.h"
@@ -139,6 +141,7 @@ static void check_down_at_start(void) {
   h_resp_free(r);
   r = r_post("/v1/robot/commands", R_EXAMPLE_BODY "}", NULL);
   r_expect(r, 503, "gripper_disconnected"); /* a pick opens the gripper first */
+  ASSERT(json_is_null(json_object_get(r_command(r), "gripper_width"))); /* nothing was read */
   h_resp_free(r);
   r = r_post("/v1/gripper/close", "", NULL);
   r_expect(r, 503, "gripper_disconnected");
@@ -162,7 +165,7 @@ static void check_killed_mid_command(void) {
   simproc sim;
   const char *args[] = {"--done-delay-ms", "3000", NULL};
   simproc_start(&sim, 0, args);
-  r_config(sim.port, NULL, 0, NULL);
+  r_config(sim.port, NULL, sim.port, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
   h_resp *r = send_move(", \"wait\": false", "k-async");
@@ -171,7 +174,16 @@ static void check_killed_mid_command(void) {
   ASSERT(h_resp_header(r, "Location"));
   const json_int_t id = json_integer_value(json_object_get(r->json, "id"));
   h_resp_free(r);
+  /* its key while it runs: the answer of the acknowledgement again */
+  r = send_move(", \"wait\": false", "k-async");
+  r_expect(r, 202, NULL);
+  ASSERT(json_is_true(json_object_get(r->json, "replayed")));
+  ASSERT_STREQ(state_of(r), "acknowledged");
+  h_resp_free(r);
   r = send_move(NULL, NULL);
+  r_expect(r, 409, "robot_busy");
+  h_resp_free(r);
+  r = r_post("/v1/gripper/open", "", NULL); /* not between the steps of a command */
   r_expect(r, 409, "robot_busy");
   h_resp_free(r);
   r = h_get("/v1/robot");
@@ -204,6 +216,29 @@ static void check_killed_mid_command(void) {
   ASSERT(json_integer_value(json_object_get(json_object_get(r->json, "counters"),
                                             "reconnects")) >= 1);
   h_resp_free(r);
+  h_stop();
+  simproc_stop(&sim);
+}
+
+/* The daemon dies while a keyed command runs: after the restart the key answers
+ * outcome_unknown and the command is not sent again. */
+static void check_daemon_killed(void) {
+  simproc sim;
+  const char *args[] = {"--done-delay-ms", "5000", NULL};
+  simproc_start(&sim, 0, args);
+  r_config(sim.port, NULL, 0, NULL);
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  h_resp *r = send_move(", \"wait\": false", "k-cut");
+  r_expect(r, 202, NULL);
+  h_resp_free(r);
+  h_kill();
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  r = send_move(", \"wait\": false", "k-cut");
+  r_expect(r, 504, "outcome_unknown");
+  h_resp_free(r);
+  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 1);
   h_stop();
   simproc_stop(&sim);
 }
@@ -245,6 +280,7 @@ int main(int argc, char **argv) {
   check_exception_and_failure();
   check_down_at_start();
   check_killed_mid_command();
+  check_daemon_killed();
   check_not_configured();
   h_done();
   printf("ok\n");
