@@ -26,6 +26,7 @@ struct fg_mb_link {
   double next_attempt_s; /* CLOCK_MONOTONIC */
   int timeouts_in_row;
   int stale;             /* a timed-out request's reply may still arrive */
+  int said_down;         /* the log already says the peer is unreachable */
   int maybe_sent, exception;
   pthread_mutex_t lock;  /* guards st, the only part other threads read */
   fg_mb_link_state st;
@@ -151,9 +152,14 @@ int fg_mb_link_ensure(fg_mb_link *l) {
     pthread_mutex_lock(&l->lock);
     l->st.connect_failures++;
     pthread_mutex_unlock(&l->lock);
+    if (!l->said_down) /* once per outage, not at every attempt */
+      fg_warn("modbus: %s %s unreachable (%s); retrying in the background", l->name,
+              l->address, modbus_strerror(e));
+    l->said_down = 1;
     return link_fail(l, FG_EUNAVAIL, "%s %s: %s", l->name, l->address, modbus_strerror(e));
   }
   l->ctx = ctx;
+  l->said_down = 0;
   l->backoff_ms = 0;
   l->timeouts_in_row = 0;
   l->generation++;
@@ -229,6 +235,9 @@ static int request_failed(fg_mb_link *l, int e, const char *what) {
   }
   fg_mb_link_close(l);
   backoff(l);
+  fg_warn("modbus: %s %s: connection lost during %s: %s", l->name, l->address, what,
+          modbus_strerror(e));
+  l->said_down = 1;
   return link_fail(l, FG_EUNAVAIL, "%s %s: connection lost during %s: %s", l->name, l->address,
                    what, modbus_strerror(e));
 }

@@ -146,6 +146,11 @@ static void check_down_at_start(void) {
   r = r_post("/v1/gripper/close", "", NULL);
   r_expect(r, 503, "gripper_disconnected");
   h_resp_free(r);
+  /* the log says so once per peer, not at every attempt of the backoff */
+  ASSERT(h_wait_log("unreachable", 2, 5));
+  const struct timespec pause = {0, 400000000};
+  nanosleep(&pause, NULL);
+  ASSERT_EQ(h_log_count("unreachable"), 2);
 
   simproc sim;
   simproc_start(&sim, port, NULL);
