@@ -429,7 +429,8 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
     return rc;
   }
   if (rc < 0) {
-    finish(r, FG_CMD_UNKNOWN, 504, "robot_unknown",
+    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
+           rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
            "the pose write of seq %u may have reached the robot but was not confirmed (%s); "
            "it is not sent again: check the robot before sending a new command", seq,
            fg_error_detail());
