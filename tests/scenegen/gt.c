@@ -77,7 +77,6 @@ int sg_shape_from_json(const json_t *j, const double T_world_obj[16], sg_shape *
   const char *type = json_string_value(json_object_get(j, "type"));
   if (!type) return fg_fail(FG_EFORMAT, "gt.json: shape without a \"type\"");
   memcpy(s->T_world_obj, T_world_obj, sizeof s->T_world_obj);
-  sg_shape_finish(s);
   if (strcmp(type, "mug") == 0) {
     s->type = SG_SHAPE_MUG;
     FG_TRY(get_num(j, "outer_radius", &s->outer_radius));
@@ -103,6 +102,7 @@ int sg_shape_from_json(const json_t *j, const double T_world_obj[16], sg_shape *
   } else {
     return fg_fail(FG_EFORMAT, "gt.json: unknown shape type \"%s\"", type);
   }
+  sg_shape_finish(s); /* the inverse pose and the bounding sphere need the sizes above */
   return 0;
 }
 

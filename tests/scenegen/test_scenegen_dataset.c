@@ -303,6 +303,16 @@ static void test_in_view(void) {
     ASSERT(ob->aabb_max[2] <= 0.35);
     ASSERT(sg_gt_inside(&gt, k, ob->position) || ob->shape.type == SG_SHAPE_MUG ||
            ob->shape.type == SG_SHAPE_BOWL);
+    /* the shape read back from gt.json intersects rays like the one the scene drew: a ray
+     * straight down onto the top face of the bounding box's centre hits it */
+    {
+      const double o[3] = {(ob->aabb_min[0] + ob->aabb_max[0]) / 2,
+                           (ob->aabb_min[1] + ob->aabb_max[1]) / 2, 1.0};
+      const double down[3] = {0, 0, -1};
+      sg_hit hit;
+      ASSERT(sg_shape_intersect(&ob->shape, o, down, 0, INFINITY, &hit));
+      ASSERT(hit.t > 1.0 - ob->aabb_max[2] - 1e-9 && hit.t < 1.0 + 1e-9);
+    }
     for (int i = 0; i < VIEWS; i++) {
       const fg_transforms_frame *f = find_view(&train, &test, i);
       for (int c = 0; c < 8; c++) {
