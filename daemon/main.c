@@ -183,6 +183,19 @@ static void reload(fg_app *app, const options *o) {
   fg_notify_ready("running; configuration reloaded");
 }
 
+/* Frees what the start-up set up once the configuration was installed, in reverse order;
+ * parts not set up yet are NULL. A running training stops after its step and keeps its
+ * field. */
+static void app_teardown(fg_app *app) {
+  fg_robot_svc_free(app->robot);
+  fg_idem_free(app->idem);
+  fg_jobs_free(app->jobs);
+  fg_decoder_free(app->decoder);
+  fg_store_close(app->store);
+  fg_clip_svc_free(app->clip);
+  fg_app_clear_conf(app);
+}
+
 int main(int argc, char **argv) {
   options o = {0};
   int rc = parse_args(argc, argv, &o);
@@ -233,9 +246,7 @@ int main(int argc, char **argv) {
    * everything but uploads and imports, which answer 500 saying where it was looked for. */
   if (fg_decoder_new(&app.decoder, NULL, app.threads, FG_DECODER_IDLE_SECONDS) != 0) {
     fg_error("cannot set up the image decoder: %s", fg_error_detail());
-    fg_store_close(app.store);
-    fg_clip_svc_free(app.clip);
-    fg_app_clear_conf(&app);
+    app_teardown(&app);
     return 1;
   }
   if (fg_decoder_check(app.decoder) != 0)
@@ -243,10 +254,7 @@ int main(int argc, char **argv) {
   /* Trainings: each scene's last job comes back from its last_job.json. */
   if (fg_jobs_new(&app.jobs, &app) != 0) {
     fg_error("cannot set up training: %s", fg_error_detail());
-    fg_decoder_free(app.decoder);
-    fg_store_close(app.store);
-    fg_clip_svc_free(app.clip);
-    fg_app_clear_conf(&app);
+    app_teardown(&app);
     return 1;
   }
 
@@ -261,12 +269,7 @@ int main(int argc, char **argv) {
   free(idem_path);
   if (robot_rc != 0) {
     fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
-    fg_idem_free(app.idem);
-    fg_jobs_free(app.jobs);
-    fg_decoder_free(app.decoder);
-    fg_store_close(app.store);
-    fg_clip_svc_free(app.clip);
-    fg_app_clear_conf(&app);
+    app_teardown(&app);
     return 1;
   }
 
@@ -289,13 +292,7 @@ int main(int argc, char **argv) {
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
     fg_error("%s", fg_error_detail());
-    fg_robot_svc_free(app.robot);
-    fg_idem_free(app.idem);
-    fg_jobs_free(app.jobs);
-    fg_decoder_free(app.decoder);
-    fg_store_close(app.store);
-    fg_clip_svc_free(app.clip);
-    fg_app_clear_conf(&app);
+    app_teardown(&app);
     return 1;
   }
   size_t n_scenes, n_frames;
@@ -327,13 +324,7 @@ int main(int argc, char **argv) {
   fg_notify_stopping();
   fg_robot_svc_stop(app.robot); /* a command being waited for ends now, as unknown */
   fg_http_stop(http);
-  fg_robot_svc_free(app.robot);
-  fg_idem_free(app.idem);
-  fg_jobs_free(app.jobs); /* a running training stops after its step and keeps its field */
-  fg_decoder_free(app.decoder);
-  fg_store_close(app.store);
-  fg_clip_svc_free(app.clip);
-  fg_app_clear_conf(&app);
+  app_teardown(&app);
   pthread_mutex_destroy(&app.conf_lock);
   fg_info("stopped");
   return 0;
