@@ -7,6 +7,7 @@
 
 #include "config.h"
 #include "core/error.h"
+#include "core/clock.h"
 #include "core/log.h"
 
 #include <errno.h>
@@ -269,12 +270,6 @@ struct fg_decoder {
 };
 
 #define DEFAULT_INSTALLED FG_LIBEXECDIR "/fieldgrip/fieldgrip-decode"
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 /* The program to start: the one given, else the first default place that exists. */
 static int resolve_program(const fg_decoder *d, const char **out) {
@@ -568,7 +563,7 @@ static int checkout(fg_decoder *d, child **out) {
       if (!c->busy && (!best || c->last_used > best->last_used)) best = c;
     if (best) {
       best->busy = 1;
-      best->busy_since = now_s();
+      best->busy_since = fg_mono_s();
       pthread_mutex_unlock(&d->lock);
       *out = best;
       return 0;
@@ -589,7 +584,7 @@ static int checkout(fg_decoder *d, child **out) {
     pthread_mutex_unlock(&d->lock);
     return fg_fail(t.rc, "%s", t.message);
   }
-  t.result->busy_since = now_s();
+  t.result->busy_since = fg_mono_s();
   pthread_mutex_unlock(&d->lock);
   *out = t.result;
   return 0;
@@ -598,7 +593,7 @@ static int checkout(fg_decoder *d, child **out) {
 static void checkin(fg_decoder *d, child *c) {
   pthread_mutex_lock(&d->lock);
   c->busy = 0;
-  c->last_used = now_s();
+  c->last_used = fg_mono_s();
   pthread_cond_broadcast(&d->changed);
   pthread_mutex_unlock(&d->lock);
 }
@@ -816,7 +811,7 @@ int fg_decoder_encode_png(fg_decoder *d, const void *pixels, int w, int h, int c
 
 void fg_decoder_reap_idle(fg_decoder *d) {
   if (!d) return;
-  double now = now_s();
+  double now = fg_mono_s();
   child *old = NULL;
   pthread_mutex_lock(&d->lock);
   for (child **p = &d->children; *p;) {

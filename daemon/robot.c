@@ -9,6 +9,7 @@
 #include <time.h>
 
 #include "core/error.h"
+#include "core/clock.h"
 #include "core/log.h"
 #include "modbus/devices.h"
 #include "modbus/peer.h"
@@ -64,18 +65,6 @@ static const char *const state_names[FG_CMD_STATES] = {
 
 const char *fg_cmd_state_name(fg_cmd_state s) {
   return s >= 0 && s < FG_CMD_STATES ? state_names[s] : "?";
-}
-
-static double now_real(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static double now_mono_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
 /* ---------------------------------------------------------------- idle jobs */
@@ -311,7 +300,7 @@ static void finish(rec *r, fg_cmd_state state, int http, const char *code, const
     vsnprintf(r->v.message, sizeof r->v.message, fmt, ap);
     va_end(ap);
   }
-  r->v.finished_s = now_real();
+  r->v.finished_s = fg_real_s();
   r->v.stage = "finished";
   svc->by_state[state]++;
   if (svc->active == r) svc->active = NULL;
@@ -413,7 +402,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
   r->v.seq = seq;
   pthread_mutex_unlock(&svc->lock);
 
-  const double t0 = now_mono_ms();
+  const double t0 = (fg_mono_s() * 1e3);
   rc = fg_robot_write(l, &svc->rp, st->words);
   if (rc == FG_EPEER) {
     finish(r, FG_CMD_ERROR, 502, "modbus_exception", "the robot refused the pose write: %s",
@@ -448,7 +437,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
   pthread_mutex_lock(&svc->lock);
   svc->ack = seq;
   svc->status = status;
-  r->v.ack_ms = now_mono_ms() - t0;
+  r->v.ack_ms = (fg_mono_s() * 1e3) - t0;
   r->v.robot_status = status;
   r->v.state = FG_CMD_ACKNOWLEDGED;
   pthread_cond_broadcast(&svc->cond);
@@ -551,7 +540,7 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
   }
   r->svc = svc;
   r->v.id = svc->next_id++;
-  r->v.created_s = now_real();
+  r->v.created_s = fg_real_s();
   r->v.state = FG_CMD_PENDING;
   r->v.seq = 0;
   r->refs = 2; /* this call and the job */
@@ -659,9 +648,9 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   if (rc < 0) return rc;
   grip_job g = {.svc = svc, .step = &v->steps[0], .activate_only = activate,
                 .status.position = -1};
-  v->created_s = now_real();
+  v->created_s = fg_real_s();
   rc = fg_mb_peer_call(svc->gripper, grip_run, &g);
-  v->finished_s = now_real();
+  v->finished_s = fg_real_s();
   v->stage = "finished";
   if (g.status.position >= 0)
     v->gripper_width_m = fg_robotiq_position_to_width(svc->model, g.status.position);

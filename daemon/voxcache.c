@@ -2,6 +2,7 @@
 #include "voxcache.h"
 
 #include "core/error.h"
+#include "core/clock.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
@@ -20,12 +21,6 @@ struct fg_voxcache {
   int building;
   fg_voxels *current;   /* NULL until built; holds one reference */
 };
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 int fg_voxcache_new(fg_voxcache **out) {
   fg_voxcache *c = calloc(1, sizeof *c);
@@ -77,11 +72,11 @@ int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, i
   pthread_mutex_unlock(&c->lock);
 
   /* The build runs without the lock, so that describing the cache never waits for it. */
-  double t0 = now_s();
+  double t0 = fg_mono_s();
   fg_voxels *v = calloc(1, sizeof *v);
   int rc = v ? fg_voxel_features_build(&v->vf, f, g, n_threads)
              : fg_fail(FG_ENOMEM, "out of memory");
-  double seconds = now_s() - t0;
+  double seconds = fg_mono_s() - t0;
   fg_voxels *old = NULL;
   pthread_mutex_lock(&c->lock);
   c->building = 0;

@@ -3,12 +3,7 @@
 #include <time.h>
 
 #include "core/error.h"
-
-static double now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
+#include "core/clock.h"
 
 static void sleep_ms(int ms) {
   const struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
@@ -19,7 +14,7 @@ static void sleep_ms(int ms) {
  * for the first FG_MB_FAST_MS (a controller that answers within a cycle is seen at once),
  * then FG_MB_POLL_MS (a long motion does not flood the peer). */
 static void poll_pause(double started_ms) {
-  if (now_ms() - started_ms < FG_MB_FAST_MS) {
+  if ((fg_mono_s() * 1e3) - started_ms < FG_MB_FAST_MS) {
     const struct timespec ts = {0, 250000L};
     nanosleep(&ts, NULL);
   } else {
@@ -43,12 +38,12 @@ int fg_robot_write(fg_mb_link *l, const fg_robot_profile *rp, const uint16_t *wo
 
 int fg_robot_wait_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,
                       fg_mb_cancel_fn cancel, void *cancel_arg) {
-  const double start = now_ms(), until = start + rp->ack_timeout_ms;
+  const double start = (fg_mono_s() * 1e3), until = start + rp->ack_timeout_ms;
   uint16_t ack = 0;
   for (;;) {
     FG_TRY(fg_robot_read_ack(l, rp, &ack, status));
     if (ack == seq) return 0;
-    if (now_ms() >= until)
+    if ((fg_mono_s() * 1e3) >= until)
       return fg_fail(FG_ETIMEDOUT, "the robot did not acknowledge seq %u within %d ms (ack "
                      "register %d holds %u)", seq, rp->ack_timeout_ms,
                      rp->base + fg_pose_ack_offset(rp->encoding), ack);
@@ -59,7 +54,7 @@ int fg_robot_wait_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, i
 
 int fg_robot_wait_done(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,
                        fg_mb_cancel_fn cancel, void *cancel_arg) {
-  const double start = now_ms(), until = start + rp->done_timeout_ms;
+  const double start = (fg_mono_s() * 1e3), until = start + rp->done_timeout_ms;
   for (;;) {
     uint16_t ack;
     FG_TRY(fg_robot_read_ack(l, rp, &ack, status));
@@ -67,7 +62,7 @@ int fg_robot_wait_done(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, 
       return fg_fail(FG_EINVAL, "the robot's ack changed from %u to %u before it reported "
                      "seq %u done", seq, ack, seq);
     if (*status == FG_ROBOT_DONE || *status == FG_ROBOT_FAILED) return 0;
-    if (now_ms() >= until)
+    if ((fg_mono_s() * 1e3) >= until)
       return fg_fail(FG_ETIMEDOUT, "the robot did not report seq %u done within %d ms "
                      "(status %d)", seq, rp->done_timeout_ms, *status);
     if (cancel && cancel(cancel_arg)) return fg_fail(FG_ECANCELED, "stopped while waiting");
@@ -98,12 +93,12 @@ int fg_gripper_activate(fg_mb_link *l, int timeout_ms, fg_robotiq_status *s) {
   FG_TRY(fg_mb_write_registers(l, FG_ROBOTIQ_REQUEST_ADDR, FG_ROBOTIQ_WORDS, w));
   fg_robotiq_request(FG_ROBOTIQ_ACT, 0, 0, 0, w);
   FG_TRY(fg_mb_write_registers(l, FG_ROBOTIQ_REQUEST_ADDR, FG_ROBOTIQ_WORDS, w));
-  const double until = now_ms() + timeout_ms;
+  const double until = (fg_mono_s() * 1e3) + timeout_ms;
   for (;;) {
     FG_TRY(fg_gripper_read(l, s));
     if (s->sta == 3 && s->act) return 0;
     FG_TRY(fault_check(s));
-    if (now_ms() >= until)
+    if ((fg_mono_s() * 1e3) >= until)
       return fg_fail(FG_ETIMEDOUT, "the gripper did not finish its activation within %d ms "
                      "(gSTA %d, fault 0x%02X)", timeout_ms, s->sta, s->flt);
     sleep_ms(FG_MB_POLL_MS * 5);
@@ -118,12 +113,12 @@ int fg_gripper_move(fg_mb_link *l, int position, int speed, int force, int timeo
   uint16_t w[FG_ROBOTIQ_WORDS];
   fg_robotiq_request(FG_ROBOTIQ_ACT | FG_ROBOTIQ_GTO, position, speed, force, w);
   FG_TRY(fg_mb_write_registers(l, FG_ROBOTIQ_REQUEST_ADDR, FG_ROBOTIQ_WORDS, w));
-  const double start = now_ms(), until = start + timeout_ms;
+  const double start = (fg_mono_s() * 1e3), until = start + timeout_ms;
   for (;;) {
     FG_TRY(fg_gripper_read(l, s));
     FG_TRY(fault_check(s));
     if (s->echo == position && s->obj != 0) return 0;
-    if (now_ms() >= until)
+    if ((fg_mono_s() * 1e3) >= until)
       return fg_fail(FG_ETIMEDOUT, "the gripper did not finish its move to position %d within "
                      "%d ms (at %d, gOBJ %d)", position, timeout_ms, s->position, s->obj);
     poll_pause(start);

@@ -11,6 +11,7 @@
 #include <modbus/modbus.h>
 
 #include "core/error.h"
+#include "core/clock.h"
 #include "core/log.h"
 
 #define BACKOFF_FIRST_MS 100
@@ -32,18 +33,6 @@ struct fg_mb_link {
   fg_mb_link_state st;
 };
 
-static double now_mono(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static double now_real(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 /* Records the failure in the shared state and as the thread's detail; returns err. */
 static int link_fail(fg_mb_link *l, int err, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
@@ -55,7 +44,7 @@ static int link_fail(fg_mb_link *l, int err, const char *fmt, ...) {
   va_end(ap);
   pthread_mutex_lock(&l->lock);
   snprintf(l->st.last_error, sizeof l->st.last_error, "%s", msg);
-  l->st.last_error_s = now_real();
+  l->st.last_error_s = fg_real_s();
   pthread_mutex_unlock(&l->lock);
   return fg_fail(err, "%s", msg);
 }
@@ -118,12 +107,12 @@ void fg_mb_link_free(fg_mb_link *l) {
 static void backoff(fg_mb_link *l) {
   l->backoff_ms = l->backoff_ms ? l->backoff_ms * 2 : BACKOFF_FIRST_MS;
   if (l->backoff_ms > BACKOFF_MAX_MS) l->backoff_ms = BACKOFF_MAX_MS;
-  l->next_attempt_s = now_mono() + l->backoff_ms * 1e-3;
+  l->next_attempt_s = fg_mono_s() + l->backoff_ms * 1e-3;
 }
 
 int fg_mb_link_ensure(fg_mb_link *l) {
   if (l->ctx) return 0;
-  const double t = now_mono();
+  const double t = fg_mono_s();
   if (t < l->next_attempt_s)
     return fg_fail(FG_EUNAVAIL, "%s %s is not connected (%s); next attempt in %.0f ms", l->name,
                    l->address, l->st.last_error[0] ? l->st.last_error : "not tried yet",

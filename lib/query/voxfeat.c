@@ -10,6 +10,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/clock.h"
 #include "core/fsutil.h"
 #include "core/half.h"
 #include "field/model.h"
@@ -32,12 +33,6 @@ struct fg_voxel_features {
   float *inv_norm;         /* (n_kept) 1 / |W_out h|; NaN for a zero feature */
   float *W;                /* (D, 64) copy of W_out */
 };
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 void fg_voxel_features_free(fg_voxel_features *vf) {
   if (!vf) return;
@@ -71,7 +66,7 @@ int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg
     if (chk.nx != g->nx || chk.ny != g->ny || chk.nz != g->nz)
       return fg_fail(FG_EINVAL, "voxel features: the grid's sizes do not match its workspace");
   }
-  const double t0 = now_s();
+  const double t0 = fg_mono_s();
   const int D = f->cfg.feature_dim;
   const size_t N = fg_voxel_grid_count(g);
   fg_voxel_features *vf = calloc(1, sizeof *vf);
@@ -138,7 +133,7 @@ int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg
   free(sigma);
   free(hid);
   free(hg);
-  vf->build_seconds = now_s() - t0;
+  vf->build_seconds = fg_mono_s() - t0;
   *out = vf;
   return 0;
 nomem:
