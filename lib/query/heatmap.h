@@ -130,6 +130,16 @@ typedef struct fg_voxel_features fg_voxel_features; /* opaque, immutable once bu
 int fg_voxel_features_build(fg_voxel_features **out, const struct fg_field *f,
                             const fg_voxel_grid *g, int n_threads);
 
+/* A cache from given arrays instead of a field, for synthetic scenes in tests and tools:
+ * grid g, alpha (nz, ny, nx) in [0, 1], hidden vectors h (nz, ny, nx, 64) (read only where
+ * alpha >= FG_QUERY_ALPHA_FLOOR; may be NULL only if no voxel reaches it) and the feature
+ * head W (D, 64). Stored exactly as fg_voxel_features_build stores a field's samples
+ * (float16 h); trained_steps is 0. The arrays stay the caller's; the caller owns *out.
+ * FG_EINVAL (NULL, a bad grid, D outside 1..FG_FIELD_MAX_FEATURE_DIM, alpha not in [0, 1]),
+ * FG_ENOMEM. */
+int fg_voxel_features_from_arrays(fg_voxel_features **out, const fg_voxel_grid *g, int dim,
+                                  const float *alpha, const float *h, const float *W);
+
 /* Accepts NULL. */
 void fg_voxel_features_free(fg_voxel_features *vf);
 
@@ -146,6 +156,12 @@ double fg_voxel_features_build_seconds(const fg_voxel_features *vf); /* wall tim
  * grasp inference and tests. FG_ENOENT when the voxel keeps no features (alpha below the
  * floor), FG_EINVAL for idx out of range. */
 int fg_voxel_features_feature(const fg_voxel_features *vf, size_t idx, float *feat);
+
+/* The cache's arrays for grasp inference (grasp/grasp.h), owned by vf: kept (n_kept) flat
+ * indices of the voxels that keep features, ascending; h16 (n_kept, 64) their float16 hidden
+ * vectors; W (D, 64) the feature head. Any pointer argument may be NULL. */
+void fg_voxel_features_raw(const fg_voxel_features *vf, const uint32_t **kept,
+                           const uint16_t **h16, const float **W);
 
 /* Writes the cache to path atomically (temp file, fsync, rename; fsutil.h) so that a daemon
  * can keep it beside the field: "FGVOXF01", version, D, grid, trained_steps, the kept count,

@@ -54,6 +54,114 @@ static void gram(const float *W, int D, float *G) {
     }
 }
 
+/* Appends the voxels of flat indices [i0, i0 + n) whose alpha (already in vf->alpha) reaches
+ * the floor to the kept arrays at *nk: h from hid (n, 64), which is compacted in place; hg
+ * (n, 64) is scratch; G = W^T W. */
+static void keep_chunk(fg_voxel_features *vf, const float *G, size_t i0, size_t n, float *hid,
+                       float *hg, size_t *nk) {
+  size_t m = 0; /* compact the kept voxels of this chunk to the front of hid, as float16 */
+  for (size_t k = 0; k < n; k++) {
+    if (!(vf->alpha[i0 + k] >= FG_QUERY_ALPHA_FLOOR)) continue;
+    vf->kept[*nk + m] = (uint32_t)(i0 + k);
+    fg_float_to_half_n(hid + k * H, vf->h16 + (*nk + m) * H, H);
+    fg_half_to_float_n(vf->h16 + (*nk + m) * H, hid + m * H, H); /* the stored h */
+    m++;
+  }
+  if (m > 0) { /* |W h|^2 = h^T G h for the stored h */
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)m, H, H, 1.0f, hid, H, G, H,
+                0.0f, hg, H);
+    for (size_t k = 0; k < m; k++) {
+      double s = 0.0;
+      for (int j = 0; j < H; j++) s += (double)hid[k * H + j] * hg[k * H + j];
+      vf->inv_norm[*nk + k] = s > 1e-30 ? (float)(1.0 / sqrt(s)) : NAN;
+    }
+  }
+  *nk += m;
+}
+
+/* Sets the kept count and gives back what the empty voxels did not use. */
+static void finish_kept(fg_voxel_features *vf, size_t nk) {
+  vf->n_kept = nk;
+  if (nk < vf->n_vox) {
+    size_t keep = nk > 0 ? nk : 1;
+    uint32_t *k2 = realloc(vf->kept, keep * sizeof *k2);
+    uint16_t *h2 = realloc(vf->h16, keep * H * sizeof *h2);
+    float *i2 = realloc(vf->inv_norm, keep * sizeof *i2);
+    if (k2) vf->kept = k2;
+    if (h2) vf->h16 = h2;
+    if (i2) vf->inv_norm = i2;
+  }
+}
+
+/* A cache of D = dim for grid g with every array allocated for all N voxels (kept ones too),
+ * W copied and G = W^T W; NULL when out of memory. */
+static fg_voxel_features *cache_alloc(const fg_voxel_grid *g, int dim, const float *W, float *G) {
+  const size_t N = fg_voxel_grid_count(g);
+  fg_voxel_features *vf = calloc(1, sizeof *vf);
+  if (!vf) return NULL;
+  vf->grid = *g;
+  vf->dim = dim;
+  vf->n_vox = N;
+  vf->alpha = malloc(N * sizeof *vf->alpha);
+  vf->kept = malloc(N * sizeof *vf->kept);
+  vf->h16 = malloc(N * H * sizeof *vf->h16);
+  vf->inv_norm = malloc(N * sizeof *vf->inv_norm);
+  vf->W = malloc((size_t)dim * H * sizeof *vf->W);
+  if (!vf->alpha || !vf->kept || !vf->h16 || !vf->inv_norm || !vf->W) {
+    fg_voxel_features_free(vf);
+    return NULL;
+  }
+  memcpy(vf->W, W, (size_t)dim * H * sizeof(float));
+  gram(vf->W, dim, G);
+  return vf;
+}
+
+int fg_voxel_features_from_arrays(fg_voxel_features **out, const fg_voxel_grid *g, int dim,
+                                  const float *alpha, const float *h, const float *W) {
+  if (!out || !g || !alpha || !W) return fg_fail(FG_EINVAL, "voxel features: NULL argument");
+  *out = NULL;
+  if (dim < 1 || dim > FG_FIELD_MAX_FEATURE_DIM)
+    return fg_fail(FG_EINVAL, "voxel features: D must be in 1..%d, got %d",
+                   FG_FIELD_MAX_FEATURE_DIM, dim);
+  {
+    fg_voxel_grid chk;
+    FG_TRY(fg_voxel_grid_init(&chk, g->min, g->max, g->voxel_size));
+    if (chk.nx != g->nx || chk.ny != g->ny || chk.nz != g->nz)
+      return fg_fail(FG_EINVAL, "voxel features: the grid's sizes do not match its workspace");
+  }
+  const size_t N = fg_voxel_grid_count(g);
+  for (size_t i = 0; i < N; i++) {
+    if (!(alpha[i] >= 0.0f && alpha[i] <= 1.0f))
+      return fg_fail(FG_EINVAL, "voxel features: alpha[%zu] = %g is not in [0, 1]", i,
+                     (double)alpha[i]);
+    if (alpha[i] >= FG_QUERY_ALPHA_FLOOR && !h)
+      return fg_fail(FG_EINVAL, "voxel features: occupied voxels need hidden vectors");
+  }
+  float G[H * H];
+  fg_voxel_features *vf = cache_alloc(g, dim, W, G);
+  float *hid = malloc((size_t)BUILD_CHUNK * H * sizeof *hid);
+  float *hg = malloc((size_t)BUILD_CHUNK * H * sizeof *hg);
+  if (!vf || !hid || !hg) {
+    fg_voxel_features_free(vf);
+    free(hid);
+    free(hg);
+    return fg_fail(FG_ENOMEM, "voxel features: out of memory for %zu voxels", N);
+  }
+  memcpy(vf->alpha, alpha, N * sizeof *alpha);
+  size_t nk = 0;
+  for (size_t i0 = 0; i0 < N; i0 += BUILD_CHUNK) {
+    const size_t n = N - i0 < BUILD_CHUNK ? N - i0 : BUILD_CHUNK;
+    if (h)
+      memcpy(hid, h + i0 * H, n * H * sizeof *hid);
+    keep_chunk(vf, G, i0, n, hid, hg, &nk);
+  }
+  finish_kept(vf, nk);
+  free(hid);
+  free(hg);
+  *out = vf;
+  return 0;
+}
+
 int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg_voxel_grid *g,
                             int n_threads) {
   if (!out || !f || !g) return fg_fail(FG_EINVAL, "voxel features: NULL argument");
@@ -69,26 +177,15 @@ int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg
   const double t0 = fg_mono_s();
   const int D = f->cfg.feature_dim;
   const size_t N = fg_voxel_grid_count(g);
-  fg_voxel_features *vf = calloc(1, sizeof *vf);
+  float G[H * H];
+  fg_voxel_features *vf = cache_alloc(g, D, fg_field_group_const(f, FG_FIELD_FEAT_OUT, NULL), G);
   float *x = malloc((size_t)BUILD_CHUNK * 3 * sizeof *x);
   float *sigma = malloc((size_t)BUILD_CHUNK * sizeof *sigma);
   float *hid = malloc((size_t)BUILD_CHUNK * H * sizeof *hid);
   float *hg = malloc((size_t)BUILD_CHUNK * H * sizeof *hg);
-  float G[H * H];
   int rc = 0;
   if (!vf || !x || !sigma || !hid || !hg) goto nomem;
-  vf->grid = *g;
-  vf->dim = D;
   vf->trained_steps = f->trained_steps;
-  vf->n_vox = N;
-  vf->alpha = malloc(N * sizeof *vf->alpha);
-  vf->kept = malloc(N * sizeof *vf->kept);
-  vf->h16 = malloc(N * H * sizeof *vf->h16);
-  vf->inv_norm = malloc(N * sizeof *vf->inv_norm);
-  vf->W = malloc((size_t)D * H * sizeof *vf->W);
-  if (!vf->alpha || !vf->kept || !vf->h16 || !vf->inv_norm || !vf->W) goto nomem;
-  memcpy(vf->W, fg_field_group_const(f, FG_FIELD_FEAT_OUT, NULL), (size_t)D * H * sizeof(float));
-  gram(vf->W, D, G);
 
   const double vs = g->voxel_size;
   size_t nk = 0;
@@ -97,38 +194,14 @@ int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg
     fg_query_grid_centres_range(g, i0, n, x);
     rc = fg_field_features(f, x, (int64_t)n, sigma, hid, NULL, n_threads);
     if (rc < 0) goto error;
-    size_t m = 0; /* compact the kept voxels of this chunk to the front of hid, as float16 */
     for (size_t k = 0; k < n; k++) {
       float a = (float)(1.0 - exp(-(double)sigma[k] * vs));
       if (!(a >= 0.0f)) a = 0.0f; /* a NaN or negative density is empty space */
       vf->alpha[i0 + k] = a;
-      if (!(a >= FG_QUERY_ALPHA_FLOOR)) continue;
-      vf->kept[nk + m] = (uint32_t)(i0 + k);
-      fg_float_to_half_n(hid + k * H, vf->h16 + (nk + m) * H, H);
-      fg_half_to_float_n(vf->h16 + (nk + m) * H, hid + m * H, H); /* the stored h */
-      m++;
     }
-    if (m > 0) { /* |W h|^2 = h^T G h for the stored h */
-      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, (int)m, H, H, 1.0f, hid, H, G, H,
-                  0.0f, hg, H);
-      for (size_t k = 0; k < m; k++) {
-        double s = 0.0;
-        for (int j = 0; j < H; j++) s += (double)hid[k * H + j] * hg[k * H + j];
-        vf->inv_norm[nk + k] = s > 1e-30 ? (float)(1.0 / sqrt(s)) : NAN;
-      }
-    }
-    nk += m;
+    keep_chunk(vf, G, i0, n, hid, hg, &nk);
   }
-  vf->n_kept = nk;
-  if (nk < N) { /* give back what the empty voxels did not use */
-    size_t keep = nk > 0 ? nk : 1;
-    uint32_t *k2 = realloc(vf->kept, keep * sizeof *k2);
-    uint16_t *h2 = realloc(vf->h16, keep * H * sizeof *h2);
-    float *i2 = realloc(vf->inv_norm, keep * sizeof *i2);
-    if (k2) vf->kept = k2;
-    if (h2) vf->h16 = h2;
-    if (i2) vf->inv_norm = i2;
-  }
+  finish_kept(vf, nk);
   free(x);
   free(sigma);
   free(hid);
@@ -162,6 +235,13 @@ size_t fg_voxel_features_bytes(const fg_voxel_features *vf) {
   size_t kept = vf->n_kept > 0 ? vf->n_kept : 1;
   return sizeof *vf + vf->n_vox * sizeof(float) + kept * (sizeof(uint32_t) + H * 2 + 4) +
          (size_t)vf->dim * H * sizeof(float);
+}
+
+void fg_voxel_features_raw(const fg_voxel_features *vf, const uint32_t **kept,
+                           const uint16_t **h16, const float **W) {
+  if (kept) *kept = vf->kept;
+  if (h16) *h16 = vf->h16;
+  if (W) *W = vf->W;
 }
 
 /* Slot of flat index idx among the kept voxels, or -1. */
