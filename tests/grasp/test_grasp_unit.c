@@ -1,0 +1,448 @@
+/* Grasp library, unit level: query points, gripper boxes, the SO(3) cover, the fast cost
+ * against the double-precision reference and its gradient against finite differences, the
+ * collision check, and the search on a synthetic scene where the answer is known exactly: an
+ * asymmetric object and a copy of it turned by 90 degrees about z and moved, both on the
+ * voxel lattice, so a demo on the first must be found again on both. */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "core/error.h"
+#include "core/pose.h"
+#include "field/model.h"
+#include "grasp/grasp.h"
+#include "query/heatmap.h"
+#include "test.h"
+
+#define HID FG_FIELD_FEATURE_HIDDEN
+
+static uint64_t rng = 0x9e3779b97f4a7c15ull;
+
+/* Uniform in [-1, 1) (xorshift64). */
+static double urand(void) {
+  rng ^= rng << 13;
+  rng ^= rng >> 7;
+  rng ^= rng << 17;
+  return (double)(rng >> 11) * (1.0 / 9007199254740992.0) * 2.0 - 1.0;
+}
+
+static void random_quat(double q[4]) {
+  double n = 0.0;
+  do {
+    n = 0.0;
+    for (int k = 0; k < 4; k++) {
+      q[k] = urand();
+      n += q[k] * q[k];
+    }
+  } while (n < 0.01 || n > 1.0);
+  for (int k = 0; k < 4; k++) q[k] /= sqrt(n);
+}
+
+/* Angle between the rotations of two poses. */
+static double angle_between(const double A[16], const double B[16]) {
+  double tr = 0.0;
+  for (int r = 0; r < 3; r++)
+    for (int c = 0; c < 3; c++) tr += A[4 * r + c] * B[4 * r + c];
+  double c = (tr - 1.0) / 2.0;
+  return acos(c > 1 ? 1 : c < -1 ? -1 : c);
+}
+
+static double dist_between(const double A[16], const double B[16]) {
+  const double d[3] = {A[3] - B[3], A[7] - B[7], A[11] - B[11]};
+  return sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+}
+
+/* C = A B for 4x4 row-major. */
+static void mul4(const double A[16], const double B[16], double C[16]) {
+  for (int r = 0; r < 4; r++)
+    for (int c = 0; c < 4; c++) {
+      double s = 0.0;
+      for (int k = 0; k < 4; k++) s += A[4 * r + k] * B[4 * k + c];
+      C[4 * r + c] = s;
+    }
+}
+
+/* ---------------------------------------------------------------- query points */
+
+static void test_query_points(void) {
+  enum { N = 1000 };
+  float *a = malloc(N * 3 * sizeof *a), *b = malloc(N * 3 * sizeof *b);
+  const double mean[3] = {0.01, -0.02, 0.03};
+  ASSERT_OK(fg_grasp_query_points(N, mean, 0.01, a));
+  ASSERT_OK(fg_grasp_query_points(N, mean, 0.01, b));
+  ASSERT(memcmp(a, b, N * 3 * sizeof *a) == 0); /* fixed stream */
+  /* a prefix of a longer draw: n points are the first n of any larger n */
+  ASSERT_OK(fg_grasp_query_points(100, mean, 0.01, b));
+  ASSERT(memcmp(a, b, 100 * 3 * sizeof *a) == 0);
+  for (int ax = 0; ax < 3; ax++) {
+    double s = 0.0, s2 = 0.0;
+    for (int i = 0; i < N; i++) {
+      s += a[3 * i + ax];
+      s2 += (a[3 * i + ax] - mean[ax]) * (a[3 * i + ax] - mean[ax]);
+    }
+    ASSERT_NEAR(s / N, mean[ax], 0.0015);          /* 5 sigma of the mean: 5 * 0.01 / 31.6 */
+    ASSERT_NEAR(sqrt(s2 / N), 0.01, 0.0012);
+  }
+  ASSERT_ERR(fg_grasp_query_points(0, mean, 0.01, a), FG_EINVAL, "1..1000");
+  ASSERT_ERR(fg_grasp_query_points(1001, mean, 0.01, a), FG_EINVAL, "1..1000");
+  ASSERT_ERR(fg_grasp_query_points(10, mean, 0.0, a), FG_EINVAL, "std");
+  ASSERT_ERR(fg_grasp_query_points(10, mean, NAN, a), FG_EINVAL, "std");
+  const double bad[3] = {0, INFINITY, 0};
+  ASSERT_ERR(fg_grasp_query_points(10, bad, 0.01, a), FG_EINVAL, "mean");
+  free(a);
+  free(b);
+}
+
+/* ---------------------------------------------------------------- gripper models */
+
+static void test_gripper(void) {
+  fg_gripper_model m;
+  ASSERT_OK(fg_gripper_model_parse("robotiq-2f85", &m));
+  ASSERT_EQ(m, FG_GRIPPER_ROBOTIQ_2F85);
+  ASSERT_ERR(fg_gripper_model_parse("suction", &m), FG_EINVAL, "panda");
+  for (int k = 0; k < FG_GRIPPER_N_MODELS; k++) {
+    const fg_gripper_spec *s = fg_gripper_spec_get((fg_gripper_model)k);
+    fg_gripper_box b[FG_GRIPPER_N_BOXES];
+    ASSERT_OK(fg_gripper_boxes((fg_gripper_model)k, 0.05, b));
+    /* inner finger faces at +-width/2, symmetric, reaching just past the TCP */
+    ASSERT_NEAR(b[2].centre_m[1] - b[2].half_m[1], 0.025, 1e-12);
+    ASSERT_NEAR(b[1].centre_m[1] + b[1].half_m[1], -0.025, 1e-12);
+    ASSERT_NEAR(b[1].centre_m[2] + b[1].half_m[2], s->tip_beyond_tcp_m, 1e-12);
+    /* the palm ends where the fingers start, behind the TCP */
+    ASSERT_NEAR(b[0].centre_m[2] + b[0].half_m[2], b[1].centre_m[2] - b[1].half_m[2], 1e-12);
+    ASSERT(b[0].centre_m[2] < 0);
+    ASSERT_ERR(fg_gripper_boxes((fg_gripper_model)k, s->stroke_m + 0.001, b), FG_EINVAL,
+               "stroke");
+    ASSERT_ERR(fg_gripper_boxes((fg_gripper_model)k, -0.001, b), FG_EINVAL, "stroke");
+  }
+  ASSERT_NEAR(fg_gripper_spec_get(FG_GRIPPER_PANDA)->stroke_m, 0.08, 1e-12);
+  ASSERT_NEAR(fg_gripper_spec_get(FG_GRIPPER_ROBOTIQ_2F140)->stroke_m, 0.14, 1e-12);
+}
+
+/* ---------------------------------------------------------------- SO(3) cover */
+
+/* The spiral's largest gap: the angle from a random rotation to its nearest member, over
+ * many random rotations, shrinks with n like a uniform cover. */
+static void test_so3(void) {
+  const int ns[3] = {8, 24, 72};
+  const double max_gap_deg[3] = {140.0, 85.0, 60.0};
+  for (int t = 0; t < 3; t++) {
+    const int n = ns[t];
+    double *q = malloc((size_t)n * 4 * sizeof *q);
+    fg_so3_super_fibonacci(n, q);
+    for (int i = 0; i < n; i++) {
+      ASSERT_NEAR(q[4 * i] * q[4 * i] + q[4 * i + 1] * q[4 * i + 1] +
+                      q[4 * i + 2] * q[4 * i + 2] + q[4 * i + 3] * q[4 * i + 3],
+                  1.0, 1e-12);
+      ASSERT(q[4 * i] >= 0);
+    }
+    double worst = 0.0;
+    for (int k = 0; k < 2000; k++) {
+      double r[4];
+      random_quat(r);
+      double best = 0.0;
+      for (int i = 0; i < n; i++) {
+        const double d = fabs(r[0] * q[4 * i] + r[1] * q[4 * i + 1] + r[2] * q[4 * i + 2] +
+                              r[3] * q[4 * i + 3]);
+        if (d > best) best = d;
+      }
+      const double ang = 2.0 * acos(best > 1 ? 1 : best) * 180.0 / M_PI;
+      if (ang > worst) worst = ang;
+    }
+    printf("so3: %d rotations, largest gap %.1f degrees\n", n, worst);
+    ASSERT(worst < max_gap_deg[t]);
+    free(q);
+  }
+}
+
+/* ---------------------------------------------------------------- cost and gradient */
+
+static fg_voxel_features *random_cache(int D) {
+  const double mn[3] = {0.0, 0.0, 0.0}, mx[3] = {0.2, 0.2, 0.12};
+  fg_field_config cfg;
+  ASSERT_OK(fg_field_config_for_workspace(&cfg, mn, mx, 1.0, D));
+  fg_field *f = NULL;
+  ASSERT_OK(fg_field_new(&f, &cfg, 11));
+  fg_voxel_grid g;
+  ASSERT_OK(fg_voxel_grid_init(&g, mn, mx, 0.01));
+  fg_voxel_features *vf = NULL;
+  ASSERT_OK(fg_voxel_features_build(&vf, f, &g, 2));
+  fg_field_free(f);
+  return vf;
+}
+
+static void test_cost(void) {
+  enum { D = 40, NQ = 60 };
+  fg_voxel_features *vf = random_cache(D);
+  ASSERT(fg_voxel_features_n_kept(vf) > 100);
+  fg_grasp_field *gf = NULL;
+  ASSERT_OK(fg_grasp_field_new(&gf, vf, 2));
+  float p[NQ * 3], Z[NQ * D], q[D];
+  const double mean[3] = {0, 0, 0.005};
+  ASSERT_OK(fg_grasp_query_points(NQ, mean, 0.012, p));
+  for (int i = 0; i < NQ * D; i++) Z[i] = (float)urand();
+  double qn = 0.0;
+  for (int d = 0; d < D; d++) {
+    q[d] = (float)urand();
+    qn += (double)q[d] * q[d];
+  }
+  for (int d = 0; d < D; d++) q[d] /= (float)sqrt(qn);
+  for (int with_q = 0; with_q < 2; with_q++) {
+    fg_grasp_target t = {NQ, D, p, Z, with_q ? q : NULL};
+    for (int k = 0; k < 40; k++) {
+      double qu[4], T[16];
+      const double pos[3] = {0.1 + 0.07 * urand(), 0.1 + 0.07 * urand(), 0.06 + 0.04 * urand()};
+      random_quat(qu);
+      ASSERT_OK(fg_pose_from_quat(pos, qu, T));
+      double gt[3], gw[3], cosv, w;
+      const double J = fg_grasp_cost(gf, &t, T, gt, gw, &cosv, &w);
+      const double Jr = fg_grasp_cost_ref(vf, &t, T);
+      ASSERT(isfinite(J));
+      ASSERT_NEAR(J, Jr, 2e-4 * (1 + fabs(Jr)));
+      if (!with_q) ASSERT_NEAR(J, -cosv, 1e-12);
+      /* central differences: translation along world axes, rotation exp([w]) on the left
+       * about the TCP. Trilinear interpolation has kinks on the cell faces, so a difference
+       * whose interval straddles one is off: the smallest error over three step sizes counts
+       * (float sums limit the smallest step). */
+      for (int a = 0; a < 3; a++) {
+        double err_t = INFINITY, err_w = INFINITY;
+        for (double h = 1e-5; h > 5e-7; h /= 3.0) {
+          double Tp[16], Tm[16];
+          memcpy(Tp, T, sizeof Tp);
+          memcpy(Tm, T, sizeof Tm);
+          Tp[4 * a + 3] += h;
+          Tm[4 * a + 3] -= h;
+          const double fd = (fg_grasp_cost(gf, &t, Tp, NULL, NULL, NULL, NULL) -
+                             fg_grasp_cost(gf, &t, Tm, NULL, NULL, NULL, NULL)) / (2 * h);
+          err_t = fmin(err_t, fabs(gt[a] - fd) / (1 + fabs(fd)));
+          const double hw = 10 * h, zero[3] = {0, 0, 0};
+          double Tr[2][16];
+          for (int sgn = 0; sgn < 2; sgn++) {
+            double qr[4] = {cos(hw / 2), 0, 0, 0}, Rw[16];
+            qr[1 + a] = (sgn ? -1 : 1) * sin(hw / 2);
+            ASSERT_OK(fg_pose_from_quat(zero, qr, Rw));
+            mul4(Rw, T, Tr[sgn]);
+            Tr[sgn][3] = T[3], Tr[sgn][7] = T[7], Tr[sgn][11] = T[11];
+          }
+          const double fdw = (fg_grasp_cost(gf, &t, Tr[0], NULL, NULL, NULL, NULL) -
+                              fg_grasp_cost(gf, &t, Tr[1], NULL, NULL, NULL, NULL)) / (2 * hw);
+          err_w = fmin(err_w, fabs(gw[a] - fdw) / (1 + fabs(fdw)));
+        }
+        ASSERT(err_t < 1e-2);
+        ASSERT(err_w < 1e-2);
+      }
+    }
+  }
+  /* a pose far outside the grid sees nothing: cost 0, gradient 0 */
+  {
+    fg_grasp_target t = {NQ, D, p, Z, NULL};
+    const double pos[3] = {5, 5, 5}, qi[4] = {1, 0, 0, 0};
+    double T[16], gt[3], gw[3];
+    ASSERT_OK(fg_pose_from_quat(pos, qi, T));
+    ASSERT_NEAR(fg_grasp_cost(gf, &t, T, gt, gw, NULL, NULL), 0.0, 0.0);
+    ASSERT_NEAR(gt[0] + gt[1] + gt[2] + gw[0] + gw[1] + gw[2], 0.0, 0.0);
+    t.dim = D + 1;
+    ASSERT(isnan(fg_grasp_cost(gf, &t, T, NULL, NULL, NULL, NULL)));
+    fg_grasp_result r;
+    ASSERT_ERR(fg_grasp_search(gf, &t, NULL, &r), FG_EINVAL, "D = 41");
+  }
+  fg_grasp_field_free(gf);
+  fg_voxel_features_free(vf);
+}
+
+/* ---------------------------------------------------------------- synthetic scene */
+
+#define NX 40
+#define NY 30
+#define NZ 14
+#define VS 0.01
+
+/* An asymmetric object of voxel offsets from its pivot: an L-shaped base with a post on one
+ * arm, two materials (the post is the second). */
+static const int shape[][4] = {
+  /* dx, dy, dz, material */
+  {0, 0, 0, 0}, {1, 0, 0, 0}, {2, 0, 0, 0}, {3, 0, 0, 0}, {0, 1, 0, 0}, {0, 2, 0, 0},
+  {0, 0, 1, 0}, {1, 0, 1, 0}, {2, 0, 1, 0}, {3, 0, 1, 0}, {0, 1, 1, 0}, {0, 2, 1, 0},
+  {3, 0, 2, 1}, {3, 0, 3, 1}, {3, 0, 4, 1}, {0, 2, 2, 1},
+};
+#define N_SHAPE ((int)(sizeof shape / sizeof shape[0]))
+
+typedef struct synth {
+  fg_voxel_grid g;
+  float *alpha, *h, *W;
+  int D;
+} synth;
+
+static void put_object(synth *s, const int pivot[3], int quarter_turns, const float *hmat) {
+  for (int k = 0; k < N_SHAPE; k++) {
+    int dx = shape[k][0], dy = shape[k][1];
+    for (int q = 0; q < quarter_turns; q++) { /* +90 degrees about z */
+      const int t = dx;
+      dx = -dy;
+      dy = t;
+    }
+    const int ix = pivot[0] + dx, iy = pivot[1] + dy, iz = pivot[2] + shape[k][2];
+    const size_t idx = ((size_t)iz * NY + iy) * NX + ix;
+    s->alpha[idx] = 0.95f;
+    memcpy(s->h + idx * HID, hmat + shape[k][3] * HID, HID * sizeof(float));
+  }
+}
+
+static void test_search_synthetic(void) {
+  synth s = {0};
+  s.D = 32;
+  const double mn[3] = {0, 0, 0}, mx[3] = {NX * VS, NY * VS, NZ * VS};
+  ASSERT_OK(fg_voxel_grid_init(&s.g, mn, mx, VS));
+  ASSERT_EQ(fg_voxel_grid_count(&s.g), NX * NY * NZ);
+  const size_t N = fg_voxel_grid_count(&s.g);
+  s.alpha = calloc(N, sizeof *s.alpha);
+  s.h = calloc(N * HID, sizeof *s.h);
+  s.W = malloc((size_t)s.D * HID * sizeof *s.W);
+  for (int i = 0; i < s.D * HID; i++) s.W[i] = (float)urand() * 0.2f;
+  float hmat[2 * HID];
+  for (int i = 0; i < 2 * HID; i++) hmat[i] = (float)urand();
+  /* the demo object at pivot A; its copy at B turned by +90 degrees about z */
+  const int A[3] = {8, 8, 2}, B[3] = {28, 16, 2};
+  put_object(&s, A, 0, hmat);
+  put_object(&s, B, 1, hmat);
+  fg_voxel_features *vf = NULL;
+  ASSERT_OK(fg_voxel_features_from_arrays(&vf, &s.g, s.D, s.alpha, s.h, s.W));
+  ASSERT_EQ(fg_voxel_features_n_kept(vf), 2 * N_SHAPE);
+  fg_grasp_field *gf = NULL;
+  ASSERT_OK(fg_grasp_field_new(&gf, vf, 2));
+
+  /* demo: TCP at the top of the post's base (voxel (3,0,2) of A), approaching from above
+   * (gripper z = world -z) and closing along world y */
+  double c[3];
+  fg_voxel_grid_centre(&s.g, A[0] + 3, A[1], A[2] + 2, c);
+  const double T_demo[16] = {-1, 0, 0, c[0], 0, 1, 0, c[1], 0, 0, -1, c[2] + 0.004, 0, 0, 0, 1};
+  enum { NQ = 100 };
+  float p[NQ * 3];
+  const double mean[3] = {0, 0, 0};
+  ASSERT_OK(fg_grasp_query_points(NQ, mean, 0.015, p));
+  float *Z = malloc((size_t)NQ * s.D * sizeof *Z);
+  ASSERT_OK(fg_grasp_sample(gf, T_demo, p, NQ, Z));
+  fg_grasp_target t = {NQ, s.D, p, Z, NULL};
+  ASSERT_NEAR(fg_grasp_cost(gf, &t, T_demo, NULL, NULL, NULL, NULL), -1.0, 1e-5);
+
+  /* the copy's expected pose: M T_demo, M = turn by 90 degrees about z around B's pivot
+   * after moving A's pivot onto it */
+  double pa[3], pb[3];
+  fg_voxel_grid_centre(&s.g, A[0], A[1], A[2], pa);
+  fg_voxel_grid_centre(&s.g, B[0], B[1], B[2], pb);
+  const double M[16] = {0, -1, 0, pb[0] + pa[1], 1, 0, 0, pb[1] - pa[0], 0, 0, 1, pb[2] - pa[2],
+                        0, 0, 0, 1};
+  double T_copy[16];
+  mul4(M, T_demo, T_copy);
+  ASSERT_NEAR(fg_grasp_cost(gf, &t, T_copy, NULL, NULL, NULL, NULL), -1.0, 1e-4);
+
+  fg_grasp_options o;
+  fg_grasp_options_default(&o);
+  o.check_collisions = 0;
+  o.top_k = 4;
+  o.n_threads = 2;
+  fg_grasp_result r2, r1;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r2));
+  ASSERT(r2.n >= 2);
+  printf("synthetic: %zu candidates x %d rotations, %zu optimised, best score %.5f, %.3f s\n",
+         r2.stats.candidates, r2.stats.rotations, r2.stats.poses_optimised, r2.poses[0].score,
+         r2.stats.seconds);
+  ASSERT_EQ(r2.stats.candidates, 2 * N_SHAPE);
+  int found_demo = 0, found_copy = 0;
+  for (int k = 0; k < 2; k++) {
+    const double *T = r2.poses[k].T_world_gripper;
+    printf("  %d: score %.5f, %.2f mm / %.2f deg from the demo, %.2f mm / %.2f deg from the "
+           "copy\n", k, r2.poses[k].score, 1e3 * dist_between(T, T_demo),
+           angle_between(T, T_demo) * 180 / M_PI, 1e3 * dist_between(T, T_copy),
+           angle_between(T, T_copy) * 180 / M_PI);
+    ASSERT(r2.poses[k].score > 0.99);
+    found_demo |= dist_between(T, T_demo) < 0.003 && angle_between(T, T_demo) < 3 * M_PI / 180;
+    found_copy |= dist_between(T, T_copy) < 0.003 && angle_between(T, T_copy) < 3 * M_PI / 180;
+  }
+  ASSERT(found_demo && found_copy);
+  /* bit-identical for another thread count, different for another seed */
+  o.n_threads = 1;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT_EQ(r1.n, r2.n);
+  ASSERT(memcmp(r1.poses, r2.poses, (size_t)r1.n * sizeof *r1.poses) == 0);
+  fg_grasp_result_release(&r1);
+  o.seed = 7;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT(r1.n >= 1 && r1.poses[0].score > 0.99);
+  ASSERT(memcmp(r1.poses, r2.poses, sizeof *r1.poses) != 0);
+  fg_grasp_result_release(&r1);
+
+  /* collisions: the demo pose with a 2F-85 open to 6 cm straddles the post; closed to 1 cm
+   * its fingers cut through it; moved down 8 cm its palm comes down on the object */
+  ASSERT_EQ(fg_grasp_collides(gf, FG_GRIPPER_ROBOTIQ_2F85, 0.06, T_demo, 0.5f), 0);
+  ASSERT_EQ(fg_grasp_collides(gf, FG_GRIPPER_ROBOTIQ_2F85, 0.01, T_demo, 0.5f), 1);
+  double T_low[16];
+  memcpy(T_low, T_demo, sizeof T_low);
+  T_low[11] -= 0.08;
+  ASSERT_EQ(fg_grasp_collides(gf, FG_GRIPPER_ROBOTIQ_2F85, 0.06, T_low, 0.5f), 1);
+  ASSERT_ERR(fg_grasp_collides(gf, FG_GRIPPER_ROBOTIQ_2F85, 0.2, T_demo, 0.5f), FG_EINVAL,
+             "stroke");
+  /* with collisions checked, every result is free */
+  o.check_collisions = 1;
+  o.gripper = FG_GRIPPER_ROBOTIQ_2F85;
+  o.width_m = 0.06;
+  o.seed = 0;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT(r1.n >= 1);
+  ASSERT(r1.stats.rejected_collisions > 0);
+  for (int k = 0; k < r1.n; k++) {
+    ASSERT_EQ(r1.poses[k].collision_free, 1);
+    ASSERT_EQ(fg_grasp_collides(gf, o.gripper, o.width_m, r1.poses[k].T_world_gripper, 0.1f), 0);
+  }
+  fg_grasp_result_release(&r1);
+
+  /* the language weight: q along the post's feature raises its poses' weight */
+  float fpost[64];
+  ASSERT_OK(fg_voxel_features_feature(vf, ((size_t)(A[2] + 3) * NY + A[1]) * NX + A[0] + 3,
+                                      fpost));
+  double nn = 0.0;
+  for (int d = 0; d < s.D; d++) nn += fpost[d] * fpost[d];
+  float q[64];
+  for (int d = 0; d < s.D; d++) q[d] = (float)(fpost[d] / sqrt(nn));
+  t.q = q;
+  double cosv, w;
+  const double J = fg_grasp_cost(gf, &t, T_demo, NULL, NULL, &cosv, &w);
+  ASSERT(w > 0.0);
+  ASSERT_NEAR(J, -w * cosv, 1e-12);
+  ASSERT_NEAR(J, fg_grasp_cost_ref(vf, &t, T_demo), 1e-4 * (1 + fabs(J)));
+
+  /* a mask that rules out every candidate: an empty result with a reason */
+  uint8_t *mask = calloc(N, 1);
+  o.candidate_mask = mask;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT_EQ(r1.n, 0);
+  ASSERT(r1.reason && strstr(r1.reason, "mask"));
+  fg_grasp_result_release(&r1);
+  free(mask);
+  /* bad options */
+  fg_grasp_options_default(&o);
+  o.top_k = 0;
+  ASSERT_ERR(fg_grasp_search(gf, &t, &o, &r1), FG_EINVAL, "top_k");
+  fg_grasp_options_default(&o);
+  o.n_rotations = 4;
+  ASSERT_ERR(fg_grasp_search(gf, &t, &o, &r1), FG_EINVAL, "rotations");
+
+  fg_grasp_result_release(&r2);
+  free(Z);
+  fg_grasp_field_free(gf);
+  fg_voxel_features_free(vf);
+  free(s.alpha);
+  free(s.h);
+  free(s.W);
+}
+
+int main(void) {
+  test_query_points();
+  test_gripper();
+  test_so3();
+  test_cost();
+  test_search_synthetic();
+  printf("grasp_unit: ok\n");
+  return 0;
+}
