@@ -146,44 +146,47 @@ size_t fg_grasp_field_bytes(const fg_grasp_field *gf) {
 
 /* ---------------------------------------------------------------- trilinear sampling */
 
-int fg_grasp_corners(const fg_voxel_grid *g, const int32_t *slot, const float x[3],
-                     fg_grasp_corner c[8]) {
-  const double vs = g->voxel_size;
-  int i0[3];
-  double f[3];
+static inline int corners_at(const fg_voxel_grid *g, const int32_t *slot, const float x[3],
+                             fg_grasp_corner c[8]) {
+  const float inv = (float)(1.0 / g->voxel_size);
   const int n[3] = {g->nx, g->ny, g->nz};
+  int i0[3];
+  float f[3];
   for (int a = 0; a < 3; a++) {
-    const double u = ((double)x[a] - g->min[a]) / vs - 0.5;
-    if (!(u > -1.0 && u < (double)n[a])) return 0; /* no corner inside the grid */
-    const double fl = floor(u);
+    const float u = (x[a] - (float)g->min[a]) * inv - 0.5f;
+    if (!(u > -1.0f && u < (float)n[a])) return 0; /* no corner inside the grid */
+    const float fl = floorf(u);
     i0[a] = (int)fl;
     f[a] = u - fl;
   }
+  const size_t sx = 1, sy = (size_t)n[0], sz = (size_t)n[0] * (size_t)n[1];
+  const int interior = i0[0] >= 0 && i0[0] + 1 < n[0] && i0[1] >= 0 && i0[1] + 1 < n[1] &&
+                       i0[2] >= 0 && i0[2] + 1 < n[2];
+  const float w0[3] = {1.0f - f[0], 1.0f - f[1], 1.0f - f[2]};
   int m = 0;
   for (int k = 0; k < 8; k++) {
-    const int d[3] = {k & 1, (k >> 1) & 1, (k >> 2) & 1};
-    int idx[3], ok = 1;
-    for (int a = 0; a < 3; a++) {
-      idx[a] = i0[a] + d[a];
-      if (idx[a] < 0 || idx[a] >= n[a]) ok = 0;
-    }
-    if (!ok) continue;
-    const int32_t s = slot[((size_t)idx[2] * (size_t)g->ny + (size_t)idx[1]) * (size_t)g->nx +
-                           (size_t)idx[0]];
+    const int dx = k & 1, dy = (k >> 1) & 1, dz = (k >> 2) & 1;
+    if (!interior && (i0[0] + dx < 0 || i0[0] + dx >= n[0] || i0[1] + dy < 0 ||
+                      i0[1] + dy >= n[1] || i0[2] + dz < 0 || i0[2] + dz >= n[2]))
+      continue;
+    const int32_t s = slot[(size_t)(i0[2] + dz) * sz + (size_t)(i0[1] + dy) * sy +
+                           (size_t)(i0[0] + dx) * sx];
     if (s < 0) continue;
-    double w[3], dw[3];
-    for (int a = 0; a < 3; a++) {
-      w[a] = d[a] ? f[a] : 1.0 - f[a];
-      dw[a] = (d[a] ? 1.0 : -1.0) / vs;
-    }
+    const float wx = dx ? f[0] : w0[0], wy = dy ? f[1] : w0[1], wz = dz ? f[2] : w0[2];
+    const float gx = dx ? inv : -inv, gy = dy ? inv : -inv, gz = dz ? inv : -inv;
     c[m].slot = s;
-    c[m].w = (float)(w[0] * w[1] * w[2]);
-    c[m].dw[0] = (float)(dw[0] * w[1] * w[2]);
-    c[m].dw[1] = (float)(w[0] * dw[1] * w[2]);
-    c[m].dw[2] = (float)(w[0] * w[1] * dw[2]);
+    c[m].w = wx * wy * wz;
+    c[m].dw[0] = gx * wy * wz;
+    c[m].dw[1] = wx * gy * wz;
+    c[m].dw[2] = wx * wy * gz;
     m++;
   }
   return m;
+}
+
+int fg_grasp_corners(const fg_voxel_grid *g, const int32_t *slot, const float x[3],
+                     fg_grasp_corner c[8]) {
+  return corners_at(g, slot, x, c);
 }
 
 void fg_grasp_transform_points(const double T[16], const float *p, int n, float *x) {
@@ -280,6 +283,10 @@ void fg_grasp_prepared_release(fg_grasp_prepared *p) {
   memset(p, 0, sizeof *p);
 }
 
+/* Compiled for AVX-512, AVX2 and the baseline and picked at load time: the 64-wide loops are
+ * the whole cost. None of the clones contracts to FMA (ISO C11 mode), but the lane count fixes
+ * the order of the sums, so results are identical on one machine, not across processors. */
+__attribute__((target_clones("avx512f", "avx2", "default")))
 double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
                           const double T[16], double d_t[3], double d_w[3], double *cos_out,
                           double *weight_out, fg_grasp_scratch *s) {
@@ -290,10 +297,19 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
   for (int i = 0; i < n; i++) {
     float *u = s->u + (size_t)i * H;
     fg_grasp_corner *c = s->c + (size_t)i * 8;
-    const int m = fg_grasp_corners(&gf->grid, gf->slot, s->x + 3 * i, c);
+    const int m = corners_at(&gf->grid, gf->slot, s->x + 3 * i, c);
     s->m[i] = m;
-    for (int j = 0; j < H; j++) u[j] = 0.0f;
-    for (int k = 0; k < m; k++) {
+    if (m == 0) { /* free space: u = 0 adds nothing */
+      for (int j = 0; j < H; j++) u[j] = 0.0f;
+      continue;
+    }
+    {
+      const float *y = gf->y + (size_t)c[0].slot * H;
+      const float w = c[0].w;
+#pragma omp simd
+      for (int j = 0; j < H; j++) u[j] = w * y[j];
+    }
+    for (int k = 1; k < m; k++) {
       const float *y = gf->y + (size_t)c[k].slot * H;
       const float w = c[k].w;
 #pragma omp simd
@@ -382,6 +398,21 @@ double fg_grasp_cost(const fg_grasp_field *gf, const fg_grasp_target *t,
   fg_grasp_scratch_release(&s);
   fg_grasp_prepared_release(&p);
   return J;
+}
+
+double fg_grasp_task_similarity(const float *Z, int n_points, int dim, const float *q) {
+  if (!Z || !q || n_points < 1 || dim < 1) return NAN;
+  double dot = 0.0, mm = 0.0, qq = 0.0;
+  for (int d = 0; d < dim; d++) {
+    double m = 0.0;
+    for (int i = 0; i < n_points; i++) m += Z[(size_t)i * dim + d];
+    m /= n_points;
+    dot += m * q[d];
+    mm += m * m;
+    qq += (double)q[d] * q[d];
+  }
+  if (!(mm > 0.0) || !(qq > 0.0) || !isfinite(dot)) return NAN;
+  return dot / sqrt(mm * qq);
 }
 
 /* ---------------------------------------------------------------- reference */

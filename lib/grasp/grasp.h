@@ -108,6 +108,11 @@ double fg_grasp_cost(const fg_grasp_field *gf, const fg_grasp_target *t,
 double fg_grasp_cost_ref(const fg_voxel_features *vf, const fg_grasp_target *t,
                          const double T_world_gripper[16]);
 
+/* F3RM's task retrieval by language: the cosine between a task's mean query-point feature
+ * (the mean of the rows of Z (n_points, D)) and a query q (D). NaN when either is zero or
+ * holds a value that is not finite. */
+double fg_grasp_task_similarity(const float *Z, int n_points, int dim, const float *q);
+
 /* ---- rotations and collisions ----------------------------------------------------------- */
 
 /* n rotations of the super-Fibonacci spiral (Alexa, "Super-Fibonacci Spirals: Fast,
