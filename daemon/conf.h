@@ -11,6 +11,8 @@
 
 #include <stddef.h>
 
+#include "grasp/gripper.h" /* fg_gripper_model: [gripper] model */
+
 #define FG_CONF_DEFAULT_PATH "/etc/fieldgrip/fieldgripd.conf"
 #define FG_CONF_DEFAULT_STATE_DIR "/var/lib/fieldgrip"
 #define FG_CONF_DEFAULT_LISTEN "127.0.0.1:7070"
@@ -18,11 +20,6 @@
 
 typedef enum { FG_TRANSPORT_NONE = 0, FG_TRANSPORT_TCP, FG_TRANSPORT_RTU } fg_transport;
 typedef enum { FG_ENCODING_INT16 = 0, FG_ENCODING_FLOAT32 } fg_encoding;
-typedef enum {
-  FG_GRIPPER_PANDA = 0,
-  FG_GRIPPER_ROBOTIQ_2F85,
-  FG_GRIPPER_ROBOTIQ_2F140
-} fg_gripper_model;
 
 /* A Modbus peer ([robot] or [gripper.modbus]). */
 typedef struct fg_conf_modbus {
