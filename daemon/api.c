@@ -43,6 +43,15 @@ const fg_route fg_api_routes[] = {
   {"GET", "/v1/robot/commands/{}", "/v1/robot/commands/{id}", fg_api_robot_command_get, 0},
   {"GET", "/v1/gripper", "/v1/gripper", fg_api_gripper_get, 0},
   {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_gripper_action, FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/tasks", "/v1/tasks", fg_api_tasks_list, 0},
+  {"GET", "/v1/tasks/{}", "/v1/tasks/{t}", fg_api_task_get, 0},
+  {"DELETE", "/v1/tasks/{}", "/v1/tasks/{t}", fg_api_task_delete, 0},
+  {"POST", "/v1/tasks/{}/demos", "/v1/tasks/{t}/demos", fg_api_task_demo_add, FG_ROUTE_OFFLOAD},
+  {"DELETE", "/v1/tasks/{}/demos/{}", "/v1/tasks/{t}/demos/{i}", fg_api_task_demo_delete, 0},
+  {"POST", "/v1/scenes/{}/grasps", "/v1/scenes/{s}/grasps", fg_api_scene_grasps,
+   FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/scenes/{}/grasps/{}/execute", "/v1/scenes/{s}/grasps/{id}/execute",
+   fg_api_grasp_execute, FG_ROUTE_OFFLOAD},
 };
 const size_t fg_api_n_routes = sizeof fg_api_routes / sizeof fg_api_routes[0];
 

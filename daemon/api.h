@@ -21,6 +21,8 @@ typedef struct fg_app {
   struct fg_clip_svc *clip;   /* the CLIP model of [clip] (clip_svc.h) */
   struct fg_robot_svc *robot; /* the [robot] and [gripper.modbus] peers (robot.h) */
   struct fg_idem *idem;       /* Idempotency-Keys of actuating requests (idem.h) */
+  struct fg_tasks *tasks;     /* the demonstration library (tasks.h) */
+  struct fg_grasp_log *grasps; /* recent grasps, for execute (grasps.h) */
 } fg_app;
 
 /* Installs conf as the current configuration (taking ownership); requests already running
@@ -65,6 +67,18 @@ int fg_api_robot_command_get(fg_req *req, fg_resp *resp);
 int fg_api_robot_get(fg_req *req, fg_resp *resp);
 int fg_api_gripper_get(fg_req *req, fg_resp *resp);
 int fg_api_gripper_action(fg_req *req, fg_resp *resp);
+int fg_api_tasks_list(fg_req *req, fg_resp *resp);
+int fg_api_task_get(fg_req *req, fg_resp *resp);
+int fg_api_task_delete(fg_req *req, fg_resp *resp);
+int fg_api_task_demo_add(fg_req *req, fg_resp *resp);
+int fg_api_task_demo_delete(fg_req *req, fg_resp *resp);
+int fg_api_scene_grasps(fg_req *req, fg_resp *resp);
+int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
+
+/* Runs robot request r (a pick or place the caller built) as POST /v1/robot/commands does:
+ * under the request's Idempotency-Key, answering with the command (or its error). */
+struct fg_robot_request;
+int fg_api_robot_run(fg_req *req, fg_resp *resp, struct fg_robot_request *r);
 
 /* fg_robot_svc_on_finish hook (ctx: the fg_app): stores the final answer of a command that
  * came with an Idempotency-Key, so that a retry sees how it ended. */

@@ -328,6 +328,10 @@ int fg_api_robot_command(fg_req *req, fg_resp *resp) {
   return actuate(req, resp, NULL, &r, run_robot);
 }
 
+int fg_api_robot_run(fg_req *req, fg_resp *resp, fg_robot_request *r) {
+  return actuate(req, resp, NULL, r, run_robot);
+}
+
 int fg_api_robot_command_get(fg_req *req, fg_resp *resp) {
   char *end;
   const unsigned long long id = strtoull(req->params[0], &end, 10);

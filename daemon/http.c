@@ -333,6 +333,11 @@ static enum MHD_Result send_response(conn_ctx *c) {
   if (r->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, r->content_type);
   if (r->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, r->allow);
   if (r->location[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_LOCATION, r->location);
+  char *colon = r->header[0] ? strstr(r->header, ": ") : NULL;
+  if (colon) {
+    *colon = 0;
+    MHD_add_response_header(mr, r->header, colon + 2);
+  }
   if (r->status == 401)
     MHD_add_response_header(mr, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"fieldgrip\"");
   enum MHD_Result ok = MHD_queue_response(c->conn, (unsigned)r->status, mr);

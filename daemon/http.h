@@ -69,6 +69,7 @@ typedef struct fg_resp {
   const char *content_type; /* static string */
   char allow[64];           /* for 405 */
   char location[160];       /* Location header, when not empty (202, 201) */
+  char header[128];         /* one more header as "Name: value", when not empty */
   const fg_stream_ops *stream_ops; /* a streamed body instead of body (fg_resp_stream) */
   void *stream_ctx;                /* owned: given to stream_ops->free */
 } fg_resp;

@@ -10,6 +10,7 @@
 #include "metrics.h"
 #include "notify.h"
 #include "store.h"
+#include "tasks.h"
 
 #include "config.h"
 #include "core/error.h"
@@ -187,6 +188,8 @@ static void reload(fg_app *app, const options *o) {
  * parts not set up yet are NULL. A running training stops after its step and keeps its
  * field. */
 static void app_teardown(fg_app *app) {
+  fg_grasp_log_free(app->grasps);
+  fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
   fg_idem_free(app->idem);
   fg_jobs_free(app->jobs);
@@ -269,6 +272,13 @@ int main(int argc, char **argv) {
   free(idem_path);
   if (robot_rc != 0) {
     fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
+    app_teardown(&app);
+    return 1;
+  }
+
+  /* The demonstration library; a task that does not load is logged and left out. */
+  if (fg_tasks_open(&app.tasks, conf->state_dir) != 0 || fg_grasp_log_new(&app.grasps) != 0) {
+    fg_error("cannot set up the task library: %s", fg_error_detail());
     app_teardown(&app);
     return 1;
   }

@@ -1,0 +1,404 @@
+/* The demonstration library over HTTP (tasks.h): GET /v1/tasks, GET and DELETE
+ * /v1/tasks/{t}, POST /v1/tasks/{t}/demos (the first demo creates the task) and DELETE
+ * /v1/tasks/{t}/demos/{i}. A demo samples the scene's current field at the task's query
+ * points placed by the demo's gripper pose (F3RM's z) and keeps the sample, not the scene. */
+#include "api.h"
+#include "grasps.h"
+#include "json.h"
+#include "tasks.h"
+#include "voxcache.h"
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/pose.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Configuration names of conf.h's gripper models, for grasps.h (see there why by name). */
+static const char *const gripper_names[] = {
+  [FG_GRIPPER_PANDA] = "panda",
+  [FG_GRIPPER_ROBOTIQ_2F85] = "robotiq-2f85",
+  [FG_GRIPPER_ROBOTIQ_2F140] = "robotiq-2f140",
+};
+
+/* ---------------------------------------------------------------- pose JSON */
+
+/* replaced by fg_json_pose after the refactor merge */
+/* {"position": [x, y, z], "quaternion": [w, x, y, z] (w >= 0), "matrix": 4x4} of T. */
+static json_t *grasp_json_pose(const double T[16]) {
+  double p[3], q[4];
+  fg_pose_to_quat(T, p, q);
+  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(p, 3), "quaternion",
+                   fg_json_from_vec(q, 4), "matrix", fg_json_from_matrix4(T));
+}
+
+/* replaced by fg_json_pose after the refactor merge */
+/* A pose as {"position": [3], "quaternion": [w, x, y, z]} (unit within 1e-3) or
+ * {"matrix": 4x4} (rigid, fg_pose_validate) into T. FG_EINVAL with a detail naming what. */
+static int grasp_parse_pose(json_t *v, double T[16], const char *what) {
+  if (!json_is_object(v))
+    return fg_fail(FG_EINVAL, "%s must be {\"position\": [x, y, z], \"quaternion\": [w, x, y, "
+                   "z]} or {\"matrix\": 4x4}", what);
+  json_t *m = json_object_get(v, "matrix");
+  if (m) {
+    if (json_object_get(v, "position") || json_object_get(v, "quaternion"))
+      return fg_fail(FG_EINVAL, "%s: give either \"matrix\" or \"position\" and "
+                     "\"quaternion\", not both", what);
+    char name[96];
+    snprintf(name, sizeof name, "%s.matrix", what);
+    FG_TRY(fg_json_matrix4(m, T, name));
+  } else {
+    double p[3], q[4];
+    char name[96];
+    snprintf(name, sizeof name, "%s.position", what);
+    FG_TRY(fg_json_vec(json_object_get(v, "position"), p, 3, name));
+    snprintf(name, sizeof name, "%s.quaternion", what);
+    FG_TRY(fg_json_vec(json_object_get(v, "quaternion"), q, 4, name));
+    if (fg_pose_from_quat(p, q, T) != 0)
+      return fg_fail(FG_EINVAL, "%s.quaternion must be a unit quaternion [w, x, y, z] (its "
+                     "norm within 1e-3 of 1)", what);
+  }
+  if (fg_pose_validate(T) != 0) {
+    char detail[512];
+    snprintf(detail, sizeof detail, "%s", fg_error_detail());
+    return fg_fail(FG_EINVAL, "%s: %s", what, detail);
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- views */
+
+static json_t *time_json(int64_t ms) {
+  char buf[32];
+  fg_iso8601(ms, buf);
+  return json_string(buf);
+}
+
+static json_t *demo_json(const fg_task_demo *d) {
+  return json_pack("{s:i, s:s, s:o, s:s, s:f, s:f, s:o}", "id", d->id, "scene", d->scene,
+                   "pose", grasp_json_pose(d->T_world_gripper), "kind",
+                   fg_task_kind_name(d->kind), "width", d->width_m, "approach", d->approach_m,
+                   "created", time_json(d->created_ms));
+}
+
+/* The task object of the API; with_demos adds the demos. */
+static json_t *task_json(const fg_task *t, int with_demos) {
+  const int has = t->n_demos > 0;
+  json_t *o = json_pack(
+      "{s:s, s:o, s:o, s:{s:i, s:f, s:o}, s:o, s:o, s:i, s:o}", "name", t->name, "kind",
+      has ? json_string(fg_task_kind_name(t->kind)) : json_null(), "dim",
+      has ? json_integer(t->dim) : json_null(), "query_points", "n", t->n_points, "std",
+      t->qp_std_m, "mean", fg_json_from_vec(t->qp_mean_m, 3), "width",
+      has ? json_real(t->width_m) : json_null(), "approach",
+      has ? json_real(t->approach_m) : json_null(), "n_demos", t->n_demos, "created",
+      time_json(t->created_ms));
+  if (o && with_demos) {
+    json_t *a = json_array();
+    for (int i = 0; a && i < t->n_demos; i++) json_array_append_new(a, demo_json(&t->demos[i]));
+    json_object_set_new(o, "demos", a);
+  }
+  return o;
+}
+
+/* The task named by the first path parameter with a reference, or NULL after answering 404. */
+static const fg_task *task_param(fg_req *req, fg_resp *resp) {
+  const fg_task *t = fg_tasks_get(req->app->tasks, req->params[0]);
+  if (!t)
+    fg_resp_error(resp, 404, "task_not_found", "no task named '%s'; GET /v1/tasks lists them, "
+                  "POST /v1/tasks/{name}/demos with a first demo creates one", req->params[0]);
+  return t;
+}
+
+/* ---------------------------------------------------------------- reading and deleting */
+
+int fg_api_tasks_list(fg_req *req, fg_resp *resp) {
+  const fg_task **list = NULL;
+  size_t n = 0;
+  if (fg_tasks_list(req->app->tasks, &list, &n) != 0)
+    return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  json_t *a = json_array();
+  for (size_t i = 0; a && i < n; i++) json_array_append_new(a, task_json(list[i], 0));
+  fg_tasks_list_free(list, n);
+  fg_resp_json(resp, 200, json_pack("{s:o}", "tasks", a));
+  return 0;
+}
+
+int fg_api_task_get(fg_req *req, fg_resp *resp) {
+  const fg_task *t = task_param(req, resp);
+  if (!t) return 0;
+  fg_resp_json(resp, 200, task_json(t, 1));
+  fg_task_unref(t);
+  return 0;
+}
+
+int fg_api_task_delete(fg_req *req, fg_resp *resp) {
+  int rc = fg_tasks_delete(req->app->tasks, req->params[0]);
+  if (rc == FG_ENOENT)
+    return fg_resp_error(resp, 404, "task_not_found", "no task named '%s'; GET /v1/tasks "
+                         "lists them", req->params[0]);
+  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  fg_resp_json(resp, 200, json_pack("{s:s}", "deleted", req->params[0]));
+  return 0;
+}
+
+int fg_api_task_demo_delete(fg_req *req, fg_resp *resp) {
+  char *end;
+  long id = strtol(req->params[1], &end, 10);
+  if (*end || end == req->params[1] || id < 1 || id > (1L << 30))
+    id = 0; /* answered as an unknown demo below, once the task is known to exist */
+  const fg_task *t = NULL;
+  int rc;
+  if (id) {
+    rc = fg_tasks_delete_demo(req->app->tasks, req->params[0], (int)id, &t);
+  } else {
+    const fg_task *had = fg_tasks_get(req->app->tasks, req->params[0]);
+    rc = had ? FG_ERANGE : FG_ENOENT;
+    fg_task_unref(had);
+  }
+  if (rc == FG_ENOENT)
+    return fg_resp_error(resp, 404, "task_not_found", "no task named '%s'; GET /v1/tasks "
+                         "lists them", req->params[0]);
+  if (rc == FG_ERANGE)
+    return fg_resp_error(resp, 404, "demo_not_found", "task '%s' has no demo '%s'; GET "
+                         "/v1/tasks/%s lists its demos and their ids", req->params[0],
+                         req->params[1], req->params[0]);
+  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  fg_resp_json(resp, 200, json_pack("{s:{s:s, s:i}, s:o}", "deleted", "task", req->params[0],
+                                    "demo", (int)id, "task", task_json(t, 1)));
+  fg_task_unref(t);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- adding a demo */
+
+static const char *const demo_keys[] = {"scene", "pose", "kind", "width", "approach",
+                                        "query_points", NULL};
+
+/* Reads "query_points" ({"n", "std", "mean"}, each optional: the task's, else the defaults)
+ * into d. Answers 400 itself and returns -1 when they are wrong. */
+static int parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
+                              fg_resp *resp) {
+  const int from_task = t && t->n_demos > 0;
+  d->n_points = from_task ? t->n_points : FG_GRASPS_DEFAULT_QUERY_POINTS;
+  d->qp_std_m = from_task ? t->qp_std_m : FG_GRASPS_DEFAULT_STD_M;
+  for (int k = 0; k < 3; k++) d->qp_mean_m[k] = from_task ? t->qp_mean_m[k] : 0.0;
+  json_t *qp = json_object_get(body, "query_points");
+  if (!qp || json_is_null(qp)) return 0;
+  const char *key;
+  json_t *v;
+  if (!json_is_object(qp))
+    goto bad;
+  json_object_foreach(qp, key, v) {
+    if (strcmp(key, "n") && strcmp(key, "std") && strcmp(key, "mean")) goto bad;
+  }
+  v = json_object_get(qp, "n");
+  if (v) {
+    if (!json_is_integer(v) || json_integer_value(v) < 1 ||
+        json_integer_value(v) > FG_GRASPS_MAX_QUERY_POINTS)
+      goto bad;
+    d->n_points = (int)json_integer_value(v);
+  }
+  v = json_object_get(qp, "std");
+  if (v) {
+    if (!json_is_number(v) || !(json_number_value(v) > 0) || !(json_number_value(v) <= 1))
+      goto bad;
+    d->qp_std_m = json_number_value(v);
+  }
+  v = json_object_get(qp, "mean");
+  if (v) {
+    double m[3];
+    if (fg_json_vec(v, m, 3, "query_points.mean") != 0 ||
+        sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) > 1)
+      goto bad;
+    memcpy(d->qp_mean_m, m, sizeof m);
+  }
+  return 0;
+bad:
+  return fg_resp_error(resp, 400, "invalid_query_points", "\"query_points\" must be {\"n\": "
+                       "1..%d points, \"std\": metres > 0 and <= 1, \"mean\": [x, y, z] metres "
+                       "in the gripper frame, within 1 m}, each optional (default {\"n\": %d, "
+                       "\"std\": %g, \"mean\": [0, 0, 0]}, or the task's)",
+                       FG_GRASPS_MAX_QUERY_POINTS, FG_GRASPS_DEFAULT_QUERY_POINTS,
+                       FG_GRASPS_DEFAULT_STD_M), -1;
+}
+
+/* Reads the demo's keys but its z into d (scene name, pose, kind, width, approach, query
+ * points). Answers 400 itself and returns -1 on a bad request. */
+static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_new *d,
+                      fg_resp *resp) {
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    int known = 0;
+    for (int i = 0; demo_keys[i]; i++) known |= strcmp(key, demo_keys[i]) == 0;
+    if (!known)
+      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a demo takes "
+                           "\"scene\", \"pose\", \"kind\", \"width\", \"approach\" and "
+                           "\"query_points\"", key), -1;
+  }
+  if (fg_json_string(body, "scene", &d->scene) != 1)
+    return fg_resp_error(resp, 400, "invalid_request", "\"scene\" is required: the name of a "
+                         "trained scene the demo's pose is shown on"), -1;
+  json_t *pose = json_object_get(body, "pose");
+  if (!pose)
+    return fg_resp_error(resp, 400, "invalid_pose", "\"pose\" is required: the gripper's pose "
+                         "in the world frame, {\"position\": [x, y, z], \"quaternion\": [w, x, "
+                         "y, z]} or {\"matrix\": 4x4}"), -1;
+  if (grasp_parse_pose(pose, d->T_world_gripper, "pose") != 0)
+    return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;
+  const char *kind = "grasp";
+  if (fg_json_string(body, "kind", &kind) < 0 || (strcmp(kind, "grasp") && strcmp(kind, "place")))
+    return fg_resp_error(resp, 400, "invalid_request", "\"kind\" must be \"grasp\" (the "
+                         "robot picks at the pose) or \"place\" (it places there)"), -1;
+  d->kind = strcmp(kind, "place") == 0 ? FG_TASK_PLACE : FG_TASK_GRASP;
+  const char *gripper = gripper_names[req->conf->gripper_model];
+  double stroke = 0;
+  if (fg_grasps_stroke(gripper, &stroke) != 0)
+    return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail()), -1;
+  d->width_m = stroke;
+  int rc = fg_json_number(body, "width", &d->width_m);
+  if (rc < 0 || (json_object_get(body, "width") && rc == 0) ||
+      !(d->width_m > 0 && d->width_m <= stroke + 1e-12))
+    return fg_resp_error(resp, 400, "invalid_request", "\"width\" must be the gripper's "
+                         "opening in metres, more than 0 and at most the %s's stroke %g m "
+                         "([gripper] model; default the stroke)", gripper, stroke), -1;
+  d->approach_m = FG_TASK_DEFAULT_APPROACH_M;
+  rc = fg_json_number(body, "approach", &d->approach_m);
+  if (rc < 0 || (json_object_get(body, "approach") && rc == 0) ||
+      !(d->approach_m >= 0 && d->approach_m <= 1))
+    return fg_resp_error(resp, 400, "invalid_request", "\"approach\" must be the pre-grasp "
+                         "distance in metres along the gripper's -z, 0 to 1 (default %g)",
+                         FG_TASK_DEFAULT_APPROACH_M), -1;
+  return parse_query_points(body, t, d, resp);
+}
+
+/* The 409 of a demo that does not fit its task (fg_task_check_demo's detail). */
+static int answer_misfit(fg_resp *resp, fg_task_fit fit) {
+  const char *code = fit == FG_TASK_QUERY_POINTS_DIFFER ? "query_points_mismatch"
+                     : fit == FG_TASK_KIND_DIFFERS      ? "kind_mismatch"
+                     : fit == FG_TASK_DIM_DIFFERS       ? "feature_dim_mismatch"
+                                                        : "too_many_demos";
+  return fg_resp_error(resp, 409, code, "%s", fg_error_detail());
+}
+
+int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
+  const char *name = req->params[0];
+  if (fg_scene_name_validate(name) != 0)
+    return fg_resp_error(resp, 400, "invalid_name", "task name '%s': %s", name,
+                         fg_error_detail());
+  json_t *body = fg_api_body_object(req, resp);
+  if (!body) return 0;
+  const fg_task *t = fg_tasks_get(req->app->tasks, name);
+  fg_scene *s = NULL;
+  fg_field_ref *ref = NULL;
+  fg_voxels *vox = NULL;
+  float *p = NULL, *z = NULL;
+  const fg_task *nt = NULL;
+  fg_task_demo_new d = {0};
+  if (parse_demo(req, body, t, &d, resp) != 0) goto out;
+  s = fg_store_get(req->app->store, d.scene);
+  if (!s) {
+    fg_resp_error(resp, 404, "scene_not_found", "no scene named '%s'; GET /v1/scenes lists "
+                  "them", d.scene);
+    goto out;
+  }
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  const double *T = d.T_world_gripper;
+  for (int a = 0; a < 3; a++) {
+    const double x = T[4 * a + 3];
+    if (!(x >= info.params.workspace_min[a] && x <= info.params.workspace_max[a])) {
+      fg_resp_error(resp, 400, "pose_outside_workspace", "the pose's position [%g, %g, %g] is "
+                    "outside scene '%s''s workspace [%g, %g, %g] .. [%g, %g, %g]; a demo "
+                    "shows the gripper where the scene's field is", T[3], T[7], T[11],
+                    info.name, info.params.workspace_min[0], info.params.workspace_min[1],
+                    info.params.workspace_min[2], info.params.workspace_max[0],
+                    info.params.workspace_max[1], info.params.workspace_max[2]);
+      goto out;
+    }
+  }
+  ref = fg_api_scene_field(s, &info, resp);
+  if (!ref) goto out;
+  const fg_field *field = fg_field_ref_field(ref);
+  d.dim = field->cfg.feature_dim;
+  if (d.dim == 0) {
+    fg_resp_error(resp, 409, "no_features", "scene '%s' was trained on colour only, without "
+                  "features, so a demo has nothing to sample; upload frames with \"features\" "
+                  "(.npy) or configure [clip], then train it again", info.name);
+    goto out;
+  }
+  fg_task_fit fit = fg_task_check_demo(t, &d);
+  if (fit != FG_TASK_FITS) {
+    answer_misfit(resp, fit);
+    goto out;
+  }
+  fg_voxel_grid grid;
+  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
+                              info.params.voxel_size);
+  const int threads = fg_conf_threads(req->conf);
+  if (rc == 0) rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, NULL);
+  if (rc != 0) {
+    fg_resp_error(resp, rc == FG_ERANGE ? 400 : 500, rc == FG_ERANGE ? "grid_too_large"
+                  : "internal_error", "cannot build the voxel features of scene '%s': %s",
+                  info.name, fg_error_detail());
+    goto out;
+  }
+  /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
+  fg_field_ref_release(ref);
+  ref = NULL;
+  p = malloc((size_t)d.n_points * 3 * sizeof *p);
+  z = malloc((size_t)d.n_points * (size_t)d.dim * sizeof *z);
+  if (!p || !z) {
+    fg_resp_error(resp, 500, "internal_error", "out of memory");
+    goto out;
+  }
+  if (fg_grasps_query_points(d.n_points, d.qp_mean_m, d.qp_std_m, p) != 0 ||
+      fg_grasps_sample(fg_voxels_features(vox), T, p, d.n_points, z, threads) != 0) {
+    fg_resp_error(resp, 400, "invalid_query_points", "%s", fg_error_detail());
+    goto out;
+  }
+  double zz = 0;
+  for (size_t k = 0; k < (size_t)d.n_points * (size_t)d.dim; k++) zz += (double)z[k] * z[k];
+  if (!(zz > 0)) {
+    fg_resp_error(resp, 400, "demo_in_free_space", "at this pose every query point of the "
+                  "gripper lies in free space of scene '%s''s field, so the demo would show "
+                  "nothing; give the pose of the gripper at the object (the TCP between the "
+                  "fingertips, +z the approach direction)", info.name);
+    goto out;
+  }
+  d.z = z;
+  int id = 0;
+  rc = fg_tasks_add_demo(req->app->tasks, name, &d, &fit, &nt, &id);
+  if (rc == FG_EEXIST) {
+    answer_misfit(resp, fit);
+    goto out;
+  }
+  if (rc == FG_EBUSY) {
+    fg_resp_error(resp, 409, "task_unreadable", "%s", fg_error_detail());
+    goto out;
+  }
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "the demo was not stored: %s",
+                  fg_error_detail());
+    goto out;
+  }
+  const fg_task_demo *nd = &nt->demos[nt->n_demos - 1];
+  snprintf(resp->location, sizeof resp->location, "/v1/tasks/%s", name);
+  fg_resp_json(resp, 201, json_pack("{s:o, s:o}", "demo", demo_json(nd), "task",
+                                    task_json(nt, 0)));
+  fg_info("task %s: demo %d on scene %s (%d query points, D = %d)", name, id, d.scene,
+          d.n_points, d.dim);
+out:
+  fg_task_unref(nt);
+  free(p);
+  free(z);
+  fg_voxels_release(vox);
+  fg_field_ref_release(ref);
+  if (s) fg_scene_unref(s);
+  fg_task_unref(t);
+  json_decref(body);
+  return 0;
+}

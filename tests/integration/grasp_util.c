@@ -1,0 +1,95 @@
+/* See grasp_util.h. */
+#include "grasp_util.h"
+
+#include <math.h>
+
+static json_t *g_gt_json;
+static char *g_data;
+
+char *g_dataset(const char *scenegen) {
+  char *imports = h_fmt("%s/imports", h_tmpdir());
+  g_data = h_fmt("%s/sg", imports);
+  t_scenegen(scenegen, g_data, G_VIEWS, G_W, G_H, G_DIM, G_PATCH);
+  char *path = h_fmt("%s/gt.json", g_data);
+  json_error_t e;
+  g_gt_json = json_load_file(path, 0, &e);
+  ASSERT(g_gt_json != NULL);
+  free(path);
+  return imports;
+}
+
+json_t *g_gt(void) { return g_gt_json; }
+const char *g_dir(void) { return g_data; }
+
+void g_config(const char *imports, const char *extra) {
+  char *conf = h_fmt("[state]\nimport_dirs = %s\n\n[train]\nthreads = 2\nsteps = 20\n\n%s\n",
+                     imports, extra ? extra : "");
+  h_write_config(conf);
+  free(conf);
+}
+
+void g_scene(const char *name, const char *tf) {
+  char *body = h_fmt("{\"name\": \"%s\", \"workspace\": {\"min\": [0.1, -0.45, -0.05], "
+                     "\"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": 0.02}", name);
+  h_resp *r = h_post_json("/v1/scenes", body);
+  ASSERT_STATUS(r, 201);
+  h_resp_free(r);
+  free(body);
+  char *path = h_fmt("/v1/scenes/%s/import", name);
+  body = tf ? h_fmt("{\"path\": \"%s\", \"transforms\": \"%s\"}", g_data, tf)
+            : h_fmt("{\"path\": \"%s\"}", g_data);
+  r = h_post_json(path, body);
+  ASSERT_STATUS(r, 200);
+  ASSERT_EQ(JINT(r->json, "imported"), G_VIEWS);
+  h_resp_free(r);
+  free(body);
+  free(path);
+}
+
+void g_train(const char *scene, int steps) {
+  char *body = h_fmt("{\"steps\": %d}", steps);
+  char *id = t_train(scene, body);
+  json_decref(t_wait_job(id, "done", 600));
+  free(id);
+  free(body);
+}
+
+char *g_class_embedding(const char *name) {
+  json_t *classes = JGET(g_gt_json, "classes");
+  for (size_t i = 0; i < json_array_size(classes); i++) {
+    json_t *c = json_array_get(classes, i);
+    if (strcmp(JSTR(c, "name"), name) == 0) return json_dumps(JGET(c, "embedding"), JSON_COMPACT);
+  }
+  FG_TEST_FAIL("no class %s in gt.json", name);
+}
+
+json_t *g_object(const char *name) {
+  json_t *objects = JGET(g_gt_json, "objects");
+  for (size_t i = 0; i < json_array_size(objects); i++) {
+    json_t *o = json_array_get(objects, i);
+    if (strcmp(JSTR(o, "name"), name) == 0) return o;
+  }
+  FG_TEST_FAIL("no object %s in gt.json", name);
+}
+
+char *g_demo_body(const char *scene, const char *object, const char *extra) {
+  char qp[32];
+  snprintf(qp, sizeof qp, "{\"n\": %d}", G_NQ);
+  return g_demo_body_qp(scene, object, qp, extra);
+}
+
+char *g_demo_body_qp(const char *scene, const char *object, const char *qp, const char *extra) {
+  json_t *g = JGET(g_object(object), "grasp");
+  char *p = json_dumps(JGET(g, "position"), JSON_COMPACT | JSON_REAL_PRECISION(17));
+  char *q = json_dumps(JGET(g, "quaternion"), JSON_COMPACT | JSON_REAL_PRECISION(17));
+  double w = JNUM(g, "width") + 0.01;
+  if (w > 0.08) w = 0.08; /* within the stroke of either gripper the tests configure */
+  char *s = h_fmt("{\"scene\": \"%s\", \"pose\": {\"position\": %s, \"quaternion\": %s}, "
+                  "\"width\": %.4f%s%s%s%s}", scene, p, q, w, qp ? ", \"query_points\": " : "",
+                  qp ? qp : "", extra[0] ? ", " : "", extra);
+  free(p);
+  free(q);
+  return s;
+}
+
+h_resp *g_post(const char *path, const char *body) { return h_post_json(path, body); }

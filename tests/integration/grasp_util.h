@@ -1,0 +1,49 @@
+/* Shared by the task and grasp integration tests: a scenegen data set, a coarse scene (2 cm
+ * voxels, so that grasp searches stay short on two cores) trained on its features, and the
+ * ground-truth grasps of gt.json as demo bodies. Like the harness, every helper asserts. */
+#ifndef FG_IT_GRASP_UTIL_H
+#define FG_IT_GRASP_UTIL_H
+
+#include "training.h"
+
+#define G_VIEWS 30
+#define G_W 160
+#define G_H 120
+#define G_DIM 32
+#define G_PATCH 8
+#define G_NQ 32 /* query points of the tests' demos */
+
+/* Makes the data set under <tmp>/imports/sg with scenegen and loads its gt.json; returns the
+ * imports folder (caller frees). */
+char *g_dataset(const char *scenegen);
+
+/* gt.json and the data set's folder, after g_dataset. */
+json_t *g_gt(void);
+const char *g_dir(void);
+
+/* Writes the configuration: import_dirs, [train] threads 2, then extra (may be NULL). */
+void g_config(const char *imports, const char *extra);
+
+/* Creates scene name over scenegen's tabletop at 2 cm voxels and imports the data set
+ * (transforms file tf, NULL for transforms.json). */
+void g_scene(const char *name, const char *tf);
+
+/* Trains scene for steps and waits until done. */
+void g_train(const char *scene, int steps);
+
+/* The embedding of class name of gt.json as JSON text; caller frees. */
+char *g_class_embedding(const char *name);
+
+/* Object `name` of gt.json. */
+json_t *g_object(const char *name);
+
+/* A demo body (JSON text) for object name's ground-truth grasp on scene, with extra keys
+ * (may be "") and G_NQ query points; caller frees. */
+char *g_demo_body(const char *scene, const char *object, const char *extra);
+/* The same with "query_points": qp (JSON text; NULL leaves the key out). */
+char *g_demo_body_qp(const char *scene, const char *object, const char *qp, const char *extra);
+
+/* POST path with a JSON body; the caller frees the reply. */
+h_resp *g_post(const char *path, const char *body);
+
+#endif
