@@ -6,7 +6,7 @@
  * lock while it trains; it takes a job's lock for a moment after every step. */
 #include "jobs.h"
 
-#include "api.h"
+#include "app.h"
 #include "clip_features.h"
 #include "clip_svc.h"
 #include "metrics.h"

@@ -1,5 +1,6 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
+#include "app.h"
 #include "clip_svc.h"
 #include "idem.h"
 #include "robot.h"

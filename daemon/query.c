@@ -1,7 +1,7 @@
 /* Queries: JSON to unit vectors; see query.h. */
 #include "query.h"
 
-#include "api.h"
+#include "app.h"
 #include "clip_svc.h"
 #include "json.h"
 
@@ -208,10 +208,11 @@ int fg_query_parse(fg_req *req, fg_resp *resp, json_t *body, int scene_dim, fg_q
   }
   fg_clip_model *m = NULL;
   if (text || n_neg_texts) {
-    m = fg_api_clip_model(req, resp);
+    char why[1400];
+    m = fg_clip_svc_acquire_explained(req->app->clip, why, sizeof why);
     if (!m) {
       fg_query_release(out);
-      return -1;
+      return fg_resp_error(resp, 409, "clip_not_configured", "%s", why), -1;
     }
     int E = fg_clip_model_info(m)->embed_dim;
     if (scene_dim && E != scene_dim) {
