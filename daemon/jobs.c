@@ -343,7 +343,8 @@ static const fg_job_kind *kind_find(const fg_jobs *jobs, const char *name) {
 int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind) {
   if (!kind || !kind->name || !kind->run) return fg_fail(FG_EINVAL, "job kind: NULL name or run");
   size_t len = strlen(kind->name);
-  if (len == 0 || len >= FG_JOB_KIND_MAX || strspn(kind->name, "abcdefghijklmnopqrstuvwxyz_") != len)
+  if (len == 0 || len >= FG_JOB_KIND_MAX ||
+      strspn(kind->name, "abcdefghijklmnopqrstuvwxyz_") != len)
     return fg_fail(FG_EINVAL, "job kind '%s': names are 1 to %d characters of a-z and _",
                    kind->name, FG_JOB_KIND_MAX - 1);
   pthread_mutex_lock(&jobs->lock);
