@@ -1,43 +1,13 @@
-/* The daemon's application state and the HTTP API's route table and handlers. */
+/* The HTTP API: its route table, the handlers (one api_*.c file per group of endpoints) and
+ * the helpers they share. Only handlers and main.c include this header; the modules below
+ * them (jobs, CLIP, robot, store) reach the application object through app.h. */
 #ifndef FG_DAEMON_API_H
 #define FG_DAEMON_API_H
 
-#include <pthread.h>
 #include <stddef.h>
 
-#include "conf.h"
+#include "app.h"
 #include "http.h"
-#include "store.h"
-
-typedef struct fg_conf_ref fg_conf_ref;
-
-typedef struct fg_app {
-  fg_store *store;
-  pthread_mutex_t conf_lock;
-  fg_conf_ref *conf; /* current configuration; requests hold references */
-  int threads;       /* [train] threads at start-up, resolved (>= 1): sizes the decoder pool */
-  struct fg_decoder *decoder; /* image decoding in child processes (decoder.h) */
-  struct fg_jobs *jobs;       /* trainings (jobs.h) */
-  struct fg_clip_svc *clip;   /* the CLIP model of [clip] (clip_svc.h) */
-  struct fg_robot_svc *robot; /* the [robot] and [gripper.modbus] peers (robot.h) */
-  struct fg_idem *idem;       /* Idempotency-Keys of actuating requests (idem.h) */
-  struct fg_tasks *tasks;     /* the demonstration library (tasks.h) */
-  struct fg_grasp_log *grasps; /* recent grasps, for execute (grasps.h) */
-} fg_app;
-
-/* Installs conf as the current configuration (taking ownership); requests already running
- * keep the one they started with. */
-void fg_app_set_conf(fg_app *app, fg_conf *conf);
-
-/* Reference-counted access for the HTTP layer (fg_http_config callbacks). */
-const fg_conf *fg_app_conf_acquire(fg_app *app);
-void fg_app_conf_release(fg_app *app, const fg_conf *conf);
-
-/* [train] threads of conf, 0 resolved to the number of online cores; >= 1. */
-int fg_conf_threads(const fg_conf *conf);
-
-/* Drops the current configuration at shutdown. */
-void fg_app_clear_conf(fg_app *app);
 
 /* The route table. */
 extern const fg_route fg_api_routes[];

@@ -14,20 +14,10 @@
 #include <string.h>
 
 fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp) {
-  fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;
-  if (m) return m;
-  char why[1024] = "";
-  if (req->app->clip) fg_clip_svc_unavailable(req->app->clip, why, sizeof why);
-  if (why[0])
-    fg_resp_error(resp, 409, "clip_not_configured", "this server has no CLIP model: the [clip] "
-                  "files of its configuration did not load (%s); fix them and reload the "
-                  "configuration (SIGHUP, or systemctl reload fieldgripd)", why);
-  else
-    fg_resp_error(resp, 409, "clip_not_configured", "this server has no CLIP model: add a "
-                  "[clip] section with weights = /path/to/clip.safetensors and vocab = "
-                  "/path/to/bpe_simple_vocab_16e6.txt.gz to its configuration file and reload "
-                  "it (SIGHUP, or systemctl reload fieldgripd)");
-  return NULL;
+  char why[1400];
+  fg_clip_model *m = fg_clip_svc_acquire_explained(req->app->clip, why, sizeof why);
+  if (!m) fg_resp_error(resp, 409, "clip_not_configured", "%s", why);
+  return m;
 }
 
 /* An array of n floats as JSON numbers; NULL on allocation failure. */

@@ -98,7 +98,7 @@ static int parse_meta(json_t *meta, double T[16], fg_transforms_frame *camera, f
     return fg_resp_error(resp, 400, "invalid_pose", "meta needs \"transform_matrix\" (4x4 "
                          "camera-to-world, row-major) or \"pose\" {\"position\", \"quaternion\"}"),
            -1;
-  if (fg_json_pose(pose, T, what) != 0)
+  if (fg_json_pose_parse(pose, what, T, NULL) != 0)
     return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;
   const char *conv_name = "opengl";
   fg_convention conv;

@@ -118,8 +118,8 @@ static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
   else if (!matrix && !pose)
     rc = fg_fail(FG_EINVAL, "the camera needs \"transform_matrix\" (4x4 camera-to-world, "
                  "row-major) or \"pose\" {\"position\", \"quaternion\"}");
-  else rc = fg_json_pose(matrix ? matrix : pose, r->T_world_cam,
-                         matrix ? "transform_matrix" : "pose");
+  else rc = fg_json_pose_parse(matrix ? matrix : pose, matrix ? "transform_matrix" : "pose",
+                              r->T_world_cam, NULL);
   if (rc != 0) {
     json_decref(merged);
     return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;

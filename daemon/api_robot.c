@@ -9,7 +9,6 @@
 
 #include "core/error.h"
 #include "core/log.h"
-#include "core/pose.h"
 
 #include <inttypes.h>
 #include <math.h>
@@ -60,22 +59,13 @@ static int parse_request(json_t *body, const char *const *allowed, fg_robot_requ
   json_t *pose = json_object_get(body, "pose");
   if (pose) {
     double T[16];
-    if (fg_json_pose(pose, T, "pose") < 0) {
+    /* the quaternion as given: its sign picks the rotation vector at a half turn */
+    if (fg_json_pose_parse(pose, "pose", T, r->q_wxyz) < 0) {
       fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail());
       return -1;
     }
     r->has_pose = 1;
-    json_t *q = json_is_object(pose) ? json_object_get(pose, "quaternion") : NULL;
-    if (q && !json_object_get(pose, "matrix")) {
-      /* the quaternion as given (its sign picks the rotation vector at a half turn) */
-      fg_json_vec(q, r->q_wxyz, 4, "pose.quaternion");
-      const double n = sqrt(r->q_wxyz[0] * r->q_wxyz[0] + r->q_wxyz[1] * r->q_wxyz[1] +
-                            r->q_wxyz[2] * r->q_wxyz[2] + r->q_wxyz[3] * r->q_wxyz[3]);
-      for (int i = 0; i < 4; i++) r->q_wxyz[i] /= n;
-      for (int i = 0; i < 3; i++) r->p_world_m[i] = T[4 * i + 3];
-    } else {
-      fg_pose_to_quat(T, r->p_world_m, r->q_wxyz);
-    }
+    for (int i = 0; i < 3; i++) r->p_world_m[i] = T[4 * i + 3];
   }
   static const char *const nums[] = {"width", "force", "speed"};
   double *dst[] = {&r->width_m, &r->force_n, &r->speed_mps};
@@ -118,14 +108,6 @@ static json_t *time_json(double s) {
   return json_string(buf);
 }
 
-static json_t *pose_json(const fg_robot_request *r) {
-  double T[16];
-  fg_pose_from_quat(r->p_world_m, r->q_wxyz, T);
-  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(r->p_world_m, 3),
-                   "quaternion", fg_json_from_vec(r->q_wxyz, 4), "matrix",
-                   fg_json_from_matrix4(T));
-}
-
 static json_t *command_json(const fg_robot_cmd_view *v) {
   json_t *o = json_object();
   if (!o) return NULL;
@@ -137,7 +119,7 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
     json_object_set_new(o, "stage", json_string(v->stage));
   }
   json_object_set_new(o, "seq", v->seq ? json_integer(v->seq) : json_null());
-  if (v->req.has_pose) json_object_set_new(o, "pose", pose_json(&v->req));
+  if (v->req.has_pose) json_object_set_new(o, "pose", fg_json_pose_quat(v->req.p_world_m, v->req.q_wxyz));
   if (v->req.has_width) json_object_set_new(o, "width", json_real(v->req.width_m));
   if (v->req.has_force) json_object_set_new(o, "force", json_real(v->req.force_n));
   if (v->req.has_speed) json_object_set_new(o, "speed", json_real(v->req.speed_mps));

@@ -1,6 +1,7 @@
 /* Training jobs over HTTP: start a training, list, describe and cancel jobs, and follow one
  * as Server-Sent Events. */
 #include "api.h"
+#include "job_train.h"
 #include "jobs.h"
 #include "json.h"
 
@@ -50,7 +51,7 @@ static int json_seed(json_t *obj, uint64_t *out) {
 }
 
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
-static int parse_train(json_t *body, const fg_conf *conf, fg_train_params *p) {
+static int parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
   static const char *const keys[] = {"steps", "seed", "max_seconds", "holdout_every"};
   const char *key;
   json_t *val;
@@ -87,7 +88,7 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
   /* An empty body takes every default. */
   json_t *body = req->body_len == 0 ? json_object() : fg_api_body_object(req, resp);
   if (!body) goto out;
-  fg_train_params p;
+  fg_job_params p;
   if (parse_train(body, req->conf, &p) != 0) {
     fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
     goto out;
@@ -111,7 +112,7 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
     }
   }
   fg_job_info job;
-  int rc = fg_jobs_submit(req->app->jobs, s, &p, &job);
+  int rc = fg_jobs_submit(req->app->jobs, FG_JOB_KIND_TRAIN, s, &p, NULL, &job);
   if (rc == FG_EBUSY) {
     fg_resp_error(resp, 409, "training_in_progress", "%s", fg_error_detail());
   } else if (rc == FG_ENOENT) {

@@ -1,7 +1,7 @@
 /* The CLIP model the daemon serves: loading, reference counts, reloads; see clip_svc.h. */
 #include "clip_svc.h"
 
-#include "api.h"
+#include "conf.h"
 
 #include "core/error.h"
 #include "core/log.h"
@@ -182,6 +182,22 @@ void fg_clip_svc_unavailable(fg_clip_svc *svc, char *msg, size_t n) {
   pthread_mutex_lock(&svc->lock);
   snprintf(msg, n, "%s", svc->last_error);
   pthread_mutex_unlock(&svc->lock);
+}
+
+fg_clip_model *fg_clip_svc_acquire_explained(fg_clip_svc *svc, char *msg, size_t n) {
+  fg_clip_model *m = svc ? fg_clip_svc_acquire(svc) : NULL;
+  if (m) return m;
+  char why[1024] = "";
+  if (svc) fg_clip_svc_unavailable(svc, why, sizeof why);
+  if (why[0])
+    snprintf(msg, n, "this server has no CLIP model: the [clip] files of its configuration "
+             "did not load (%s); fix them and reload the configuration (SIGHUP, or systemctl "
+             "reload fieldgripd)", why);
+  else
+    snprintf(msg, n, "this server has no CLIP model: add a [clip] section with weights = "
+             "/path/to/clip.safetensors and vocab = /path/to/bpe_simple_vocab_16e6.txt.gz to "
+             "its configuration file and reload it (SIGHUP, or systemctl reload fieldgripd)");
+  return NULL;
 }
 
 /* Whether m still matches conf: same paths, unchanged files, same threads. */

@@ -61,6 +61,13 @@ void fg_clip_model_release(fg_clip_model *m);
  * configured or was removed, else the last load failure. */
 void fg_clip_svc_unavailable(fg_clip_svc *svc, char *msg, size_t n);
 
+/* fg_clip_svc_acquire for callers that answer a client: svc may be NULL (no service). When
+ * there is no model it returns NULL and writes into msg (size n) a message for the client
+ * that says why (no [clip] section, or the files that did not load) and how to fix it; the
+ * HTTP handlers send it as 409 clip_not_configured. On success the caller owns a reference
+ * (fg_clip_model_release) and msg is untouched. */
+fg_clip_model *fg_clip_svc_acquire_explained(fg_clip_svc *svc, char *msg, size_t n);
+
 /* The model's parts; they live as long as the reference. The fg_clip is safe to call from
  * several threads at once (clip.h). */
 fg_clip *fg_clip_model_clip(const fg_clip_model *m);

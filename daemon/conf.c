@@ -31,6 +31,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/types.h>
+#include <unistd.h>
 
 /* ---------------------------------------------------------------- sections and keys */
 
@@ -904,6 +905,12 @@ const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name) {
   for (size_t i = 0; i < conf->n_scenes; i++)
     if (strcmp(conf->scenes[i].name, name) == 0) return &conf->scenes[i];
   return NULL;
+}
+
+int fg_conf_threads(const fg_conf *conf) {
+  if (conf->train_threads > 0) return conf->train_threads;
+  long n = sysconf(_SC_NPROCESSORS_ONLN);
+  return n > 0 ? (int)n : 1;
 }
 
 static void modbus_free(fg_conf_modbus *m) {

@@ -98,6 +98,9 @@ int fg_scene_name_validate(const char *name);
 /* Finds a [scene NAME] by name; NULL if absent. */
 const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name);
 
+/* [train] threads of conf, 0 resolved to the number of online cores; always >= 1. */
+int fg_conf_threads(const fg_conf *conf);
+
 void fg_conf_free(fg_conf *conf);
 
 #endif

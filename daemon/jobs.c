@@ -1,23 +1,14 @@
-/* Jobs: the registry, the FIFO queue, the worker thread and the training loop (jobs.h).
- *
- * Locking: fg_jobs.lock guards the registry list and the queue; fg_job.lock guards a job's
- * info and flags. Order: registry lock, then a job's lock. persist_lock serialises writes of
- * last_job.json so that the last write always carries the latest state. The worker holds no
- * lock while it trains; it takes a job's lock for a moment after every step. */
+/* Jobs: the registry, its table of kinds, the queue and the worker; see jobs.h. What a job
+ * does lives with its kind (job_train.c). */
 #include "jobs.h"
 
-#include "api.h"
-#include "clip_features.h"
-#include "clip_svc.h"
-#include "metrics.h"
+#include "app.h"
+#include "json.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
-#include "field/checkpoint.h"
-#include "field/model.h"
-#include "field/train.h"
-#include "json.h"
 
 #include <errno.h>
 #include <malloc.h>
@@ -34,12 +25,10 @@
 #include <time.h>
 #include <unistd.h>
 
-/* The nice value of the training threads (see jobs.h). */
-#define TRAIN_NICE 10
+/* The nice value of a job's threads (see jobs.h). */
+#define JOB_NICE 10
 /* Finished jobs kept in memory beyond each scene's last one. */
 #define MAX_FINISHED_JOBS 1000
-/* The field's cube: twice the workspace's largest extent (model.h). */
-#define FIELD_SCALE 2.0
 
 struct fg_job {
   atomic_int refs;
@@ -49,6 +38,9 @@ struct fg_job {
   int cancel;           /* cancelled while running: the worker stops after this step */
   int committing;       /* installing its result: too late to cancel */
   fg_scene *scene;      /* held while queued or running; NULL for jobs loaded from disk */
+  struct fg_jobs *jobs; /* the registry, for fg_job_should_stop; NULL for jobs loaded from disk */
+  const fg_job_kind *kind; /* NULL for jobs loaded from disk */
+  void *kind_params;    /* the kind's own parameters, owned (kind->params_free) */
   struct fg_job *next;  /* registry, newest first (guarded by fg_jobs.lock) */
   struct fg_job *qnext; /* queue (guarded by fg_jobs.lock) */
 };
@@ -60,6 +52,8 @@ struct fg_jobs {
   pthread_mutex_t persist_lock;
   fg_job *all; /* newest first */
   fg_job *qhead, *qtail;
+  const fg_job_kind *kinds[FG_JOBS_MAX_KINDS]; /* registered at start-up, before any submit */
+  int n_kinds;
   int stopping;
   int worker_started;
   pthread_t worker;
@@ -76,17 +70,8 @@ int fg_job_state_finished(fg_job_state s) {
   return s == FG_JOB_DONE || s == FG_JOB_FAILED || s == FG_JOB_CANCELLED;
 }
 
-static int64_t now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
-static double mono_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
+/* Unix milliseconds, for the job's timestamps. */
+static int64_t now_ms(void) { return (int64_t)(fg_real_s() * 1000.0); }
 
 /* ---------------------------------------------------------------- job objects */
 
@@ -102,6 +87,7 @@ static fg_job *job_new(void) {
 void fg_job_unref(fg_job *j) {
   if (!j || atomic_fetch_sub(&j->refs, 1) != 1) return;
   if (j->scene) fg_scene_unref(j->scene);
+  if (j->kind && j->kind->params_free) j->kind->params_free(j->kind_params);
   pthread_mutex_destroy(&j->lock);
   free(j);
 }
@@ -110,7 +96,7 @@ void fg_job_unref(fg_job *j) {
 static void info_locked(const fg_job *j, fg_job_info *out) {
   *out = j->info;
   if (j->info.state == FG_JOB_RUNNING && j->started_mono > 0)
-    out->elapsed_s = mono_s() - j->started_mono;
+    out->elapsed_s = fg_mono_s() - j->started_mono;
 }
 
 void fg_job_get_info(fg_job *j, fg_job_info *out) {
@@ -161,7 +147,7 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   }
   json_object_set_new(o, "id", json_string(j->id));
   json_object_set_new(o, "scene", json_string(j->scene));
-  json_object_set_new(o, "kind", json_string("train"));
+  json_object_set_new(o, "kind", json_string(j->kind));
   json_object_set_new(o, "state", json_string(fg_job_state_name(j->state)));
   json_object_set_new(o, "step", json_integer(j->step));
   json_object_set_new(o, "steps", json_integer(j->params.steps));
@@ -209,6 +195,9 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   const char *id = json_string_value(json_object_get(o, "id"));
   const char *scene = json_string_value(json_object_get(o, "scene"));
   const char *state = json_string_value(json_object_get(o, "state"));
+  const char *kind = json_string_value(json_object_get(o, "kind"));
+  if (!kind) kind = "train"; /* every job was a training before kinds came */
+  if (strlen(kind) >= sizeof j->kind) return fg_fail(FG_EFORMAT, "job kind '%s' is too long", kind);
   if (!id || !scene || !state || strlen(id) >= sizeof j->id || strlen(scene) >= sizeof j->scene)
     return fg_fail(FG_EFORMAT, "not a job: id, scene or state missing");
   for (const char *p = id; *p; p++)
@@ -220,6 +209,7 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   if (s < 0) return fg_fail(FG_EFORMAT, "job %s: unknown state '%s'", id, state);
   snprintf(j->id, sizeof j->id, "%s", id);
   snprintf(j->scene, sizeof j->scene, "%s", scene);
+  snprintf(j->kind, sizeof j->kind, "%s", kind);
   j->state = (fg_job_state)s;
   j->step = jint(o, "step");
   j->params.steps = jint(o, "steps");
@@ -342,9 +332,39 @@ void fg_jobs_count(fg_jobs *jobs, size_t counts[FG_JOB_N_STATES]) {
   pthread_mutex_unlock(&jobs->lock);
 }
 
-int fg_jobs_submit(fg_jobs *jobs, fg_scene *scene, const fg_train_params *params,
-                   fg_job_info *out) {
+/* The registered kind of that name; NULL when none. Kinds are registered before the worker
+ * sees a job and never removed, so the table is read without the lock. */
+static const fg_job_kind *kind_find(const fg_jobs *jobs, const char *name) {
+  for (int i = 0; i < jobs->n_kinds; i++)
+    if (strcmp(jobs->kinds[i]->name, name) == 0) return jobs->kinds[i];
+  return NULL;
+}
+
+int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind) {
+  if (!kind || !kind->name || !kind->run) return fg_fail(FG_EINVAL, "job kind: NULL name or run");
+  size_t len = strlen(kind->name);
+  if (len == 0 || len >= FG_JOB_KIND_MAX ||
+      strspn(kind->name, "abcdefghijklmnopqrstuvwxyz_") != len)
+    return fg_fail(FG_EINVAL, "job kind '%s': names are 1 to %d characters of a-z and _",
+                   kind->name, FG_JOB_KIND_MAX - 1);
+  pthread_mutex_lock(&jobs->lock);
+  int rc = 0;
+  if (kind_find(jobs, kind->name))
+    rc = fg_fail(FG_EEXIST, "job kind '%s' is registered already", kind->name);
+  else if (jobs->n_kinds == FG_JOBS_MAX_KINDS)
+    rc = fg_fail(FG_ERANGE, "job kind '%s': the registry holds %d kinds at most", kind->name,
+                 FG_JOBS_MAX_KINDS);
+  else
+    jobs->kinds[jobs->n_kinds++] = kind;
+  pthread_mutex_unlock(&jobs->lock);
+  return rc;
+}
+
+int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
+                   const fg_job_params *params, void *kind_params, fg_job_info *out) {
   const char *name = fg_scene_name(scene);
+  const fg_job_kind *kind = kind_find(jobs, kind_name);
+  if (!kind) return fg_fail(FG_EINVAL, "no job kind '%s' is registered", kind_name);
   fg_job *j = job_new();
   if (!j) return fg_fail(FG_ENOMEM, "out of memory");
   pthread_mutex_lock(&jobs->lock);
@@ -365,6 +385,7 @@ int fg_jobs_submit(fg_jobs *jobs, fg_scene *scene, const fg_train_params *params
   }
   make_id(j->info.id);
   snprintf(j->info.scene, sizeof j->info.scene, "%s", name);
+  snprintf(j->info.kind, sizeof j->info.kind, "%s", kind->name);
   j->info.state = FG_JOB_QUEUED;
   j->info.params = *params;
   j->info.created_ms = now_ms();
@@ -383,6 +404,9 @@ int fg_jobs_submit(fg_jobs *jobs, fg_scene *scene, const fg_train_params *params
   atomic_fetch_add(&j->refs, 1); /* one for the registry, one for the queue */
   fg_scene_ref(scene);
   j->scene = scene;
+  j->jobs = jobs;
+  j->kind = kind;
+  j->kind_params = kind_params;
   j->next = jobs->all;
   jobs->all = j;
   j->qnext = NULL;
@@ -393,8 +417,8 @@ int fg_jobs_submit(fg_jobs *jobs, fg_scene *scene, const fg_train_params *params
   if (out) fg_job_get_info(j, out);
   pthread_mutex_unlock(&jobs->lock);
   persist(jobs, j);
-  fg_info("job %s: training of scene %s queued (%lld steps, seed %llu)", j->info.id, name,
-          (long long)params->steps, (unsigned long long)params->seed);
+  fg_info("job %s: %s of scene %s queued (%lld steps, seed %llu)", j->info.id, kind->name,
+          name, (long long)params->steps, (unsigned long long)params->seed);
   return 0;
 }
 
@@ -426,7 +450,7 @@ static int cancel_locked(fg_jobs *jobs, fg_job *j) {
   } else {
     if (st == FG_JOB_RUNNING) {
       j->cancel = 1;
-      j->info.elapsed_s = mono_s() - j->started_mono;
+      j->info.elapsed_s = fg_mono_s() - j->started_mono;
     }
     j->info.state = FG_JOB_CANCELLED;
     j->info.eta_s = NAN;
@@ -473,56 +497,60 @@ void fg_jobs_cancel_scene(fg_jobs *jobs, const char *scene) {
   pthread_mutex_unlock(&jobs->lock);
 }
 
-/* ---------------------------------------------------------------- the training */
+/* ---------------------------------------------------------------- for run functions */
 
-/* Lowers the calling thread and the OpenMP team it leads (libgomp keeps one team per
- * calling thread, so other threads' teams keep their priority) to TRAIN_NICE; never raises
- * a priority the daemon was started with. */
-static void lower_priority(int n_threads) {
-  int tid = gettid();
-  errno = 0;
-  int cur = getpriority(PRIO_PROCESS, (id_t)tid);
-  if (!(errno == 0 && cur >= TRAIN_NICE)) setpriority(PRIO_PROCESS, (id_t)tid, TRAIN_NICE);
-#pragma omp parallel num_threads(n_threads)
-  {
-    int t = gettid();
-    errno = 0;
-    int c = getpriority(PRIO_PROCESS, (id_t)t);
-    if (!(errno == 0 && c >= TRAIN_NICE)) setpriority(PRIO_PROCESS, (id_t)t, TRAIN_NICE);
-  }
+const char *fg_job_id(const fg_job *j) { return j->info.id; }
+
+fg_scene *fg_job_scene(fg_job *j) { return j->scene; }
+
+double fg_job_started_s(fg_job *j) { return j->started_mono; }
+
+int fg_job_cancelled(fg_job *j) {
+  pthread_mutex_lock(&j->lock);
+  int cancelled = j->cancel || j->info.state == FG_JOB_CANCELLED;
+  pthread_mutex_unlock(&j->lock);
+  return cancelled;
 }
 
-typedef struct run_ctx {
-  fg_jobs *jobs;
-  fg_job *job;
-} run_ctx;
-
-/* Whether the job should stop: cancelled, or the daemon is stopping. */
-static int should_stop(void *ud) {
-  run_ctx *r = ud;
-  pthread_mutex_lock(&r->job->lock);
-  int c = r->job->cancel;
-  pthread_mutex_unlock(&r->job->lock);
-  pthread_mutex_lock(&r->jobs->lock);
-  int s = r->jobs->stopping;
-  pthread_mutex_unlock(&r->jobs->lock);
-  return c || s;
+int fg_job_should_stop(fg_job *j) {
+  pthread_mutex_lock(&j->lock);
+  int cancelled = j->cancel;
+  pthread_mutex_unlock(&j->lock);
+  pthread_mutex_lock(&j->jobs->lock);
+  int stopping = j->jobs->stopping;
+  pthread_mutex_unlock(&j->jobs->lock);
+  return cancelled || stopping;
 }
 
-/* Ends a job as failed with a message (unless it was cancelled meanwhile). */
-static void job_fail(fg_job *j, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void job_fail(fg_job *j, const char *fmt, ...) {
+fg_job_info *fg_job_update_begin(fg_job *j) {
+  pthread_mutex_lock(&j->lock);
+  return &j->info;
+}
+
+void fg_job_update_end(fg_job *j) {
+  j->info.version++;
+  pthread_mutex_unlock(&j->lock);
+}
+
+void fg_job_set_phase(fg_job *j, const char *phase) {
+  fg_job_info *info = fg_job_update_begin(j);
+  snprintf(info->phase, sizeof info->phase, "%s", phase);
+  fg_job_update_end(j);
+}
+
+void fg_job_fail(fg_job *j, const char *fmt, ...) {
   char msg[512];
   va_list ap;
   va_start(ap, fmt);
   vsnprintf(msg, sizeof msg, fmt, ap);
   va_end(ap);
   pthread_mutex_lock(&j->lock);
+  j->committing = 0;
   if (j->info.state == FG_JOB_RUNNING) {
     j->info.state = FG_JOB_FAILED;
     snprintf(j->info.error, sizeof j->info.error, "%s", msg);
     j->info.eta_s = NAN;
-    j->info.elapsed_s = mono_s() - j->started_mono;
+    j->info.elapsed_s = fg_mono_s() - j->started_mono;
     j->info.finished_ms = now_ms();
     j->info.version++;
   }
@@ -530,288 +558,44 @@ static void job_fail(fg_job *j, const char *fmt, ...) {
   fg_warn("job %s: failed: %s", j->info.id, msg);
 }
 
-/* Records the phase the job is in. */
-static void set_phase(fg_job *j, const char *phase) {
-  pthread_mutex_lock(&j->lock);
-  snprintf(j->info.phase, sizeof j->info.phase, "%s", phase);
-  j->info.version++;
-  pthread_mutex_unlock(&j->lock);
-}
-
-/* Progress of the CLIP features phase (clip_features.h). */
-static void on_features(void *ud, const fg_clip_features_progress *p) {
-  run_ctx *r = ud;
-  pthread_mutex_lock(&r->job->lock);
-  r->job->info.features_done = (int)p->done;
-  r->job->info.features_cached = (int)p->cached;
-  r->job->info.elapsed_s = mono_s() - r->job->started_mono;
-  r->job->info.version++;
-  pthread_mutex_unlock(&r->job->lock);
-}
-
-/* Total pixels of the frames the trainer holds out (frames i with i % k == 0). */
-static double heldout_pixels(const fg_frame *frames, size_t n, int k) {
-  double px = 0;
-  for (size_t i = 0; k > 0 && i < n; i += (size_t)k)
-    px += (double)frames[i].cam.w * (double)frames[i].cam.h;
-  return px;
-}
-
-/* Trains j's scene. Leaves the job done, failed, cancelled or (daemon stopping) running. */
-static void run_training(fg_jobs *jobs, fg_job *j) {
-  fg_app *app = jobs->app;
-  run_ctx rc_ud = {jobs, j};
-  fg_scene *scene = j->scene;
-  const char *id = j->info.id;
-  const fg_conf *conf = fg_app_conf_acquire(app);
-  const int n_threads = fg_conf_threads(conf), half = conf->half_precision;
-  fg_app_conf_release(app, conf);
-  /* The CLIP model this job starts with serves it to the end, whatever a reload brings. Its
-   * team may be larger than training's: lower every thread either may use. */
-  fg_clip_model *clip = app->clip ? fg_clip_svc_acquire(app->clip) : NULL;
-  lower_priority(clip && fg_clip_model_threads(clip) > n_threads ? fg_clip_model_threads(clip)
-                                                                  : n_threads);
-  /* This training writes and removes field.next.fgc: if the scene's field came from that file
-   * (an interrupted training), make it field.fgc first so that nothing can lose it. */
-  fg_scene_keep_partial(scene);
-
-  fg_frame *frames = NULL;
-  int *indices = NULL;
-  size_t n = 0;
-  fg_field *field = NULL;
-  fg_trainer *t = NULL;
-  char *next_path = fg_path_join(fg_scene_dir(scene), "field.next.fgc");
-  int keep_partial = 0;
-  if (!next_path) {
-    job_fail(j, "out of memory");
-    goto out;
-  }
-
-  set_phase(j, "loading");
-  int rc = fg_scene_load_frames(scene, &frames, &indices, &n, should_stop, &rc_ud);
-  if (rc == FG_ECANCELED) goto stopped;
-  if (rc != 0) {
-    job_fail(j, "cannot load the scene's frames: %s", fg_error_detail());
-    goto out;
-  }
-  if (n == 0) {
-    job_fail(j, "the scene has no frames; add some with POST /v1/scenes/%s/frames or .../import",
-             j->info.scene);
-    goto out;
-  }
-  /* ---- CLIP features for the frames that have none ---- */
-  size_t need = clip ? fg_clip_features_needed(frames, n) : 0;
-  if (need) {
-    pthread_mutex_lock(&j->lock);
-    snprintf(j->info.phase, sizeof j->info.phase, "features");
-    j->info.features_total = (int)need;
-    j->info.features_done = j->info.features_cached = 0;
-    j->info.version++;
-    pthread_mutex_unlock(&j->lock);
-    double t0 = mono_s();
-    rc = fg_clip_features_attach(clip, fg_scene_dir(scene), frames, indices, n, should_stop,
-                                 on_features, &rc_ud);
-    if (rc == FG_ECANCELED) goto stopped;
-    if (rc != 0) {
-      job_fail(j, "cannot give the frames CLIP features: %s", fg_error_detail());
-      goto out;
-    }
-    pthread_mutex_lock(&j->lock);
-    int cached = j->info.features_cached;
-    pthread_mutex_unlock(&j->lock);
-    fg_info("job %s: CLIP features of %zu frames (model %s): %zu computed, %d from the cache, "
-            "in %.1f s", id, need, fg_clip_model_info(clip)->fingerprint, need - (size_t)cached,
-            cached, mono_s() - t0);
-  }
-  fg_clip_model_release(clip);
-  clip = NULL;
-  int feature_dim = 0; /* the store keeps one D per scene; CLIP's E equals it (checked) */
-  for (size_t i = 0; i < n && !feature_dim; i++) feature_dim = frames[i].feat_d;
-
-  set_phase(j, "training");
-  fg_scene_info si;
-  fg_scene_get_info(scene, &si);
-  fg_train_params p = j->info.params;
-  fg_field_config cfg;
-  if (fg_field_config_for_workspace(&cfg, si.params.workspace_min, si.params.workspace_max,
-                                    FIELD_SCALE, feature_dim) != 0 ||
-      fg_field_new(&field, &cfg, p.seed) != 0) {
-    job_fail(j, "cannot set up the field: %s", fg_error_detail());
-    goto out;
-  }
-  fg_train_opts opts;
-  fg_train_opts_default(&opts);
-  opts.n_threads = n_threads;
-  opts.seed = p.seed;
-  opts.holdout_every = p.holdout_every;
-  for (int k = 0; k < 3; k++) opts.background[k] = (float)si.params.background[k];
-  if (fg_trainer_new(&t, field, frames, n, &opts) != 0) {
-    job_fail(j, "cannot start training: %s", fg_error_detail());
-    goto out;
-  }
-  size_t n_heldout = fg_trainer_n_heldout(t);
-  pthread_mutex_lock(&j->lock);
-  j->info.n_frames = (int)n;
-  j->info.n_heldout = (int)n_heldout;
-  j->info.version++;
-  pthread_mutex_unlock(&j->lock);
-  fg_info("job %s: training scene %s on %zu frames (%zu held out), %d threads", id,
-          j->info.scene, n, n_heldout, n_threads);
-
-  /* ---- the loop ---- */
-  double t_start = j->started_mono, t_loop = mono_s();
-  double last_eval = t_loop, last_ckpt = t_loop;
-  int64_t step = 0;
-  for (; step < p.steps; ) {
-    if (should_stop(&rc_ud)) goto stopped;
-    double t0 = mono_s();
-    if (p.max_seconds > 0 && t0 - t_start >= p.max_seconds) break;
-    fg_train_stats st;
-    rc = fg_trainer_step(t, &st);
-    double t1 = mono_s();
-    if (rc != 0) {
-      job_fail(j, "training stopped at step %lld: %s%s", (long long)step, fg_error_detail(),
-               rc == FG_ERANGE ? "; try another seed" : "");
-      goto out;
-    }
-    step++;
-    fg_metrics_add_training_steps(1);
-    double sps = t1 > t0 ? (double)st.samples / (t1 - t0) : NAN;
-    if (isfinite(sps)) fg_metrics_set_training_samples_per_s(sps);
-    double elapsed = t1 - t_start, per_step = (t1 - t_loop) / (double)step;
-    double eta = per_step * (double)(p.steps - step);
-    if (p.max_seconds > 0 && p.max_seconds - elapsed < eta) eta = fmax(0, p.max_seconds - elapsed);
-    double psnr = NAN;
-    if (n_heldout > 0 && t1 - last_eval >= FG_TRAIN_EVAL_SECONDS) {
-      if (fg_trainer_eval(t, 0, &psnr) != 0) psnr = NAN;
-      last_eval = mono_s();
-    }
-    pthread_mutex_lock(&j->lock);
-    j->info.step = step;
-    j->info.loss = st.loss;
-    j->info.samples_per_s = sps;
-    j->info.elapsed_s = elapsed;
-    j->info.eta_s = eta;
-    if (isfinite(psnr)) {
-      j->info.psnr = psnr;
-      j->info.psnr_full = 0;
-    }
-    j->info.version++;
-    pthread_mutex_unlock(&j->lock);
-    if (mono_s() - last_ckpt >= FG_TRAIN_CHECKPOINT_SECONDS) {
-      if (fg_checkpoint_save(field, next_path, half) == 0) {
-        fg_debug("job %s: partial checkpoint at step %lld", id, (long long)step);
-      } else {
-        fg_warn("job %s: cannot write the partial checkpoint %s: %s", id, next_path,
-                fg_error_detail());
-      }
-      last_ckpt = mono_s();
-    }
-  }
-
-  /* ---- the end: PSNR over every held-out pixel when that is cheap, then commit ---- */
-  if (n_heldout > 0) {
-    double psnr = NAN, t0 = mono_s();
-    if (fg_trainer_eval(t, 0, &psnr) != 0) psnr = NAN;
-    double sampled_s = mono_s() - t0;
-    double px = heldout_pixels(frames, n, p.holdout_every);
-    double est_full = px > 0 ? sampled_s * px / fmin(px, 16384.0) : INFINITY;
-    int full = 0;
-    if (est_full < 0.1 * (mono_s() - t_loop) && !should_stop(&rc_ud)) {
-      double psnr_full = NAN;
-      if (fg_trainer_eval(t, 1, &psnr_full) == 0 && isfinite(psnr_full)) {
-        psnr = psnr_full;
-        full = 1;
-      }
-    }
-    pthread_mutex_lock(&j->lock);
-    if (isfinite(psnr)) {
-      j->info.psnr = psnr;
-      j->info.psnr_full = full;
-    }
-    j->info.version++;
-    pthread_mutex_unlock(&j->lock);
-  }
-  if (should_stop(&rc_ud)) goto stopped;
-  set_phase(j, "saving");
-  if (fg_checkpoint_save(field, next_path, half) != 0) {
-    job_fail(j, "cannot save the trained field: %s", fg_error_detail());
-    goto out;
-  }
-  /* From here on a DELETE is too late: the job installs its result. */
+int fg_job_commit_begin(fg_job *j) {
   pthread_mutex_lock(&j->lock);
   int cancelled = j->cancel;
   if (!cancelled) j->committing = 1;
   pthread_mutex_unlock(&j->lock);
-  if (cancelled) goto stopped;
-  rc = fg_scene_commit_field(scene, field, next_path);
-  if (rc == FG_ENOENT) { /* the scene was deleted meanwhile */
-    pthread_mutex_lock(&j->lock);
-    j->info.state = FG_JOB_CANCELLED;
-    j->info.finished_ms = now_ms();
-    j->info.version++;
-    pthread_mutex_unlock(&j->lock);
-    goto out;
-  }
-  if (rc != 0) {
-    pthread_mutex_lock(&j->lock);
-    j->committing = 0;
-    pthread_mutex_unlock(&j->lock);
-    job_fail(j, "cannot install the trained field: %s", fg_error_detail());
-    goto out;
-  }
-  field = NULL; /* the scene's now */
+  return cancelled ? FG_ECANCELED : 0;
+}
+
+void fg_job_finish(fg_job *j, fg_job_state state) {
   pthread_mutex_lock(&j->lock);
-  j->info.state = FG_JOB_DONE;
-  j->info.step = step;
-  j->info.eta_s = 0;
-  j->info.elapsed_s = mono_s() - j->started_mono;
+  j->info.state = state;
+  j->info.eta_s = state == FG_JOB_DONE ? 0 : NAN;
+  j->info.elapsed_s = fg_mono_s() - j->started_mono;
   j->info.finished_ms = now_ms();
   j->info.version++;
   pthread_mutex_unlock(&j->lock);
-  fg_info("job %s: done: scene %s trained for %lld steps in %.1f s", id, j->info.scene,
-          (long long)step, j->info.elapsed_s);
-  goto out;
+}
 
-stopped:
-  pthread_mutex_lock(&j->lock);
-  int was_cancelled = j->cancel || j->info.state == FG_JOB_CANCELLED;
-  pthread_mutex_unlock(&j->lock);
-  if (!was_cancelled) {
-    /* The daemon is stopping: keep what was learnt as the partial checkpoint; the job stays
-     * "running" on disk and the next start reports it interrupted. */
-    keep_partial = 1;
-    if (field && t && field->trained_steps > 0) {
-      if (fg_checkpoint_save(field, next_path, half) == 0)
-        fg_info("job %s: interrupted by the shutdown after %lld steps; its field is kept as "
-                "field.next.fgc", id, (long long)field->trained_steps);
-      else
-        fg_warn("job %s: cannot save field.next.fgc at shutdown: %s", id, fg_error_detail());
-    }
-  } else {
-    fg_info("job %s: stopped (cancelled); the scene's field is as it was", id);
+void fg_job_lower_priority(int n_threads) {
+  int tid = gettid();
+  errno = 0;
+  int current = getpriority(PRIO_PROCESS, (id_t)tid);
+  if (!(errno == 0 && current >= JOB_NICE)) setpriority(PRIO_PROCESS, (id_t)tid, JOB_NICE);
+#pragma omp parallel num_threads(n_threads)
+  {
+    int team_tid = gettid();
+    errno = 0;
+    int team_current = getpriority(PRIO_PROCESS, (id_t)team_tid);
+    if (!(errno == 0 && team_current >= JOB_NICE))
+      setpriority(PRIO_PROCESS, (id_t)team_tid, JOB_NICE);
   }
-
-out:
-  if (next_path && !keep_partial) {
-    pthread_mutex_lock(&j->lock);
-    int done = j->info.state == FG_JOB_DONE;
-    pthread_mutex_unlock(&j->lock);
-    if (!done && unlink(next_path) == 0) fg_debug("job %s: removed %s", id, next_path);
-  }
-  fg_trainer_free(t);
-  fg_field_free(field);
-  fg_scene_frames_free(frames, n);
-  free(indices);
-  fg_clip_model_release(clip);
-  free(next_path);
 }
 
 /* ---------------------------------------------------------------- the worker */
 
 static void *worker_main(void *arg) {
   fg_jobs *jobs = arg;
-  pthread_setname_np(pthread_self(), "fg-train");
+  pthread_setname_np(pthread_self(), "fg-train"); /* tests and ps look for this name */
   for (;;) {
     pthread_mutex_lock(&jobs->lock);
     while (!jobs->qhead && !jobs->stopping) pthread_cond_wait(&jobs->cond, &jobs->lock);
@@ -830,14 +614,14 @@ static void *worker_main(void *arg) {
     if (go) {
       j->info.state = FG_JOB_RUNNING;
       j->info.started_ms = now_ms();
-      j->started_mono = mono_s();
+      j->started_mono = fg_mono_s();
       j->info.version++;
     }
     pthread_mutex_unlock(&j->lock);
     if (go) {
       persist(jobs, j);
-      fg_info("job %s: training of scene %s started", j->info.id, j->info.scene);
-      run_training(jobs, j);
+      fg_info("job %s: %s of scene %s started", j->info.id, j->kind->name, j->info.scene);
+      j->kind->run(j, jobs->app, j->kind_params);
       persist(jobs, j);
       /* The job is over: its scene may go (the reference kept it alive while it ran). */
       pthread_mutex_lock(&j->lock);
@@ -845,7 +629,7 @@ static void *worker_main(void *arg) {
       if (scene) j->scene = NULL;
       pthread_mutex_unlock(&j->lock);
       if (scene) fg_scene_unref(scene);
-      /* Training's buffers (hundreds of MB) are free now; hand them back to the system. */
+      /* A job's buffers (a training's are hundreds of MB) are free now; hand them back. */
       malloc_trim(0);
     }
     pthread_mutex_lock(&jobs->lock);

@@ -68,19 +68,22 @@ int fg_json_matrix4(json_t *v, double T[16], const char *what) {
   return 0;
 }
 
-int fg_json_pose(json_t *v, double T[16], const char *what) {
+int fg_json_pose_parse(json_t *v, const char *what, double T[16], double q_wxyz[4]) {
+  double q[4];
+  int quaternion_form = 0;
   if (json_is_array(v)) {
     FG_TRY(fg_json_matrix4(v, T, what));
   } else if (json_is_object(v) && json_object_get(v, "matrix")) {
     FG_TRY(fg_json_matrix4(json_object_get(v, "matrix"), T, what));
   } else if (json_is_object(v)) {
-    double p[3], q[4];
+    double p[3];
     char name[96];
     snprintf(name, sizeof name, "%s.position", what);
     FG_TRY(fg_json_vec(json_object_get(v, "position"), p, 3, name));
     snprintf(name, sizeof name, "%s.quaternion", what);
     FG_TRY(fg_json_vec(json_object_get(v, "quaternion"), q, 4, name));
     FG_TRY(fg_pose_from_quat(p, q, T));
+    quaternion_form = 1;
   } else {
     return fg_fail(FG_EINVAL, "%s must be a 4x4 matrix or {\"position\": [x, y, z], "
                    "\"quaternion\": [w, x, y, z]}", what);
@@ -90,7 +93,32 @@ int fg_json_pose(json_t *v, double T[16], const char *what) {
     snprintf(detail, sizeof detail, "%s", fg_error_detail());
     return fg_fail(FG_EINVAL, "%s: %s", what, detail);
   }
+  if (!q_wxyz) return 0;
+  if (quaternion_form) {
+    /* fg_pose_from_quat checked that the norm is within FG_POSE_ORTHO_TOL of 1 */
+    const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int i = 0; i < 4; i++) q_wxyz[i] = q[i] / n;
+  } else {
+    double p[3];
+    fg_pose_to_quat(T, p, q_wxyz);
+  }
   return 0;
+}
+
+json_t *fg_json_pose_quat(const double p[3], const double q_wxyz[4]) {
+  double T[16];
+  double R[9];
+  fg_rotmat_from_quat(q_wxyz, R);
+  fg_pose_from_rotmat(R, p, T);
+  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(p, 3), "quaternion",
+                   fg_json_from_vec(q_wxyz, 4), "matrix", fg_json_from_matrix4(T));
+}
+
+json_t *fg_json_pose(const double T[16]) {
+  double p[3], q[4];
+  fg_pose_to_quat(T, p, q);
+  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(p, 3), "quaternion",
+                   fg_json_from_vec(q, 4), "matrix", fg_json_from_matrix4(T));
 }
 
 static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",

@@ -31,9 +31,27 @@ int fg_json_vec(json_t *v, double *out, size_t n, const char *what);
 /* A 4x4 row-major nested array of numbers (not validated as rigid). */
 int fg_json_matrix4(json_t *v, double T[16], const char *what);
 
-/* A pose: either a 4x4 matrix, or {"matrix": 4x4} or {"position":[3], "quaternion":[w,x,y,z]}.
- * Checked with fg_pose_validate. */
-int fg_json_pose(json_t *v, double T[16], const char *what);
+/* ---- poses: the one JSON view of SPEC.md "Pose in JSON" ---- */
+
+/* Parses a pose T_world_x in either form SPEC.md allows: {"position": [x, y, z] (metres),
+ * "quaternion": [w, x, y, z]} or {"matrix": 4x4 rows} (the matrix wins when both are given),
+ * or a bare 4x4 array. A quaternion must be finite and of unit length within
+ * FG_POSE_ORTHO_TOL (1e-3; rounding within it is normalised away); a matrix must be rigid
+ * (fg_pose_validate: orthonormal, right-handed, last row [0, 0, 0, 1]). On success T holds
+ * the pose and q_wxyz (may be NULL) its unit quaternion: as given for the quaternion form
+ * (its sign kept: a robot's rotation vector at a half turn depends on it), else the
+ * matrix's with w >= 0. FG_EINVAL otherwise, with a detail that names `what` or its field
+ * ("pose.quaternion must be an array of 4 numbers", "quaternion [w, x, y, z] must have unit
+ * length, its norm is 2", "pose: rotation part is not orthonormal: ..."). */
+int fg_json_pose_parse(json_t *v, const char *what, double T[16], double q_wxyz[4]);
+
+/* The JSON view of a rigid pose T: {"position": [x, y, z], "quaternion": [w, x, y, z] (unit,
+ * w >= 0), "matrix": 4x4 rows}. New reference; NULL on allocation failure. */
+json_t *fg_json_pose(const double T[16]);
+
+/* The same view of a pose given as position p (metres) and unit quaternion q_wxyz, whose
+ * sign is kept in "quaternion" (a request's pose echoed as it came). */
+json_t *fg_json_pose_quat(const double p[3], const double q_wxyz[4]);
 
 /* Intrinsics of SPEC.md "Frames and units" from obj (a "camera" object, or a frame object
  * whose camera keys stand at the top level, as in a transforms.json frame; strict says

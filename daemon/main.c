@@ -1,11 +1,13 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
+#include "app.h"
 #include "clip_svc.h"
 #include "idem.h"
 #include "robot.h"
 #include "conf.h"
 #include "decoder.h"
 #include "http.h"
+#include "job_train.h"
 #include "jobs.h"
 #include "metrics.h"
 #include "notify.h"
@@ -254,8 +256,10 @@ int main(int argc, char **argv) {
   }
   if (fg_decoder_check(app.decoder) != 0)
     fg_warn("%s; uploads, imports and renders will fail until it is there", fg_error_detail());
-  /* Trainings: each scene's last job comes back from its last_job.json. */
-  if (fg_jobs_new(&app.jobs, &app) != 0) {
+  /* Jobs: each scene's last job comes back from its last_job.json; one kind per job that
+   * the API can start. */
+  if (fg_jobs_new(&app.jobs, &app) != 0 ||
+      fg_jobs_register_kind(app.jobs, &fg_job_kind_train) != 0) {
     fg_error("cannot set up training: %s", fg_error_detail());
     app_teardown(&app);
     return 1;

@@ -10,8 +10,10 @@
  *                                 ["object", "things", "stuff", "texture"]; [] for none;
  *   "negative_embeddings": [[D]]  or vectors given directly (not both);
  *   "temperature": 0.1            > 0, of the softmax between query and negatives.
- * Every vector is scaled to unit L2 norm; one of norm 0 is refused. An "embedding" query
- * has no negatives unless the request names some. */
+ * Every query, from texts or vectors, is resolved by the library's one rule, fg_query_init
+ * (query/heatmap.h): each vector scaled to unit L2 norm, the positives averaged and the mean
+ * scaled again; a zero or non-finite vector, or positives that cancel out, are refused. An
+ * "embedding" query has no negatives unless the request names some. */
 #ifndef FG_DAEMON_QUERY_H
 #define FG_DAEMON_QUERY_H
 

@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/clock.h"
 #include "core/log.h"
+#include "core/pose.h"
 #include "modbus/devices.h"
 #include "modbus/peer.h"
 

@@ -30,17 +30,6 @@ float fg_float32_from_words(const uint16_t w[2]) {
   return v;
 }
 
-void fg_rotvec_from_quat(const double q_wxyz[4], double rotvec_rad[3]) {
-  const double s = q_wxyz[0] < 0 ? -1.0 : 1.0;
-  const double w = s * q_wxyz[0], x = s * q_wxyz[1], y = s * q_wxyz[2], z = s * q_wxyz[3];
-  const double n = sqrt(x * x + y * y + z * z);
-  /* angle / n, with its small-angle limit 2 / w (w is then close to 1) */
-  const double k = n > 1e-12 ? 2.0 * atan2(n, w) / n : 2.0 / (w > 0 ? w : 1.0);
-  rotvec_rad[0] = k * x;
-  rotvec_rad[1] = k * y;
-  rotvec_rad[2] = k * z;
-}
-
 /* A signed value in units of `unit` (0.0001 m, 0.001 rad) as an int16 register, rounded half
  * away from zero; FG_ERANGE naming it when it does not fit. */
 static int put_int16(const char *field, double v, double per_unit, const char *unit_name,

@@ -32,7 +32,7 @@ typedef struct fg_pose_block {
   uint16_t seq;         /* 1..65535 */
   int command;          /* fg_robot_command */
   double p_world_m[3];  /* TCP position, metres, world (robot base) frame */
-  double rotvec_rad[3]; /* TCP orientation as a rotation vector, radians */
+  double rotvec_rad[3]; /* TCP orientation as a rotation vector, radians (core/pose.h) */
   double width_m;       /* opening before the approach, metres, >= 0 */
   int force_n;          /* newtons, 0..65535 */
 } fg_pose_block;
@@ -53,9 +53,7 @@ int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w
  * int16 values come back at their 0.1 mm / mrad resolution. */
 void fg_pose_block_decode(const uint16_t *words, fg_pose_encoding e, fg_pose_block *b);
 
-/* The rotation vector (axis x angle, radians, angle in [0, pi]) of a unit quaternion
- * [w, x, y, z]; a quaternion with w < 0 is taken as its negation (the same rotation). */
-void fg_rotvec_from_quat(const double q_wxyz[4], double rotvec_rad[3]);
+/* A quaternion becomes rotvec_rad with fg_rotvec_from_quat (core/pose.h). */
 
 /* The sequence number after s: 1..65535, then 1 again; never 0. */
 uint16_t fg_seq_next(uint16_t s);

@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/pose.h"
 #include "modbus/devices.h"
 #include "modbus/link.h"
 #include "modbus/peer.h"

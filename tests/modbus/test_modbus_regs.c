@@ -5,6 +5,7 @@
 #include "test.h"
 
 #include "core/error.h"
+#include "core/pose.h"
 #include "modbus/regs.h"
 
 /* ---------------------------------------------------------------- helpers */
