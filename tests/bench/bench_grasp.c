@@ -10,10 +10,10 @@
  * bytes are reported on their own: the daemon builds it once per field state, not per
  * request), and records one demo each of the mug's and the box's gt.json grasp (each task is
  * one demo, so Z = z at that pose, 100 query points of the default std). Then it times --runs
- * rounds of both tasks' requests done as the daemon does them: fg_grasp_field_new +
- * fg_grasp_search with the default options (candidates at alpha >= 0.1, 24 rotations,
- * n_keep 1024, n_final 64, 100 Adam iterations), the Robotiq 2F-140 open to 0.11 m for the
- * collision checks. p50/min/max are over all 2 x runs requests; poses_optimised, evaluations
+ * rounds of both tasks' requests done as the daemon does them: fg_grasp_field_new (its share
+ * is reported as grasp_field_new_p50_s) + fg_grasp_search with the default options
+ * (candidates at alpha >= 0.1, 24 rotations, n_keep 1024, n_final 64, 100 Adam iterations),
+ * the Robotiq 2F-140 open to 0.11 m for the collision checks. p50/min/max are over all 2 x runs requests; poses_optimised, evaluations
  * and lookups are those of the costlier of the two tasks' requests (they differ only by the
  * poses the collision check rejects). lookups = evaluations x N_q x 8 trilinear corners, each a
  * 64-float row of the grasp field: lookup_gb_per_s says how far the search runs from memory
@@ -245,6 +245,12 @@ static int cmp_double(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
+/* The median of v (n >= 1), which it sorts. */
+static double median(double *v, int n) {
+  qsort(v, (size_t)n, sizeof *v, cmp_double);
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 static int object_index(const sg_gt *gt, const char *name) {
   for (int k = 0; k < gt->n_objects; k++)
     if (strcmp(gt->objects[k].name, name) == 0) return k;
@@ -351,6 +357,7 @@ int main(int argc, char **argv) {
   const long base_kb = peak_reset ? rss0_kb : hwm0_kb;
   const int n_req = runs * N_TASKS;
   double *secs = xmalloc((size_t)n_req * sizeof *secs);
+  double *secs_field = xmalloc((size_t)n_req * sizeof *secs_field);
   fg_grasp_stats st = {0};
   size_t field_bytes = 0;
   double top_score[N_TASKS], top_cost[N_TASKS], top_T[N_TASKS][16];
@@ -363,8 +370,10 @@ int main(int argc, char **argv) {
       fg_grasp_field *gf;
       t0 = fg_mono_s();
       TRY("fg_grasp_field_new", fg_grasp_field_new(&gf, vf, threads));
+      const double t1 = fg_mono_s();
       TRY("fg_grasp_search", fg_grasp_search(gf, &t, &o, &res));
       secs[r * N_TASKS + task] = fg_mono_s() - t0;
+      secs_field[r * N_TASKS + task] = t1 - t0;
       field_bytes = fg_grasp_field_bytes(gf);
       fg_grasp_field_free(gf);
       found[task] = res.n;
@@ -377,8 +386,7 @@ int main(int argc, char **argv) {
     }
   const long hwm1_kb = status_kb("VmHWM:");
   const double extra_mb = (double)(hwm1_kb - base_kb) / 1024.0;
-  qsort(secs, (size_t)n_req, sizeof *secs, cmp_double);
-  const double p50 = n_req % 2 ? secs[n_req / 2] : 0.5 * (secs[n_req / 2 - 1] + secs[n_req / 2]);
+  const double p50 = median(secs, n_req), p50_field = median(secs_field, n_req);
   const double lo = secs[0], hi = secs[n_req - 1];
   const size_t lookups = st.evaluations * N_QUERY * 8;
   /* each lookup reads one row of 64 floats of the grasp field */
@@ -393,7 +401,7 @@ int main(int argc, char **argv) {
          "train_steps=%d train_samples_per_step=%d train_s=%.1f train_loss=%.4f "
          "cache_build_s=%.3f cache_bytes=%zu cache_mb=%.1f grasp_field_bytes=%zu "
          "grasp_field_mb=%.1f tasks=mug,box runs=%d requests=%d p50_s=%.4f min_s=%.4f "
-         "max_s=%.4f candidates=%zu rotations=%d poses_scored=%zu poses_optimised=%zu "
+         "max_s=%.4f grasp_field_new_p50_s=%.4f candidates=%zu rotations=%d poses_scored=%zu poses_optimised=%zu "
          "n_final=%d iterations=%d evaluations=%zu query_points=%d lookups=%zu "
          "lookup_gb_per_s=%.1f collision_checks=%zu rejected_collisions=%zu gripper=robotiq-2f140 "
          "width_m=%.2f top_score_mug=%.4f top_score_box=%.4f peak_reset=%s base_rss_mb=%.1f "
@@ -401,7 +409,7 @@ int main(int argc, char **argv) {
          D, threads, fg_voxel_grid_count(&grid), voxel_size, fg_voxel_features_n_kept(vf), steps,
          to.target_samples, train_s, (double)ts.loss, cache_s, fg_voxel_features_bytes(vf),
          fg_voxel_features_bytes(vf) / 1048576.0, field_bytes, field_bytes / 1048576.0, runs,
-         n_req, p50, lo, hi, st.candidates, st.rotations, st.poses_scored, st.poses_optimised,
+         n_req, p50, lo, hi, p50_field, st.candidates, st.rotations, st.poses_scored, st.poses_optimised,
          o.n_final, st.iterations, st.evaluations, N_QUERY, lookups, gb_per_s,
          st.collision_checks, st.rejected_collisions, o.width_m, top_score[TASK_MUG],
          top_score[TASK_BOX], peak_reset ? "yes" : "no", base_kb / 1024.0, extra_mb,
@@ -431,6 +439,7 @@ int main(int argc, char **argv) {
 
   for (int task = 0; task < N_TASKS; task++) free(Z[task]);
   free(secs);
+  free(secs_field);
   fg_voxel_features_free(vf);
   sg_gt_free(&gt);
   free(transforms);
