@@ -53,6 +53,7 @@
 
 #include <jansson.h>
 
+#include "benchmem.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
@@ -90,27 +91,6 @@ static void *xmalloc(size_t n) {
   void *p = malloc(n ? n : 1);
   if (!p) die("out of memory", FG_ENOMEM);
   return p;
-}
-
-/* ---------------------------------------------------------------- memory */
-
-/* kB of a /proc/self/status field ("VmHWM:", "VmRSS:"), or -1. */
-static long status_kb(const char *key) {
-  FILE *f = fopen("/proc/self/status", "r");
-  char line[256];
-  long v = -1;
-  while (f && fgets(line, sizeof line, f))
-    if (strncmp(line, key, strlen(key)) == 0) v = strtol(line + strlen(key), NULL, 10);
-  if (f) fclose(f);
-  return v;
-}
-
-/* Resets VmHWM to the current RSS; 1 when the kernel took it. */
-static int reset_peak(void) {
-  FILE *f = fopen("/proc/self/clear_refs", "w");
-  if (!f) return 0;
-  const int ok = fputs("5", f) >= 0;
-  return fclose(f) == 0 && ok;
 }
 
 /* ---------------------------------------------------------------- dump */
@@ -351,9 +331,9 @@ int main(int argc, char **argv) {
 
   /* ---- the requests, measured from here: what training left is given back first */
   malloc_trim(0);
-  const int peak_reset = reset_peak();
-  const long rss0_kb = status_kb("VmRSS:");
-  const long hwm0_kb = status_kb("VmHWM:");
+  const int peak_reset = bench_reset_peak();
+  const long rss0_kb = bench_status_kb("VmRSS:");
+  const long hwm0_kb = bench_status_kb("VmHWM:");
   const long base_kb = peak_reset ? rss0_kb : hwm0_kb;
   const int n_req = runs * N_TASKS;
   double *secs = xmalloc((size_t)n_req * sizeof *secs);
@@ -384,7 +364,7 @@ int main(int argc, char **argv) {
       if (res.stats.evaluations >= st.evaluations) st = res.stats;
       fg_grasp_result_release(&res);
     }
-  const long hwm1_kb = status_kb("VmHWM:");
+  const long hwm1_kb = bench_status_kb("VmHWM:");
   const double extra_mb = (double)(hwm1_kb - base_kb) / 1024.0;
   const double p50 = median(secs, n_req), p50_field = median(secs_field, n_req);
   const double lo = secs[0], hi = secs[n_req - 1];
