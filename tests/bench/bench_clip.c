@@ -15,6 +15,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "benchmem.h"
 #include "clip/clip.h"
 #include "core/error.h"
 
@@ -59,26 +60,6 @@ static double sgemm_gflops(int threads) {
   }
   free(a), free(b), free(c);
   return 2.0 * n * n * (double)n / best * 1e-9;
-}
-
-/* kB of a /proc/self/status field ("VmHWM:", "VmRSS:"). */
-static long status_kb(const char *key) {
-  FILE *f = fopen("/proc/self/status", "r");
-  char line[256];
-  long v = -1;
-  while (f && fgets(line, sizeof line, f))
-    if (strncmp(line, key, strlen(key)) == 0) v = strtol(line + strlen(key), NULL, 10);
-  if (f) fclose(f);
-  return v;
-}
-
-/* Resets VmHWM to the current RSS, so that the peak measured is this benchmark's. */
-static void reset_peak(void) {
-  FILE *f = fopen("/proc/self/clear_refs", "w");
-  if (f) {
-    fputs("5", f);
-    fclose(f);
-  }
 }
 
 /* FLOPs of one transformer block over T tokens of width w (attention included). */
@@ -158,8 +139,8 @@ int main(int argc, char **argv) {
   /* The machine's SGEMM rate: the better of a measurement before and one after the rest, so
    * that a moment of load on a shared machine does not flatter the ratios. */
   double sgemm = sgemm_gflops(threads);
-  reset_peak();
-  const long rss0 = status_kb("VmRSS:");
+  bench_reset_peak();
+  const long rss0 = bench_status_kb("VmRSS:");
   const double t_load = now_s();
   fg_clip *c;
   if (fg_clip_load(&c, argv[1]) != 0) {
@@ -210,7 +191,7 @@ int main(int argc, char **argv) {
   }
   free(ids), free(temb);
 
-  const long hwm = status_kb("VmHWM:");
+  const long hwm = bench_status_kb("VmHWM:");
   const double sgemm_after = sgemm_gflops(threads);
   if (sgemm_after > sgemm) sgemm = sgemm_after;
   printf(" sgemm2048_gflops=%.1f", sgemm);

@@ -22,6 +22,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "benchmem.h"
 #include "core/error.h"
 #include "field/model.h"
 #include "field/train.h"
@@ -34,15 +35,7 @@ static double now_s(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static double peak_rss_mb(void) {
-  FILE *f = fopen("/proc/self/status", "r");
-  char line[256];
-  double kb = 0.0;
-  while (f && fgets(line, sizeof line, f))
-    if (strncmp(line, "VmHWM:", 6) == 0) kb = atof(line + 6);
-  if (f) fclose(f);
-  return kb / 1024.0;
-}
+static double peak_rss_mb(void) { return bench_status_kb("VmHWM:") / 1024.0; }
 
 int main(int argc, char **argv) {
   const char *data = NULL, *render_out = NULL;

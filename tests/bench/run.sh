@@ -2,8 +2,9 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy] [clip] [heatmap] [robot]
-#   (no names: all of them; train takes about 6 minutes, throughput about 3)
+#                           [busy] [clip] [heatmap] [robot] [grasp]
+#   (no names: all of them; train takes about 6 minutes, throughput about 3; grasp several,
+#   most of them in the PyTorch peer)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
@@ -44,6 +45,24 @@
 #           /v1/robot and dry-run moves (HTTP without Modbus); every command's seq checked
 #           against the simulator's request log: each one once and consecutive, none lost
 #           or duplicated, the logged words equal to the reply's registers.robot.words
+#   grasp   a grasp request (issue 12) on the SPEC.md tabletop workspace (220,500 voxels) with
+#           512-d features: a generated tabletop (fieldgrip-scenegen --dim 512 --views 40)
+#           trained in-process on 2 threads for BENCH_GRASP_STEPS steps (default 300), its
+#           voxel cache built (seconds and bytes reported apart: not part of a request), one
+#           demo each of the mug's and the box's gt.json grasp, then BENCH_GRASP_RUNS (default
+#           5) rounds of both tasks' requests as the daemon does them (grasp field + search,
+#           default options, Robotiq 2F-140 at 0.11 m): p50/min/max seconds, candidates,
+#           rotations, poses scored and optimised, iterations, evaluations, lookups and the
+#           extra peak memory (targets p50 <= 1 s, <= 300 MB); then the same optimisation in
+#           PyTorch (tests/bench/peer_grasp.py, F3RM's way: full 512-d features, autograd,
+#           Adam; no collision check) on the same threads from bench_grasp --dump, and the
+#           ratio of the peer's seconds to ours (reported, no target). Quick checks at tiny
+#           sizes: BENCH_GRASP_DIM, BENCH_GRASP_VIEWS (default 40), BENCH_GRASP_ROTATIONS
+#           (default 24), BENCH_GRASP_SAMPLES (samples per training step, default the
+#           trainer's 2^17) and BENCH_GRASP_VOXEL_SIZE (default 0.01; a coarser grid finds
+#           candidates after fewer steps) change the run; pass is only meaningful at the
+#           defaults. ratio_per_evaluation compares the seconds per cost evaluation, since
+#           the peer, without collision checks, may optimise more poses than ours
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -53,13 +72,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,52p' "$0" >&2
+  sed -n '2,71p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -444,6 +463,50 @@ bench_robot() {
   echo "$line target_max_p99_ms=5 pass=$pass"
 }
 
+bench_grasp() {
+  local set=$tmp/grasp512 dump=$tmp/grasp_dump bin=$build/tests/bench/bench_grasp
+  local dim=${BENCH_GRASP_DIM:-512} steps=${BENCH_GRASP_STEPS:-300} runs=${BENCH_GRASP_RUNS:-5}
+  local views=${BENCH_GRASP_VIEWS:-40} rotations=${BENCH_GRASP_ROTATIONS:-24}
+  local samples=${BENCH_GRASP_SAMPLES:-0} voxel=${BENCH_GRASP_VOXEL_SIZE:-0.01}
+  local ours peer rc=0 ratio ratio_eval pass
+  if [ ! -x "$bin" ]; then
+    echo "bench=grasp error=not_built hint=meson_compile_bench_grasp pass=no"
+    failed=1; return
+  fi
+  "$build/tests/scenegen/fieldgrip-scenegen" --out "$set" --dim "$dim" --views "$views" \
+    --holdout 0 >/dev/null
+  ours=$("$bin" --data "$set" --threads 2 --steps "$steps" --runs "$runs" \
+    --rotations "$rotations" --samples "$samples" --voxel-size "$voxel" --dump "$dump") || rc=$?
+  ours=$(printf '%s\n' "$ours" | grep '^bench=grasp ' || true)
+  rm -rf "$set"
+  if [ -z "$ours" ]; then
+    echo "bench=grasp error=bench_grasp_exit_$rc pass=no"
+    failed=1; return
+  fi
+  echo "$ours"
+  [ "$(field pass "$ours")" = yes ] || failed=1
+  if ! /usr/bin/python3 -c 'import torch, numpy' 2>/dev/null; then
+    echo "bench=grasp_vs_peer error=no_pytorch hint=apt-get_install_python3-torch_python3-numpy pass=no"
+    failed=1; return
+  fi
+  rc=0
+  peer=$(/usr/bin/python3 "$src/tests/bench/peer_grasp.py" "$dump" --threads 2) || rc=$?
+  peer=$(printf '%s\n' "$peer" | grep '^bench=grasp_peer ' || true)
+  rm -rf "$dump"
+  if [ -z "$peer" ]; then
+    echo "bench=grasp_vs_peer error=peer_grasp_exit_$rc pass=no"
+    failed=1; return
+  fi
+  echo "$peer"
+  ratio=$(awk -v a="$(field seconds "$peer")" -v b="$(field p50_s "$ours")" \
+    'BEGIN { printf "%.1f", a / b }')
+  ratio_eval=$(awk -v a="$(field seconds "$peer")" -v b="$(field p50_s "$ours")" \
+    -v ea="$(field evaluations "$peer")" -v eb="$(field evaluations "$ours")" \
+    'BEGIN { printf "%.1f", (a / ea) / (b / eb) }')
+  pass=$(field pass "$ours")
+  echo "bench=grasp_vs_peer threads=2 dim=$dim seconds=$(field p50_s "$ours") peer_seconds=$(field seconds "$peer") ratio=$ratio ratio_per_evaluation=$ratio_eval evaluations=$(field evaluations "$ours") peer_evaluations=$(field evaluations "$peer") best_score_mug=$(field top_score_mug "$ours") peer_best_score_mug=$(field best_score_mug "$peer") best_score_box=$(field top_score_box "$ours") peer_best_score_box=$(field best_score_box "$peer") peer_cost_check_max_abs=$(field cost_check_max_abs "$peer") target_ratio=report_only pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -455,7 +518,8 @@ for b in "${benches[@]}"; do
     clip) bench_clip ;;
     heatmap) bench_heatmap ;;
     robot) bench_robot ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot)" >&2; exit 2 ;;
+    grasp) bench_grasp ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
