@@ -4,8 +4,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <cblas.h>
 #include <omp.h>
 
+#include "core/blas.h"
 #include "core/error.h"
 #include "core/half.h"
 #include "core/rng.h"
@@ -13,6 +15,7 @@
 #include "grasp/internal.h"
 
 #define H FG_GRASP_HIDDEN
+#define BUILD_CHUNK 4096 /* kept voxels per SGEMM */
 
 /* ---------------------------------------------------------------- query points */
 
@@ -106,19 +109,36 @@ int fg_grasp_field_new(fg_grasp_field **out, const fg_voxel_features *vf, int n_
   for (int k = 0; k < H * H; k++) Rf[k] = (float)Rd[k];
   for (size_t i = 0; i < N; i++) gf->slot[i] = -1;
   for (size_t k = 0; k < n_kept; k++) gf->slot[kept[k]] = (int32_t)k;
+  /* y (m, 64) = alpha * (h (m, 64) R^T), one SGEMM per chunk of kept voxels */
   const int nt = n_threads > 0 ? n_threads : omp_get_max_threads();
-#pragma omp parallel for num_threads(nt) schedule(static)
-  for (int64_t k = 0; k < (int64_t)n_kept; k++) {
-    float h[H];
-    fg_half_to_float_n(h16 + (size_t)k * H, h, H);
-    const float a = alpha[kept[k]];
-    float *y = gf->y + (size_t)k * H;
-    for (int r = 0; r < H; r++) {
-      float s = 0.0f;
-      for (int c = r; c < H; c++) s += Rf[r * H + c] * h[c];
-      y[r] = a * s;
+  const int64_t n_chunks = (int64_t)((n_kept + BUILD_CHUNK - 1) / BUILD_CHUNK);
+  const int blas = fg_blas_single_begin();
+  int nomem = 0;
+#pragma omp parallel num_threads(nt)
+  {
+    float *h = malloc((size_t)BUILD_CHUNK * H * sizeof *h);
+    if (!h) {
+#pragma omp atomic write
+      nomem = 1;
     }
+#pragma omp for schedule(static)
+    for (int64_t b = 0; b < n_chunks; b++) {
+      if (!h) continue;
+      const size_t k0 = (size_t)b * BUILD_CHUNK;
+      const size_t m = n_kept - k0 < BUILD_CHUNK ? n_kept - k0 : BUILD_CHUNK;
+      fg_half_to_float_n(h16 + k0 * H, h, m * H);
+      float *y = gf->y + k0 * H;
+      cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, (int)m, H, H, 1.0f, h, H, Rf, H,
+                  0.0f, y, H);
+      for (size_t k = 0; k < m; k++) {
+        const float a = alpha[kept[k0 + k]];
+        for (int j = 0; j < H; j++) y[k * H + j] *= a;
+      }
+    }
+    free(h);
   }
+  fg_blas_single_end(blas);
+  if (nomem) goto nomem;
   gf->n_kept = n_kept;
   free(Qd);
   free(Rd);

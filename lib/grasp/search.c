@@ -38,15 +38,6 @@ void fg_so3_super_fibonacci(int n, double *q_wxyz) {
   }
 }
 
-/* R (3x3 row-major) of unit quaternion q. */
-static void quat_to_rot(const double q[4], double R[9]) {
-  double T[16];
-  const double zero[3] = {0, 0, 0};
-  fg_pose_from_quat(zero, q, T);
-  for (int r = 0; r < 3; r++)
-    for (int c = 0; c < 3; c++) R[3 * r + c] = T[4 * r + c];
-}
-
 /* C = A B for 3x3 matrices. */
 static void mul3(const double A[9], const double B[9], double C[9]) {
   for (int r = 0; r < 3; r++)
@@ -54,48 +45,12 @@ static void mul3(const double A[9], const double B[9], double C[9]) {
       C[3 * r + c] = A[3 * r] * B[c] + A[3 * r + 1] * B[3 + c] + A[3 * r + 2] * B[6 + c];
 }
 
-/* R = exp([w]) by Rodrigues' formula. */
-static void rot_exp(const double w[3], double R[9]) {
-  const double th = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-  double a, b;
-  if (th < 1e-8) {
-    a = 1.0 - th * th / 6.0;
-    b = 0.5 - th * th / 24.0;
-  } else {
-    a = sin(th) / th;
-    b = (1.0 - cos(th)) / (th * th);
-  }
-  const double K[9] = {0, -w[2], w[1], w[2], 0, -w[0], -w[1], w[0], 0};
-  double K2[9];
-  mul3(K, K, K2);
-  for (int k = 0; k < 9; k++) R[k] = (k % 4 == 0 ? 1.0 : 0.0) + a * K[k] + b * K2[k];
-}
-
-/* Angle (radians) of the rotation A^T B. */
-static double rot_angle(const double A[9], const double B[9]) {
-  double tr = 0.0;
-  for (int r = 0; r < 3; r++)
-    for (int c = 0; c < 3; c++) tr += A[3 * r + c] * B[3 * r + c];
-  double c = (tr - 1.0) / 2.0;
-  c = c > 1.0 ? 1.0 : c < -1.0 ? -1.0 : c;
-  return acos(c);
-}
-
 /* Angle between two parallel-gripper orientations: a turn of 180 degrees about the approach
  * axis (z) gives the same grasp, so the smaller of the two angles. */
 static double grip_angle(const double A[9], const double B[9]) {
   const double Bf[9] = {-B[0], -B[1], B[2], -B[3], -B[4], B[5], -B[6], -B[7], B[8]};
-  const double a = rot_angle(A, B), b = rot_angle(A, Bf);
+  const double a = fg_rotmat_angle_rad(A, B), b = fg_rotmat_angle_rad(A, Bf);
   return a < b ? a : b;
-}
-
-static void pose_from_rt(const double R[9], const double t[3], double T[16]) {
-  for (int r = 0; r < 3; r++) {
-    for (int c = 0; c < 3; c++) T[4 * r + c] = R[3 * r + c];
-    T[4 * r + 3] = t[r];
-  }
-  T[12] = T[13] = T[14] = 0.0;
-  T[15] = 1.0;
 }
 
 /* ---------------------------------------------------------------- collisions */
@@ -285,7 +240,7 @@ static int optimise(const fg_grasp_field *gf, search_bufs *b, const fg_grasp_opt
     for (int k = 0; k < n; k++) {
       pose_state *p = &ps[k];
       double T[16], gt[3], gw[3];
-      pose_from_rt(p->R, p->t, T);
+      fg_pose_from_rotmat(p->R, p->t, T);
       fg_grasp_scratch *s = &b->scratch[omp_get_thread_num()];
       p->cost = fg_grasp_cost_fast(gf, &b->prep, T, last ? NULL : gt, last ? NULL : gw,
                                    &p->cosv, &p->weight, s);
@@ -301,7 +256,7 @@ static int optimise(const fg_grasp_field *gf, search_bufs *b, const fg_grasp_opt
       }
       for (int j = 0; j < 3; j++) p->t[j] += step[j];
       double dR[9], Rn[9];
-      rot_exp(step + 3, dR);
+      fg_rotmat_from_rotvec(step + 3, dR);
       mul3(dR, p->R, Rn);
       memcpy(p->R, Rn, sizeof Rn);
     }
@@ -377,11 +332,11 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
                    u3 = fg_rng_uniform(o.seed, 2);
       const double qs[4] = {sqrt(u1) * cos(2 * M_PI * u3), sqrt(1 - u1) * sin(2 * M_PI * u2),
                             sqrt(1 - u1) * cos(2 * M_PI * u2), sqrt(u1) * sin(2 * M_PI * u3)};
-      quat_to_rot(qs, Rs);
+      fg_rotmat_from_quat(qs, Rs);
     }
     for (int r = 0; r < n_rot; r++) {
       double R0[9];
-      quat_to_rot(q + 4 * r, R0);
+      fg_rotmat_from_quat(q + 4 * r, R0);
       mul3(Rs, R0, b.rot + (size_t)r * 9);
     }
     free(q);
@@ -396,7 +351,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   for (int64_t id = 0; id < (int64_t)n_poses; id++) {
     double R[9], tr[3], T[16];
     candidate_pose(gf, &b, n_rot, (uint32_t)id, R, tr);
-    pose_from_rt(R, tr, T);
+    fg_pose_from_rotmat(R, tr, T);
     b.sc[id].cost = fg_grasp_cost_fast(gf, &b.prep, T, NULL, NULL, NULL, NULL,
                                        &b.scratch[omp_get_thread_num()]);
     b.sc[id].id = (uint32_t)id;
@@ -415,7 +370,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
       for (int k = 0; k < m; k++) {
         double R[9], tr[3], T[16];
         candidate_pose(gf, &b, n_rot, b.sc[s0 + k].id, R, tr);
-        pose_from_rt(R, tr, T);
+        fg_pose_from_rotmat(R, tr, T);
         b.hit[k] = (uint8_t)gripper_collides(gf, b.occ, boxes, T);
       }
       st->collision_checks += (size_t)m;
@@ -446,7 +401,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
     const pose_state *p = &b.ps[k];
     if (!(p->cosv > 0.0)) break; /* no likeness to the task left */
     double T[16];
-    pose_from_rt(p->R, p->t, T);
+    fg_pose_from_rotmat(p->R, p->t, T);
     if (o.check_collisions) {
       st->collision_checks++;
       if (gripper_collides(gf, b.occ, boxes, T)) {

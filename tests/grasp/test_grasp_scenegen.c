@@ -137,8 +137,41 @@ static void task_errors(const sg_gt *gt, int task, const double T[16], double *d
   *angle_deg = best;
 }
 
-/* Generates, trains and samples one layout. */
+/* Generates, trains and samples one layout. With FG_GRASP_TEST_KEEP=DIR in the environment,
+ * the layout's gt.json and voxel cache are kept in DIR and read back by later runs instead of
+ * training again (for tuning the search by hand; CI never sets it). */
+static int layout_reuse(const char *seed, layout *L) {
+  const char *keep = getenv("FG_GRASP_TEST_KEEP");
+  if (!keep || !*keep) return 0;
+  char gt_path[1024], vf_path[1024];
+  snprintf(gt_path, sizeof gt_path, "%s/gt-%s.json", keep, seed);
+  snprintf(vf_path, sizeof vf_path, "%s/voxels-%s.fgv", keep, seed);
+  if (sg_gt_load(gt_path, &L->gt) < 0) return 0;
+  if (fg_voxel_features_load(vf_path, &L->vf) < 0) {
+    sg_gt_free(&L->gt);
+    return 0;
+  }
+  ASSERT_OK(fg_grasp_field_new(&L->gf, L->vf, 2));
+  printf("seed %s: read back from %s\n", seed, keep);
+  return 1;
+}
+
+static void layout_keep(const char *seed, const char *gt_path, const layout *L) {
+  const char *keep = getenv("FG_GRASP_TEST_KEEP");
+  if (!keep || !*keep) return;
+  char path[1024];
+  char *buf;
+  size_t len;
+  ASSERT_OK(fg_read_file(gt_path, (size_t)1 << 26, &buf, &len));
+  snprintf(path, sizeof path, "%s/gt-%s.json", keep, seed);
+  ASSERT_OK(fg_write_file_atomic(path, buf, len));
+  free(buf);
+  snprintf(path, sizeof path, "%s/voxels-%s.fgv", keep, seed);
+  ASSERT_OK(fg_voxel_features_save(L->vf, path));
+}
+
 static void layout_load(const char *scenegen, const char *seed, layout *L) {
+  if (layout_reuse(seed, L)) return;
   char *dir = sg_test_tmpdir("grasp");
   const char *args[] = {"--out", dir, "--seed", seed, "--views", "30", "--width", "160",
                         "--height", "120", "--dim", "32", "--patch", "4", "--holdout", "0",
@@ -175,6 +208,8 @@ static void layout_load(const char *scenegen, const char *seed, layout *L) {
   ASSERT_OK(fg_grasp_field_new(&L->gf, L->vf, 2));
   printf("seed %s: %d steps in %.1f s, loss %.4f, %zu voxels keep features\n", seed, STEPS,
          train_s, st.loss, fg_voxel_features_n_kept(L->vf));
+  fflush(stdout);
+  layout_keep(seed, gt_path, L);
   fg_field_free(f);
   fg_dataset_free(frames, n);
   fg_rmtree(dir);
@@ -238,6 +273,7 @@ static void search_and_check(const layout *L, int task, const fg_grasp_target *t
 
 int main(int argc, char **argv) {
   ASSERT(argc == 2);
+  setvbuf(stdout, NULL, _IOLBF, 0);
   float p[N_QUERY * 3];
   const double mean[3] = {0, 0, 0};
   ASSERT_OK(fg_grasp_query_points(N_QUERY, mean, QUERY_STD_M, p));
