@@ -424,16 +424,23 @@ static void *offload_main(void *arg) {
   }
 }
 
-static void offload(fg_http *h, conn_ctx *c) {
+/* Queues c for the pool; -1 once fg_http_stop has begun (the pool may be gone, and nothing
+ * may stay suspended when MHD_stop_daemon runs). */
+static int offload(fg_http *h, conn_ctx *c) {
+  pthread_mutex_lock(&h->qlock);
+  if (h->stopping) {
+    pthread_mutex_unlock(&h->qlock);
+    return -1;
+  }
   c->stage = STAGE_OFFLOADED;
   MHD_suspend_connection(c->conn);
-  pthread_mutex_lock(&h->qlock);
   c->next = NULL;
   if (h->qtail) h->qtail->next = c;
   else h->qhead = c;
   h->qtail = c;
   pthread_cond_signal(&h->qcond);
   pthread_mutex_unlock(&h->qlock);
+  return 0;
 }
 
 /* ---------------------------------------------------------------- the access handler */
@@ -578,8 +585,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     return respond_now(c, 400, "invalid_request", msg);
   }
   if (c->route->flags & FG_ROUTE_OFFLOAD) {
-    offload(h, c);
-    return MHD_YES;
+    if (offload(h, c) == 0) return MHD_YES;
+    return respond_now(c, 503, "shutting_down", "the daemon is shutting down; send the "
+                       "request again once it is back");
   }
   fg_error_clear();
   c->route->handler(&c->req, &c->resp);
@@ -706,9 +714,12 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
   return 0;
 }
 
+/* No MHD_quiesce_daemon: with a thread pool on epoll, libmicrohttpd 0.9.75's quiesce and its
+ * workers both take the listening socket out of the workers' epoll sets, unsynchronised, and
+ * the loser aborts the process ("Failed to remove listen FD from epoll set"). Connections that
+ * arrive while stopping are answered instead: 503 for work the pool would have done. */
 void fg_http_stop(fg_http *h) {
   if (!h) return;
-  MHD_quiesce_daemon(h->mhd);
   pthread_mutex_lock(&h->qlock);
   h->stopping = 1;
   pthread_cond_broadcast(&h->qcond);

@@ -13,6 +13,10 @@
 struct fg_voxels {
   fg_voxel_features *vf; /* owned */
   atomic_int refs;
+  pthread_mutex_t lock;  /* guards the three below */
+  pthread_cond_t done;   /* signalled when a grasp field build ends */
+  int gf_building;
+  fg_grasp_field *gf;    /* owned; NULL until built; reads vf */
 };
 
 struct fg_voxcache {
@@ -43,9 +47,42 @@ const fg_voxel_features *fg_voxels_features(const fg_voxels *v) { return v->vf; 
 
 void fg_voxels_release(fg_voxels *v) {
   if (v && atomic_fetch_sub(&v->refs, 1) == 1) {
+    fg_grasp_field_free(v->gf); /* before the features it reads */
     fg_voxel_features_free(v->vf);
+    pthread_cond_destroy(&v->done);
+    pthread_mutex_destroy(&v->lock);
     free(v);
   }
+}
+
+int fg_voxels_grasp_field(fg_voxels *v, int n_threads, const fg_grasp_field **out,
+                          double *built_s) {
+  *out = NULL;
+  if (built_s) *built_s = 0;
+  pthread_mutex_lock(&v->lock);
+  while (v->gf_building) pthread_cond_wait(&v->done, &v->lock);
+  if (v->gf) {
+    *out = v->gf;
+    pthread_mutex_unlock(&v->lock);
+    return 0;
+  }
+  v->gf_building = 1;
+  pthread_mutex_unlock(&v->lock);
+
+  /* Built without the lock, so that describing the cache never waits for it. */
+  const double t0 = fg_mono_s();
+  fg_grasp_field *gf = NULL;
+  int rc = fg_grasp_field_new(&gf, v->vf, n_threads);
+  pthread_mutex_lock(&v->lock);
+  v->gf_building = 0;
+  if (rc == 0) {
+    v->gf = gf;
+    *out = gf;
+    if (built_s) *built_s = fg_mono_s() - t0;
+  }
+  pthread_cond_broadcast(&v->done);
+  pthread_mutex_unlock(&v->lock);
+  return rc;
 }
 
 /* Whether the cached voxels were built for grid g. */
@@ -76,6 +113,10 @@ int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, i
   fg_voxels *v = calloc(1, sizeof *v);
   int rc = v ? fg_voxel_features_build(&v->vf, f, g, n_threads)
              : fg_fail(FG_ENOMEM, "out of memory");
+  if (rc == 0) {
+    pthread_mutex_init(&v->lock, NULL);
+    pthread_cond_init(&v->done, NULL);
+  }
   double seconds = fg_mono_s() - t0;
   fg_voxels *old = NULL;
   pthread_mutex_lock(&c->lock);
@@ -103,6 +144,9 @@ void fg_voxcache_describe(fg_voxcache *c, fg_voxcache_info *out) {
     const fg_voxel_features *vf = c->current->vf;
     out->built = 1;
     out->bytes = fg_voxel_features_bytes(vf);
+    pthread_mutex_lock(&c->current->lock); /* order: the cache's lock, then its voxels' */
+    if (c->current->gf) out->bytes += fg_grasp_field_bytes(c->current->gf);
+    pthread_mutex_unlock(&c->current->lock);
     out->voxels = fg_voxel_grid_count(fg_voxel_features_grid(vf));
     out->kept = fg_voxel_features_n_kept(vf);
     out->voxel_size = fg_voxel_features_grid(vf)->voxel_size;

@@ -1,5 +1,5 @@
 /* The voxel feature cache of a trained field (query/heatmap.h): the field sampled once on the
- * scene's workspace grid, shared by every heatmap of that field.
+ * scene's workspace grid, shared by every heatmap, demo and grasp search of that field.
  *
  * One fg_voxcache belongs to each trained field the store holds (store.h, fg_field_ref) and
  * dies with it, so a new field (a training committed, a restart, the scene deleted) starts
@@ -8,14 +8,19 @@
  * requests arriving during the build wait for it instead of building again. A built cache
  * (fg_voxels) is immutable and reference counted: any number of heatmaps read it at once,
  * and one built for another grid (the scene's workspace or voxel size changed in the
- * configuration) replaces it without pulling it from under a reader. All functions are
- * thread-safe. */
+ * configuration) replaces it without pulling it from under a reader.
+ *
+ * The grasp field (grasp/grasp.h) is a function of the voxel features alone, so a built
+ * fg_voxels keeps one too: the first demo or grasp search that asks for it builds it on its
+ * own thread, requests asking meanwhile wait for that build, and it is freed with its
+ * fg_voxels. Its bytes count in the cache's. All functions are thread-safe. */
 #ifndef FG_DAEMON_VOXCACHE_H
 #define FG_DAEMON_VOXCACHE_H
 
 #include <stddef.h>
 
 #include "field/model.h"
+#include "grasp/grasp.h"
 #include "query/heatmap.h"
 
 typedef struct fg_voxcache fg_voxcache;
@@ -40,6 +45,14 @@ int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, i
 
 /* The features, owned by v. */
 const fg_voxel_features *fg_voxels_features(const fg_voxels *v);
+
+/* The grasp field of v's features: the one v keeps, else built now with n_threads (waiting
+ * first for a build in progress) and kept. On success *out is owned by v and valid while the
+ * caller holds its reference to v; *built_s (may be NULL) receives the seconds this call
+ * spent building (0 when it found it built). Errors of fg_grasp_field_new, with its detail;
+ * the next caller tries again. */
+int fg_voxels_grasp_field(fg_voxels *v, int n_threads, const fg_grasp_field **out,
+                          double *built_s);
 /* Accepts NULL. */
 void fg_voxels_release(fg_voxels *v);
 
@@ -47,7 +60,7 @@ void fg_voxels_release(fg_voxels *v);
 typedef struct fg_voxcache_info {
   int built;            /* voxels are cached */
   int building;         /* a build is in progress */
-  size_t bytes;         /* heap bytes of the cached voxels */
+  size_t bytes;         /* heap bytes of the cached voxels and their grasp field */
   size_t voxels;        /* voxels of their grid */
   size_t kept;          /* voxels that keep features (alpha >= FG_QUERY_ALPHA_FLOOR) */
   double voxel_size;    /* metres */
