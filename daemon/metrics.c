@@ -240,7 +240,8 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "feature caches.\n# TYPE fieldgrip_voxel_cache_build_seconds_total counter\n"
                  "fieldgrip_voxel_cache_build_seconds_total %.6f\n"
                  "# HELP fieldgrip_voxel_cache_bytes Heap bytes of the voxel feature caches "
-                 "and their grasp fields held, over all scenes.\n# TYPE fieldgrip_voxel_cache_bytes gauge\n"
+                 "and their grasp fields held, over all scenes.\n"
+                 "# TYPE fieldgrip_voxel_cache_bytes gauge\n"
                  "fieldgrip_voxel_cache_bytes %zu\n",
             atomic_load(&voxel_builds), (double)atomic_load(&voxel_build_us) / 1e6,
             g->voxel_cache_bytes);
