@@ -6,10 +6,13 @@
  * Determinism: the same request on the same field with the same seed gives the same body,
  * byte for byte, also after a restart: the search is deterministic (grasp.h), the numbers
  * are printed the same way, the grasp ids are hashes of the field's identity
- * (fg_grasps_field_version), the request and the rank, and the elapsed time goes in the
- * X-Took-Ms header, not the body. Both routes run on the offload pool. */
+ * (fg_grasp_log_field_version), the request and the rank, and the elapsed time goes in the
+ * X-Took-Ms header, not the body. Both routes run on the offload pool.
+ *
+ * The search is lib/grasp's on the grasp field the scene's voxels keep (voxcache.h), built
+ * by the first demo or search of a field and shared by every later one. */
 #include "api.h"
-#include "grasps.h"
+#include "grasp_log.h"
 #include "idem.h"
 #include "json.h"
 #include "metrics.h"
@@ -23,6 +26,7 @@
 #include "core/log.h"
 #include "core/pose.h"
 #include "core/rng.h"
+#include "grasp/grasp.h"
 
 #include <inttypes.h>
 #include <math.h>
@@ -31,14 +35,7 @@
 #include <string.h>
 
 #define LANG_MASK_SCORE 0.5f /* candidates where the query's heatmap score reaches this */
-#define CANDIDATE_ALPHA 0.1f /* the search's candidate_alpha: the mask is scored there */
-
-/* Configuration names of conf.h's gripper models, for grasps.h (see there why by name). */
-static const char *const gripper_names[] = {
-  [FG_GRIPPER_PANDA] = "panda",
-  [FG_GRIPPER_ROBOTIQ_2F85] = "robotiq-2f85",
-  [FG_GRIPPER_ROBOTIQ_2F140] = "robotiq-2f140",
-};
+#define MAX_ROTATIONS 4096   /* fg_grasp_search's bound (grasp.h names no constant for it) */
 
 /* replaced by fg_json_pose after the refactor merge */
 /* {"position": [x, y, z], "quaternion": [w, x, y, z] (w >= 0), "matrix": 4x4} of T. */
@@ -57,8 +54,7 @@ static const char *const grasp_keys[] = {"task", "top_k", "seed", "rotations"};
 typedef struct grasp_req {
   const char *task; /* NULL: retrieved by the query */
   int has_query;
-  int top_k, rotations;
-  uint64_t seed;
+  fg_grasp_options opt; /* lib/grasp's defaults with the request's top_k, rotations, seed */
 } grasp_req;
 
 /* An integer key of body in [lo, hi] into *out (unchanged when absent); answers 400 itself
@@ -87,6 +83,7 @@ static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
                            "\"top_k\", \"seed\", \"rotations\"", key), -1;
   }
   memset(r, 0, sizeof *r);
+  fg_grasp_options_default(&r->opt);
   if (fg_json_string(body, "task", &r->task) < 0)
     return fg_resp_error(resp, 400, "invalid_request", "\"task\" must be a task's name"), -1;
   r->has_query = fg_query_present(body);
@@ -94,17 +91,21 @@ static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
     return fg_resp_error(resp, 400, "invalid_request", "name a task (\"task\": \"mug_handle\") "
                          "or give a query (\"text\": \"a mug\" or \"embedding\": [D numbers]) "
                          "that retrieves one"), -1;
-  json_int_t top_k = 10, rotations = FG_GRASPS_DEFAULT_ROTATIONS, seed = 0;
-  if (int_key(body, "top_k", 1, FG_GRASPS_MAX_TOP_K, &top_k, "the number of grasps returned "
-              "(default 10)", resp) != 0 ||
-      int_key(body, "rotations", FG_GRASPS_MIN_ROTATIONS, FG_GRASPS_MAX_ROTATIONS, &rotations,
-              "orientations tried at every candidate voxel (default 24)", resp) != 0 ||
+  json_int_t top_k = r->opt.top_k, rotations = r->opt.n_rotations, seed = 0;
+  char top_k_means[64], rotations_means[80];
+  snprintf(top_k_means, sizeof top_k_means, "the number of grasps returned (default %d)",
+           r->opt.top_k);
+  snprintf(rotations_means, sizeof rotations_means, "orientations tried at every candidate "
+           "voxel (default %d)", r->opt.n_rotations);
+  if (int_key(body, "top_k", 1, FG_GRASP_MAX_TOP_K, &top_k, top_k_means, resp) != 0 ||
+      int_key(body, "rotations", FG_GRASP_MIN_ROTATIONS, MAX_ROTATIONS, &rotations,
+              rotations_means, resp) != 0 ||
       int_key(body, "seed", 0, INT64_MAX, &seed, "turns the orientations as a whole (default "
               "0)", resp) != 0)
     return -1;
-  r->top_k = (int)top_k;
-  r->rotations = (int)rotations;
-  r->seed = (uint64_t)seed;
+  r->opt.top_k = (int)top_k;
+  r->opt.n_rotations = (int)rotations;
+  r->opt.seed = (uint64_t)seed;
   return 0;
 }
 
@@ -173,8 +174,8 @@ static void pre_grasp(const double T[16], double d, double P[16]) {
   for (int a = 0; a < 3; a++) P[4 * a + 3] = T[4 * a + 3] - d * T[4 * a + 2];
 }
 
-static json_t *grasp_json(const fg_grasp_entry *e, const fg_grasps_pose *p, double approach_m,
-                          const fg_task *t) {
+static json_t *grasp_json(const fg_grasp_entry *e, const fg_grasp_result_pose *p,
+                          double approach_m, const fg_task *t) {
   double P[16];
   pre_grasp(p->T_world_gripper, approach_m, P);
   return json_pack("{s:s, s:o, s:o, s:f, s:s, s:s, s:f, s:b}", "id", e->id, "pose",
@@ -198,7 +199,7 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   size_t n_ret = 0;
   float *scores = NULL;
   uint8_t *mask = NULL;
-  fg_grasps_result res = {0};
+  fg_grasp_result res = {0};
   fg_grasp_entry *entries = NULL;
   char *canon = NULL;
   if (!body) goto out;
@@ -275,30 +276,38 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   fg_field_ref_release(ref);
   ref = NULL;
   const fg_voxel_features *vf = fg_voxels_features(vox);
+  const fg_grasp_field *gf = NULL;
+  rc = fg_voxels_grasp_field(vox, threads, &gf, NULL);
+  if (rc != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot build the grasp field of scene '%s': %s",
+                  info.name, fg_error_detail());
+    goto out;
+  }
+  fg_grasp_options *o = &r.opt;
 
-  /* The language mask: candidates only where the query's heatmap score reaches 0.5. */
+  /* The language mask: candidates only where the query's heatmap score reaches 0.5, scored
+   * at the search's own candidate threshold. */
   if (r.has_query) {
     const size_t n_vox = fg_voxel_grid_count(&grid);
     scores = malloc(n_vox * sizeof *scores);
     mask = malloc(n_vox);
     if (!scores || !mask ||
-        fg_voxel_features_score(vf, &q, CANDIDATE_ALPHA, scores, threads) != 0) {
+        fg_voxel_features_score(vf, &q, o->candidate_alpha, scores, threads) != 0) {
       fg_resp_error(resp, 500, "internal_error", "cannot score the query: %s",
                     scores && mask ? fg_error_detail() : "out of memory");
       goto out;
     }
     for (size_t i = 0; i < n_vox; i++) mask[i] = scores[i] >= LANG_MASK_SCORE;
   }
-  const char *gripper = gripper_names[req->conf->gripper_model];
-  double stroke = 0;
-  fg_grasps_stroke(gripper, &stroke);
-  const double width = task->width_m < stroke ? task->width_m : stroke;
-  const fg_grasps_query gq = {
-    .vf = vf, .n_points = task->n_points, .dim = D, .p_gripper = task->p_gripper,
-    .Z = task->Z, .q = r.has_query ? q.q : NULL, .candidate_mask = mask, .gripper = gripper,
-    .width_m = width, .top_k = r.top_k, .rotations = r.rotations, .seed = r.seed,
-    .n_threads = threads};
-  rc = fg_grasps_find(&gq, &res);
+  o->gripper = req->conf->gripper_model;
+  const double stroke = fg_gripper_spec_get(o->gripper)->stroke_m;
+  o->width_m = task->width_m < stroke ? task->width_m : stroke;
+  o->candidate_mask = mask;
+  o->n_threads = threads;
+  const fg_grasp_target target = {.n_points = task->n_points, .dim = D,
+                                   .p_gripper = task->p_gripper, .Z = task->Z,
+                                   .q = r.has_query ? q.q : NULL};
+  rc = fg_grasp_search(gf, &target, o, &res);
   if (rc != 0) {
     fg_resp_error(resp, rc == FG_EINVAL || rc == FG_ERANGE ? 400 : 500,
                   rc == FG_EINVAL || rc == FG_ERANGE ? "invalid_request" : "internal_error",
@@ -307,7 +316,7 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   }
 
   /* Ids: the field's identity, the request (its keys sorted) and the rank. */
-  const uint64_t version = fg_grasps_field_version(vf);
+  const uint64_t version = fg_grasp_log_field_version(vf);
   canon = json_dumps(body, JSON_COMPACT | JSON_SORT_KEYS);
   uint64_t rh = canon ? fg_idem_hash(canon, strlen(canon)) : 0;
   rh ^= fg_idem_hash(info.name, strlen(info.name)) * 31;
@@ -325,35 +334,36 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
     snprintf(e->task, sizeof e->task, "%s", task->name);
     e->field_version = version;
     memcpy(e->T_world_gripper, res.poses[i].T_world_gripper, sizeof e->T_world_gripper);
-    e->width_m = width;
+    e->width_m = o->width_m;
     e->place = task->kind == FG_TASK_PLACE;
     json_array_append_new(grasps, grasp_json(e, &res.poses[i], task->approach_m, task));
   }
   fg_grasp_log_put(req->app->grasps, entries, res.n);
-  json_t *o = json_pack("{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I}}", "grasps", grasps,
-                        "task", task->name, "search", "candidates",
-                        (json_int_t)res.candidates, "rotations", res.rotations,
-                        "poses_scored", (json_int_t)res.poses_scored, "poses_optimised",
-                        (json_int_t)res.poses_optimised, "iterations", res.iterations,
-                        "evaluations", (json_int_t)res.evaluations);
-  if (o && ret) {
+  const fg_grasp_stats *st = &res.stats;
+  json_t *reply = json_pack("{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I}}", "grasps", grasps,
+                            "task", task->name, "search", "candidates",
+                            (json_int_t)st->candidates, "rotations", st->rotations,
+                            "poses_scored", (json_int_t)st->poses_scored, "poses_optimised",
+                            (json_int_t)st->poses_optimised, "iterations", st->iterations,
+                            "evaluations", (json_int_t)st->evaluations);
+  if (reply && ret) {
     json_t *a = json_array();
     /* ret[0]'s reference moved to task: it is the first entry */
     json_array_append_new(a, json_pack("{s:s, s:f}", "task", task->name, "score", ret[0].score));
     for (size_t i = 1; i < n_ret; i++)
       json_array_append_new(a, json_pack("{s:s, s:f}", "task", ret[i].task->name, "score",
                                          ret[i].score));
-    json_object_set_new(o, "retrieval", a);
+    json_object_set_new(reply, "retrieval", a);
   }
-  if (o && res.n == 0) json_object_set_new(o, "reason", json_string(res.reason));
+  if (reply && res.n == 0) json_object_set_new(reply, "reason", json_string(res.reason));
   snprintf(resp->header, sizeof resp->header, "X-Took-Ms: %.1f", (fg_mono_s() - t0) * 1e3);
-  fg_resp_json(resp, 200, o);
+  fg_resp_json(resp, 200, reply);
   fg_info("scene %s: %d grasps of task %s in %.2f s (%zu candidates x %d rotations)",
-          info.name, res.n, task->name, res.seconds, res.candidates, res.rotations);
+          info.name, res.n, task->name, st->seconds, st->candidates, st->rotations);
 out:
   free(canon);
   free(entries);
-  fg_grasps_result_release(&res);
+  fg_grasp_result_release(&res);
   free(mask);
   free(scores);
   retrieved_free(ret, n_ret);
@@ -400,7 +410,7 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp) {
     fg_resp_error(resp, 404, "grasp_not_found", "scene '%s' has no grasp '%s' (the newest %d "
                   "grasps of each scene are kept in memory, until a restart); POST "
                   "/v1/scenes/%s/grasps to infer grasps", fg_scene_name(s), id,
-                  FG_GRASPS_LOG_PER_SCENE, fg_scene_name(s));
+                  FG_GRASP_LOG_PER_SCENE, fg_scene_name(s));
     goto out;
   }
   /* Stale when the scene's field is not the one the grasp came from any more. */
@@ -422,7 +432,7 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp) {
     }
     fg_field_ref_release(ref);
     ref = NULL;
-    now = fg_grasps_field_version(fg_voxels_features(vox));
+    now = fg_grasp_log_field_version(fg_voxels_features(vox));
   }
   if (!ref && !vox) now = e.field_version + 1; /* untrained now: differs */
   if (now != e.field_version) {

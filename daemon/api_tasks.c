@@ -3,7 +3,6 @@
  * /v1/tasks/{t}/demos/{i}. A demo samples the scene's current field at the task's query
  * points placed by the demo's gripper pose (F3RM's z) and keeps the sample, not the scene. */
 #include "api.h"
-#include "grasps.h"
 #include "json.h"
 #include "tasks.h"
 #include "voxcache.h"
@@ -11,18 +10,12 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/pose.h"
+#include "grasp/grasp.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* Configuration names of conf.h's gripper models, for grasps.h (see there why by name). */
-static const char *const gripper_names[] = {
-  [FG_GRIPPER_PANDA] = "panda",
-  [FG_GRIPPER_ROBOTIQ_2F85] = "robotiq-2f85",
-  [FG_GRIPPER_ROBOTIQ_2F140] = "robotiq-2f140",
-};
 
 /* ---------------------------------------------------------------- pose JSON */
 
@@ -182,8 +175,8 @@ static const char *const demo_keys[] = {"scene", "pose", "kind", "width", "appro
 static int parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
                               fg_resp *resp) {
   const int from_task = t && t->n_demos > 0;
-  d->n_points = from_task ? t->n_points : FG_GRASPS_DEFAULT_QUERY_POINTS;
-  d->qp_std_m = from_task ? t->qp_std_m : FG_GRASPS_DEFAULT_STD_M;
+  d->n_points = from_task ? t->n_points : FG_GRASP_DEFAULT_QUERY_POINTS;
+  d->qp_std_m = from_task ? t->qp_std_m : FG_GRASP_DEFAULT_STD_M;
   for (int k = 0; k < 3; k++) d->qp_mean_m[k] = from_task ? t->qp_mean_m[k] : 0.0;
   json_t *qp = json_object_get(body, "query_points");
   if (!qp || json_is_null(qp)) return 0;
@@ -197,7 +190,7 @@ static int parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *
   v = json_object_get(qp, "n");
   if (v) {
     if (!json_is_integer(v) || json_integer_value(v) < 1 ||
-        json_integer_value(v) > FG_GRASPS_MAX_QUERY_POINTS)
+        json_integer_value(v) > FG_GRASP_MAX_QUERY_POINTS)
       goto bad;
     d->n_points = (int)json_integer_value(v);
   }
@@ -221,8 +214,8 @@ bad:
                        "1..%d points, \"std\": metres > 0 and <= 1, \"mean\": [x, y, z] metres "
                        "in the gripper frame, within 1 m}, each optional (default {\"n\": %d, "
                        "\"std\": %g, \"mean\": [0, 0, 0]}, or the task's)",
-                       FG_GRASPS_MAX_QUERY_POINTS, FG_GRASPS_DEFAULT_QUERY_POINTS,
-                       FG_GRASPS_DEFAULT_STD_M), -1;
+                       FG_GRASP_MAX_QUERY_POINTS, FG_GRASP_DEFAULT_QUERY_POINTS,
+                       FG_GRASP_DEFAULT_STD_M), -1;
 }
 
 /* Reads the demo's keys but its z into d (scene name, pose, kind, width, approach, query
@@ -254,17 +247,15 @@ static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_
     return fg_resp_error(resp, 400, "invalid_request", "\"kind\" must be \"grasp\" (the "
                          "robot picks at the pose) or \"place\" (it places there)"), -1;
   d->kind = strcmp(kind, "place") == 0 ? FG_TASK_PLACE : FG_TASK_GRASP;
-  const char *gripper = gripper_names[req->conf->gripper_model];
-  double stroke = 0;
-  if (fg_grasps_stroke(gripper, &stroke) != 0)
-    return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail()), -1;
+  const fg_gripper_spec *gripper = fg_gripper_spec_get(req->conf->gripper_model);
+  const double stroke = gripper->stroke_m;
   d->width_m = stroke;
   int rc = fg_json_number(body, "width", &d->width_m);
   if (rc < 0 || (json_object_get(body, "width") && rc == 0) ||
       !(d->width_m > 0 && d->width_m <= stroke + 1e-12))
     return fg_resp_error(resp, 400, "invalid_request", "\"width\" must be the gripper's "
                          "opening in metres, more than 0 and at most the %s's stroke %g m "
-                         "([gripper] model; default the stroke)", gripper, stroke), -1;
+                         "([gripper] model; default the stroke)", gripper->name, stroke), -1;
   d->approach_m = FG_TASK_DEFAULT_APPROACH_M;
   rc = fg_json_number(body, "approach", &d->approach_m);
   if (rc < 0 || (json_object_get(body, "approach") && rc == 0) ||
@@ -355,8 +346,14 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
     fg_resp_error(resp, 500, "internal_error", "out of memory");
     goto out;
   }
-  if (fg_grasps_query_points(d.n_points, d.qp_mean_m, d.qp_std_m, p) != 0 ||
-      fg_grasps_sample(fg_voxels_features(vox), T, p, d.n_points, z, threads) != 0) {
+  const fg_grasp_field *gf = NULL;
+  if (fg_voxels_grasp_field(vox, threads, &gf, NULL) != 0) {
+    fg_resp_error(resp, 500, "internal_error", "cannot build the grasp field of scene '%s': "
+                  "%s", info.name, fg_error_detail());
+    goto out;
+  }
+  if (fg_grasp_query_points(d.n_points, d.qp_mean_m, d.qp_std_m, p) != 0 ||
+      fg_grasp_sample(gf, T, p, d.n_points, z) != 0) {
     fg_resp_error(resp, 400, "invalid_query_points", "%s", fg_error_detail());
     goto out;
   }

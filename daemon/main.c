@@ -6,6 +6,7 @@
 #include "robot.h"
 #include "conf.h"
 #include "decoder.h"
+#include "grasp_log.h"
 #include "http.h"
 #include "job_train.h"
 #include "jobs.h"

@@ -8,6 +8,7 @@
 #include "core/fsutil.h"
 #include "core/log.h"
 #include "core/pose.h"
+#include "grasp/grasp.h"
 #include "io/npy.h"
 
 #include <dirent.h>
@@ -24,8 +25,6 @@
 
 #define TASK_JSON_MAX (16u << 20)
 #define TASK_FORMAT 1
-
-_Static_assert(FG_GRASPS_NAME_MAX == FG_SCENE_NAME_MAX, "task and scene names");
 
 /* A snapshot with its reference count and the allocations behind its const pointers. */
 typedef struct task_obj {
@@ -105,7 +104,7 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
     obj_free(o);
     return fg_fail(FG_ENOMEM, "out of memory");
   }
-  int rc = fg_grasps_query_points(nq, base->qp_mean_m, base->qp_std_m, o->p_gripper);
+  int rc = fg_grasp_query_points(nq, base->qp_mean_m, base->qp_std_m, o->p_gripper);
   if (rc != 0) {
     obj_free(o);
     return rc;
@@ -301,7 +300,7 @@ static int load_task(const fg_tasks *ts, const char *name, task_obj **out) {
   if ((rc = parse_kind(o, &base.kind)) != 0 ||
       (rc = json_int_in(o, "dim", 0, 1 << 20, &base.dim)) != 0 ||
       (rc = json_int_in(o, "next_id", 1, 1 << 30, &base.next_id)) != 0 ||
-      (rc = json_int_in(qp, "n", 1, FG_GRASPS_MAX_QUERY_POINTS, &base.n_points)) != 0 ||
+      (rc = json_int_in(qp, "n", 1, FG_GRASP_MAX_QUERY_POINTS, &base.n_points)) != 0 ||
       (rc = json_num(qp, "std", &base.qp_std_m)) != 0)
     goto out;
   if (fg_json_vec(json_object_get(qp, "mean"), base.qp_mean_m, 3, "query_points.mean") != 0) {

@@ -24,7 +24,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "grasps.h"
+#include "conf.h" /* FG_SCENE_NAME_MAX: task names follow the scene name rules */
 
 #define FG_TASK_MAX_DEMOS 256
 #define FG_TASK_DEFAULT_APPROACH_M 0.10
@@ -35,7 +35,7 @@ const char *fg_task_kind_name(fg_task_kind k); /* "grasp", "place" */
 
 typedef struct fg_task_demo {
   int id;                               /* 1, 2, ... never reused within the task */
-  char scene[FG_GRASPS_NAME_MAX + 1];   /* the scene it was shown on */
+  char scene[FG_SCENE_NAME_MAX + 1];    /* the scene it was shown on */
   double T_world_gripper[16];           /* row-major, metres */
   fg_task_kind kind;
   double width_m;                       /* gripper opening */
@@ -46,7 +46,7 @@ typedef struct fg_task_demo {
 
 /* A task as one immutable snapshot; every pointer is owned by it. */
 typedef struct fg_task {
-  char name[FG_GRASPS_NAME_MAX + 1];
+  char name[FG_SCENE_NAME_MAX + 1];
   int64_t created_ms;
   fg_task_kind kind;         /* its demos' (all alike) */
   int dim;                   /* D of its demos' z; 0 while it has none */

@@ -37,6 +37,15 @@ static void expect_error(const char *body, long status, const char *code) {
   h_resp_free(r);
 }
 
+/* voxel_cache.bytes of scene sg: its voxel features and their grasp field once built. */
+static long long cache_bytes(void) {
+  h_resp *r = h_get("/v1/scenes/sg");
+  ASSERT_STATUS(r, 200);
+  long long bytes = JINT(r->json, "voxel_cache.bytes");
+  h_resp_free(r);
+  return bytes;
+}
+
 static void matrix_of(json_t *pose, double T[16]) {
   for (int i = 0; i < 16; i++)
     T[i] = json_number_value(json_array_get(json_array_get(JGET(pose, "matrix"), i / 4), i % 4));
@@ -144,11 +153,24 @@ int main(int argc, char **argv) {
   g_train("sg", 60);
   double t_trained = t_now();
 
-  char *b = g_demo_body("sg", "ball", "");
-  h_resp *r = g_post("/v1/tasks/ball/demos", b);
+  /* A heatmap builds the voxel features alone; the first demo adds their grasp field to the
+   * cache (and its bytes to the cache's); later demos and searches share it. */
+  char *emb = g_class_embedding("ball");
+  char *b = h_fmt("{\"embedding\": %s}", emb);
+  h_resp *r = g_post("/v1/scenes/sg/heatmap", b);
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  free(b);
+  free(emb);
+  const long long features_bytes = cache_bytes();
+  ASSERT(features_bytes > 0);
+  b = g_demo_body("sg", "ball", "");
+  r = g_post("/v1/tasks/ball/demos", b);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
   free(b);
+  const long long with_field_bytes = cache_bytes();
+  ASSERT(with_field_bytes > features_bytes);
   b = g_demo_body("sg", "box", "\"approach\": 0.05");
   r = g_post("/v1/tasks/box/demos", b);
   ASSERT_STATUS(r, 201);
@@ -176,6 +198,7 @@ int main(int argc, char **argv) {
   r2 = grasps_ok("{\"task\": \"box\", \"top_k\": 3}");
   check_reply(r2, "box", 3, 0.05);
   h_resp_free(r2);
+  ASSERT_EQ(cache_bytes(), with_field_bytes);
   char *first_id = h_fmt("%s", JSTR(r->json, "grasps.0.id"));
   char *body1 = h_fmt("%.*s", (int)r->len, r->body);
   double T[16];
