@@ -29,22 +29,12 @@
 #include "grasp/grasp.h"
 
 #include <inttypes.h>
-#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #define LANG_MASK_SCORE 0.5f /* candidates where the query's heatmap score reaches this */
 #define MAX_ROTATIONS 4096   /* fg_grasp_search's bound (grasp.h names no constant for it) */
-
-/* replaced by fg_json_pose after the refactor merge */
-/* {"position": [x, y, z], "quaternion": [w, x, y, z] (w >= 0), "matrix": 4x4} of T. */
-static json_t *grasp_json_pose(const double T[16]) {
-  double p[3], q[4];
-  fg_pose_to_quat(T, p, q);
-  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(p, 3), "quaternion",
-                   fg_json_from_vec(q, 4), "matrix", fg_json_from_matrix4(T));
-}
 
 /* ---------------------------------------------------------------- the request */
 
@@ -168,18 +158,16 @@ static void grasp_id(uint64_t version, uint64_t request, int rank, char out[24])
   snprintf(out, 24, "g%016" PRIx64, h);
 }
 
-/* T backed off by d metres along its own -z (the approach direction is +z). */
-static void pre_grasp(const double T[16], double d, double P[16]) {
-  memcpy(P, T, 16 * sizeof *P);
-  for (int a = 0; a < 3; a++) P[4 * a + 3] = T[4 * a + 3] - d * T[4 * a + 2];
-}
-
+/* The grasp's JSON; its pre_grasp is the pose backed off by approach_m along the gripper's
+ * own -z (the approach direction is +z). */
 static json_t *grasp_json(const fg_grasp_entry *e, const fg_grasp_result_pose *p,
                           double approach_m, const fg_task *t) {
-  double P[16];
-  pre_grasp(p->T_world_gripper, approach_m, P);
+  double T_gripper_pre[16], T_world_pre[16];
+  fg_pose_identity(T_gripper_pre);
+  T_gripper_pre[11] = -approach_m;
+  fg_pose_compose(p->T_world_gripper, T_gripper_pre, T_world_pre);
   return json_pack("{s:s, s:o, s:o, s:f, s:s, s:s, s:f, s:b}", "id", e->id, "pose",
-                   grasp_json_pose(p->T_world_gripper), "pre_grasp", grasp_json_pose(P),
+                   fg_json_pose(p->T_world_gripper), "pre_grasp", fg_json_pose(T_world_pre),
                    "score", p->score, "task", t->name, "kind", fg_task_kind_name(t->kind),
                    "width", e->width_m, "collision_free", p->collision_free);
 }

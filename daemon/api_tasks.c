@@ -9,58 +9,12 @@
 
 #include "core/error.h"
 #include "core/log.h"
-#include "core/pose.h"
 #include "grasp/grasp.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* ---------------------------------------------------------------- pose JSON */
-
-/* replaced by fg_json_pose after the refactor merge */
-/* {"position": [x, y, z], "quaternion": [w, x, y, z] (w >= 0), "matrix": 4x4} of T. */
-static json_t *grasp_json_pose(const double T[16]) {
-  double p[3], q[4];
-  fg_pose_to_quat(T, p, q);
-  return json_pack("{s:o, s:o, s:o}", "position", fg_json_from_vec(p, 3), "quaternion",
-                   fg_json_from_vec(q, 4), "matrix", fg_json_from_matrix4(T));
-}
-
-/* replaced by fg_json_pose after the refactor merge */
-/* A pose as {"position": [3], "quaternion": [w, x, y, z]} (unit within 1e-3) or
- * {"matrix": 4x4} (rigid, fg_pose_validate) into T. FG_EINVAL with a detail naming what. */
-static int grasp_parse_pose(json_t *v, double T[16], const char *what) {
-  if (!json_is_object(v))
-    return fg_fail(FG_EINVAL, "%s must be {\"position\": [x, y, z], \"quaternion\": [w, x, y, "
-                   "z]} or {\"matrix\": 4x4}", what);
-  json_t *m = json_object_get(v, "matrix");
-  if (m) {
-    if (json_object_get(v, "position") || json_object_get(v, "quaternion"))
-      return fg_fail(FG_EINVAL, "%s: give either \"matrix\" or \"position\" and "
-                     "\"quaternion\", not both", what);
-    char name[96];
-    snprintf(name, sizeof name, "%s.matrix", what);
-    FG_TRY(fg_json_matrix4(m, T, name));
-  } else {
-    double p[3], q[4];
-    char name[96];
-    snprintf(name, sizeof name, "%s.position", what);
-    FG_TRY(fg_json_vec(json_object_get(v, "position"), p, 3, name));
-    snprintf(name, sizeof name, "%s.quaternion", what);
-    FG_TRY(fg_json_vec(json_object_get(v, "quaternion"), q, 4, name));
-    if (fg_pose_from_quat(p, q, T) != 0)
-      return fg_fail(FG_EINVAL, "%s.quaternion must be a unit quaternion [w, x, y, z] (its "
-                     "norm within 1e-3 of 1)", what);
-  }
-  if (fg_pose_validate(T) != 0) {
-    char detail[512];
-    snprintf(detail, sizeof detail, "%s", fg_error_detail());
-    return fg_fail(FG_EINVAL, "%s: %s", what, detail);
-  }
-  return 0;
-}
 
 /* ---------------------------------------------------------------- views */
 
@@ -72,7 +26,7 @@ static json_t *time_json(int64_t ms) {
 
 static json_t *demo_json(const fg_task_demo *d) {
   return json_pack("{s:i, s:s, s:o, s:s, s:f, s:f, s:o}", "id", d->id, "scene", d->scene,
-                   "pose", grasp_json_pose(d->T_world_gripper), "kind",
+                   "pose", fg_json_pose(d->T_world_gripper), "kind",
                    fg_task_kind_name(d->kind), "width", d->width_m, "approach", d->approach_m,
                    "created", time_json(d->created_ms));
 }
@@ -240,7 +194,7 @@ static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_
     return fg_resp_error(resp, 400, "invalid_pose", "\"pose\" is required: the gripper's pose "
                          "in the world frame, {\"position\": [x, y, z], \"quaternion\": [w, x, "
                          "y, z]} or {\"matrix\": 4x4}"), -1;
-  if (grasp_parse_pose(pose, d->T_world_gripper, "pose") != 0)
+  if (fg_json_pose_parse(pose, "pose", d->T_world_gripper, NULL) != 0)
     return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;
   const char *kind = "grasp";
   if (fg_json_string(body, "kind", &kind) < 0 || (strcmp(kind, "grasp") && strcmp(kind, "place")))
