@@ -1,5 +1,6 @@
 /* The daemon's application object: the services every part of fieldgripd reaches (store,
- * decoder pool, jobs, CLIP, robot, idempotency keys) and the configuration in force.
+ * decoder pool, jobs, CLIP, robot, idempotency keys, task library, recent grasps) and the
+ * configuration in force.
  *
  * The configuration is reference-counted: fg_app_set_conf installs a new one (start-up,
  * SIGHUP) while requests and jobs that started under the old one keep it until they release

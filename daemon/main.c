@@ -2,16 +2,16 @@
 #include "api.h"
 #include "app.h"
 #include "clip_svc.h"
-#include "idem.h"
-#include "robot.h"
 #include "conf.h"
 #include "decoder.h"
 #include "grasp_log.h"
 #include "http.h"
+#include "idem.h"
 #include "job_train.h"
 #include "jobs.h"
 #include "metrics.h"
 #include "notify.h"
+#include "robot.h"
 #include "store.h"
 #include "tasks.h"
 
@@ -261,7 +261,7 @@ int main(int argc, char **argv) {
    * the API can start. */
   if (fg_jobs_new(&app.jobs, &app) != 0 ||
       fg_jobs_register_kind(app.jobs, &fg_job_kind_train) != 0) {
-    fg_error("cannot set up training: %s", fg_error_detail());
+    fg_error("cannot set up background jobs: %s", fg_error_detail());
     app_teardown(&app);
     return 1;
   }
