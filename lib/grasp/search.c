@@ -18,6 +18,7 @@
 #define ADAM_BETA2 0.999
 #define ADAM_EPS 1e-8
 #define SCORE_CHUNK 256      /* poses collision-checked at a time while filling n_keep */
+#define COARSE_POINTS 32     /* query points that score the candidate poses */
 
 /* ---------------------------------------------------------------- rotations */
 
@@ -55,12 +56,11 @@ static double grip_angle(const double A[9], const double B[9]) {
 
 /* ---------------------------------------------------------------- collisions */
 
-/* Sample lattice of a box: per axis count and spacing so that the spacing is at most
- * voxel_size / sqrt(3) (every voxel whose inscribed ball lies in the box holds a sample). */
+/* Sample lattice of a box: per axis count and spacing so that the spacing is at most step
+ * (voxel_size / sqrt(3): every voxel whose inscribed ball lies in the box holds a sample). */
 static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_gripper_box *b,
-                        const double T[16]) {
+                        const double T[16], double step) {
   const fg_voxel_grid *g = &gf->grid;
-  const double step = g->voxel_size / sqrt(3.0);
   int n[3];
   double d[3];
   for (int a = 0; a < 3; a++) {
@@ -91,8 +91,18 @@ static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_g
 /* Fingers first: they are small and meet the object first, so colliding poses exit early. */
 static int gripper_collides(const fg_grasp_field *gf, const uint8_t *occ,
                             const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16]) {
-  return box_collides(gf, occ, &boxes[1], T) || box_collides(gf, occ, &boxes[2], T) ||
-         box_collides(gf, occ, &boxes[0], T);
+  const double step = gf->grid.voxel_size / sqrt(3.0);
+  return box_collides(gf, occ, &boxes[1], T, step) || box_collides(gf, occ, &boxes[2], T, step) ||
+         box_collides(gf, occ, &boxes[0], T, step);
+}
+
+/* The check before optimising: only the palm, on a lattice of one voxel. A candidate sits on
+ * a voxel centre with a rotation up to half the cover's spacing off, so its fingers often
+ * graze the object that the optimisation then moves them clear of; a palm in the scene means
+ * the approach itself is blocked. */
+static int palm_collides(const fg_grasp_field *gf, const uint8_t *occ,
+                         const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16]) {
+  return box_collides(gf, occ, &boxes[0], T, gf->grid.voxel_size);
 }
 
 static uint8_t *occupancy(const fg_grasp_field *gf, float alpha_min) {
@@ -196,7 +206,8 @@ void fg_grasp_result_release(fg_grasp_result *r) {
 
 /* Everything one search allocates, freed in one place. */
 typedef struct search_bufs {
-  fg_grasp_prepared prep;
+  fg_grasp_prepared prep;    /* the target */
+  fg_grasp_prepared coarse;  /* its first COARSE_POINTS query points */
   fg_grasp_scratch *scratch; /* (nt) */
   int nt;
   uint8_t *occ;
@@ -209,6 +220,7 @@ typedef struct search_bufs {
 
 static void bufs_release(search_bufs *b) {
   fg_grasp_prepared_release(&b->prep);
+  fg_grasp_prepared_release(&b->coarse);
   if (b->scratch)
     for (int i = 0; i < b->nt; i++) fg_grasp_scratch_release(&b->scratch[i]);
   free(b->scratch);
@@ -288,6 +300,17 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   search_bufs b = {0};
   int rc = fg_grasp_prepare(gf, t, &b.prep);
   if (rc < 0) return rc;
+  {
+    fg_grasp_target tc = *t;
+    if (tc.n_points > COARSE_POINTS) tc.n_points = COARSE_POINTS;
+    /* a task whose first points all lie in free space is scored on all of them */
+    rc = fg_grasp_prepare(gf, &tc, &b.coarse);
+    if (rc == FG_EINVAL) rc = fg_grasp_prepare(gf, t, &b.coarse);
+    if (rc < 0) {
+      bufs_release(&b);
+      return rc;
+    }
+  }
   fg_grasp_stats *st = &out->stats;
   const int n_rot = o.n_rotations;
   st->rotations = n_rot;
@@ -352,7 +375,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
     double R[9], tr[3], T[16];
     candidate_pose(gf, &b, n_rot, (uint32_t)id, R, tr);
     fg_pose_from_rotmat(R, tr, T);
-    b.sc[id].cost = fg_grasp_cost_fast(gf, &b.prep, T, NULL, NULL, NULL, NULL,
+    b.sc[id].cost = fg_grasp_cost_fast(gf, &b.coarse, T, NULL, NULL, NULL, NULL,
                                        &b.scratch[omp_get_thread_num()]);
     b.sc[id].id = (uint32_t)id;
   }
@@ -371,7 +394,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
         double R[9], tr[3], T[16];
         candidate_pose(gf, &b, n_rot, b.sc[s0 + k].id, R, tr);
         fg_pose_from_rotmat(R, tr, T);
-        b.hit[k] = (uint8_t)gripper_collides(gf, b.occ, boxes, T);
+        b.hit[k] = (uint8_t)palm_collides(gf, b.occ, boxes, T);
       }
       st->collision_checks += (size_t)m;
     }
