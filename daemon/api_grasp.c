@@ -34,7 +34,6 @@
 #include <string.h>
 
 #define LANG_MASK_SCORE 0.5f /* candidates where the query's heatmap score reaches this */
-#define MAX_ROTATIONS 4096   /* fg_grasp_search's bound (grasp.h names no constant for it) */
 
 /* ---------------------------------------------------------------- the request */
 
@@ -89,7 +88,7 @@ static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
   snprintf(rotations_means, sizeof rotations_means, "orientations tried at every candidate "
            "voxel (default %d)", r->opt.n_rotations);
   if (int_key(body, "top_k", 1, FG_GRASP_MAX_TOP_K, &top_k, top_k_means, resp) != 0 ||
-      int_key(body, "rotations", FG_GRASP_MIN_ROTATIONS, MAX_ROTATIONS, &rotations,
+      int_key(body, "rotations", FG_GRASP_MIN_ROTATIONS, FG_GRASP_MAX_ROTATIONS, &rotations,
               rotations_means, resp) != 0 ||
       int_key(body, "seed", 0, INT64_MAX, &seed, "turns the orientations as a whole (default "
               "0)", resp) != 0)

@@ -50,6 +50,7 @@
 #define FG_GRASP_QUERY_SEED 0x6772617370ULL /* "grasp": the query points' fixed stream */
 #define FG_GRASP_MAX_TOP_K 100
 #define FG_GRASP_MIN_ROTATIONS 8
+#define FG_GRASP_MAX_ROTATIONS 4096
 
 /* ---- query points --------------------------------------------------------------------- */
 

@@ -147,8 +147,9 @@ static int check_options(const fg_grasp_options *o) {
   if (!(o->candidate_alpha >= FG_QUERY_ALPHA_FLOOR && o->candidate_alpha <= 1.0f))
     return fg_fail(FG_EINVAL, "the candidates' alpha threshold must be in [%g, 1]",
                    (double)FG_QUERY_ALPHA_FLOOR);
-  if (o->n_rotations < FG_GRASP_MIN_ROTATIONS || o->n_rotations > 4096)
-    return fg_fail(FG_EINVAL, "rotations must be in %d..4096, got %d", FG_GRASP_MIN_ROTATIONS,
+  if (o->n_rotations < FG_GRASP_MIN_ROTATIONS || o->n_rotations > FG_GRASP_MAX_ROTATIONS)
+    return fg_fail(FG_EINVAL, "rotations must be in %d..%d, got %d", FG_GRASP_MIN_ROTATIONS,
+                   FG_GRASP_MAX_ROTATIONS,
                    o->n_rotations);
   if (o->n_keep < 1 || o->n_final < 1 || o->n_final > o->n_keep || o->n_keep > 1 << 20)
     return fg_fail(FG_EINVAL, "need 1 <= n_final <= n_keep <= 2^20");
