@@ -10,9 +10,10 @@
  * the object's symmetries allowed (the box turned by 180 degrees about its vertical axis; the
  * ball in any orientation, so only its position counts) and the parallel gripper's 180-degree
  * turn about its approach axis; and it is collision-free for the Robotiq 2F-140 open to the
- * task's width. By language: the class embedding of each object, with the other classes as
- * negatives, retrieves that object's task (F3RM's mean query-point feature) and, with the
- * heatmap mask and the language weight, finds the same pose.
+ * task's width. The layouts share their class embeddings (scenegen's --embedding-seed), as
+ * frames of one feature extractor do. By language: the class embedding of each object, with
+ * the other classes as negatives, retrieves that object's task (F3RM's mean query-point
+ * feature) and, with the heatmap mask and the language weight, finds the same pose.
  * argv[1]: the fieldgrip-scenegen program. */
 #include "testutil.h"
 
@@ -173,9 +174,10 @@ static void layout_keep(const char *seed, const char *gt_path, const layout *L) 
 static void layout_load(const char *scenegen, const char *seed, layout *L) {
   if (layout_reuse(seed, L)) return;
   char *dir = sg_test_tmpdir("grasp");
-  const char *args[] = {"--out", dir, "--seed", seed, "--views", "30", "--width", "160",
-                        "--height", "120", "--dim", "32", "--patch", "4", "--holdout", "0",
-                        NULL};
+  /* one vocabulary for every layout (--embedding-seed), as one feature extractor gives */
+  const char *args[] = {"--out", dir, "--seed", seed, "--embedding-seed", "7", "--views", "30",
+                        "--width", "160", "--height", "120", "--dim", "32", "--patch", "4",
+                        "--holdout", "0", NULL};
   ASSERT_EQ(sg_test_run(scenegen, args), 0);
   char *transforms = fg_path_join(dir, "transforms.json"), *gt_path = fg_path_join(dir, "gt.json");
   ASSERT_OK(sg_gt_load(gt_path, &L->gt));
@@ -306,6 +308,9 @@ int main(int argc, char **argv) {
   for (int l = 0; l < 2; l++) {
     printf("layout %s against demo layout %s:\n", query_seed, demo_seeds[l]);
     assert_moved(&demo_gt[l], &Q.gt);
+    ASSERT_EQ(demo_gt[l].n_classes, Q.gt.n_classes);
+    ASSERT(memcmp(demo_gt[l].embeddings, Q.gt.embeddings,
+                  (size_t)Q.gt.n_classes * D * sizeof(float)) == 0);
     sg_gt_free(&demo_gt[l]);
   }
 

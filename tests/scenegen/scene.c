@@ -55,6 +55,7 @@ enum { STREAM_EMBED = 1, STREAM_OBJECTS = 2, STREAM_CAMERAS = 3, STREAM_NOISE = 
 void sg_config_default(sg_config *cfg) {
   memset(cfg, 0, sizeof *cfg);
   cfg->seed = 0;
+  cfg->embedding_seed = -1;
   cfg->n_views = 60;
   cfg->w = 320;
   cfg->h = 240;
@@ -254,7 +255,9 @@ static int place_objects(sg_scene *sc) {
  * is made orthogonal to the earlier ones (possible since dim >= SG_N_CLASSES). */
 static void make_embeddings(sg_scene *sc) {
   int D = sc->cfg.dim;
-  rng r = rng_stream(sc->cfg.seed, STREAM_EMBED, 0);
+  const uint64_t seed = sc->cfg.embedding_seed >= 0 ? (uint64_t)sc->cfg.embedding_seed
+                                                    : sc->cfg.seed;
+  rng r = rng_stream(seed, STREAM_EMBED, 0);
   double *v = malloc((size_t)D * sizeof *v);
   for (int k = 0; k < SG_N_CLASSES; k++) {
     float *e = sc->embeddings + (size_t)k * D;

@@ -30,6 +30,7 @@ enum {
 
 typedef struct sg_config {
   uint64_t seed;
+  int64_t embedding_seed; /* class embeddings' seed; -1: seed's (every layout its own) */
   int n_views;  /* cameras */
   int w, h;     /* image size, pixels */
   int dim;      /* feature dimension D, >= SG_N_CLASSES */

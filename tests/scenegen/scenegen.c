@@ -33,10 +33,13 @@
 
 static void usage(FILE *f) {
   fprintf(f,
-          "usage: fieldgrip-scenegen --out DIR [--seed N] [--views N] [--width W] [--height H]\n"
+          "usage: fieldgrip-scenegen --out DIR [--seed N] [--embedding-seed N] [--views N]\n"
+          "                          [--width W] [--height H]\n"
           "                          [--dim D] [--patch P] [--noise S] [--holdout K]\n"
           "  --out DIR     data set folder (created; existing files are replaced)\n"
           "  --seed N      object layout, cameras' start, embeddings, noise (default 0)\n"
+          "  --embedding-seed N  class embeddings from N instead of --seed, so that\n"
+          "                layouts share one feature space (default: --seed)\n"
           "  --views N     cameras on the hemisphere (default 60)\n"
           "  --width W, --height H   image size in pixels (default 320x240)\n"
           "  --dim D       feature dimension, at least %d (default 64)\n"
@@ -70,6 +73,7 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
       {"height", required_argument, NULL, 'H'},  {"dim", required_argument, NULL, 'd'},
       {"patch", required_argument, NULL, 'p'},   {"noise", required_argument, NULL, 'e'},
       {"holdout", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
+      {"embedding-seed", required_argument, NULL, 'E'},
       {NULL, 0, NULL, 0},
   };
   sg_config_default(cfg);
@@ -89,6 +93,18 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
         return -1;
       }
       cfg->seed = v;
+      break;
+    }
+    case 'E': {
+      char *end;
+      errno = 0;
+      unsigned long long v = strtoull(optarg, &end, 10);
+      if (errno || end == optarg || *end || optarg[0] == '-' || v > INT64_MAX) {
+        fprintf(stderr, "fieldgrip-scenegen: --embedding-seed wants an integer in 0..%" PRId64
+                "\n", INT64_MAX);
+        return -1;
+      }
+      cfg->embedding_seed = (int64_t)v;
       break;
     }
     case 'n':
@@ -257,6 +273,9 @@ static json_t *gt_json(const sg_scene *sc) {
   const sg_config *cfg = &sc->cfg;
   json_t *root = json_object();
   json_object_set_new(root, "seed", json_integer((json_int_t)cfg->seed));
+  json_object_set_new(root, "embedding_seed",
+                      json_integer((json_int_t)(cfg->embedding_seed >= 0 ? cfg->embedding_seed
+                                                                          : (int64_t)cfg->seed)));
   double bg[3] = {sc->background_rgb[0], sc->background_rgb[1], sc->background_rgb[2]};
   json_object_set_new(root, "background_rgb", vec_json(bg, 3));
   json_object_set_new(root, "width", json_integer(cfg->w));
