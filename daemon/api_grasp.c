@@ -37,12 +37,14 @@
 
 /* ---------------------------------------------------------------- the request */
 
-static const char *const grasp_keys[] = {"task", "top_k", "seed", "rotations"};
+static const char *const grasp_keys[] = {"task", "top_k", "seed", "rotations",
+                                         "language_weight"};
 #define N_GRASP_KEYS (sizeof grasp_keys / sizeof grasp_keys[0])
 
 typedef struct grasp_req {
   const char *task; /* NULL: retrieved by the query */
   int has_query;
+  int language_weight; /* optimise J_lang (grasp.h) instead of J; needs a query */
   fg_grasp_options opt; /* lib/grasp's defaults with the request's top_k, rotations, seed */
 } grasp_req;
 
@@ -70,13 +72,23 @@ static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
       return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a grasp request "
                            "takes \"task\" and/or a query (\"text\" or \"embedding\", "
                            "\"negatives\" or \"negative_embeddings\", \"temperature\"), and "
-                           "\"top_k\", \"seed\", \"rotations\"", key), -1;
+                           "\"top_k\", \"seed\", \"rotations\", \"language_weight\"", key),
+           -1;
   }
   memset(r, 0, sizeof *r);
   fg_grasp_options_default(&r->opt);
   if (fg_json_string(body, "task", &r->task) < 0)
     return fg_resp_error(resp, 400, "invalid_request", "\"task\" must be a task's name"), -1;
   r->has_query = fg_query_present(body);
+  json_t *lw = json_object_get(body, "language_weight");
+  if (lw && !json_is_boolean(lw))
+    return fg_resp_error(resp, 400, "invalid_request", "\"language_weight\" must be true or "
+                         "false (default false: the query masks the candidates and picks the "
+                         "task; true also weights the cost by its likeness to the query)"), -1;
+  r->language_weight = lw && json_is_true(lw);
+  if (r->language_weight && !r->has_query)
+    return fg_resp_error(resp, 400, "invalid_request", "\"language_weight\" needs a query "
+                         "(\"text\" or \"embedding\")"), -1;
   if (!r->task && !r->has_query)
     return fg_resp_error(resp, 400, "invalid_request", "name a task (\"task\": \"mug_handle\") "
                          "or give a query (\"text\": \"a mug\" or \"embedding\": [D numbers]) "
@@ -294,7 +306,7 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   o->n_threads = threads;
   const fg_grasp_target target = {.n_points = task->n_points, .dim = D,
                                    .p_gripper = task->p_gripper, .Z = task->Z,
-                                   .q = r.has_query ? q.q : NULL};
+                                   .q = r.language_weight ? q.q : NULL};
   rc = fg_grasp_search(gf, &target, o, &res);
   if (rc != 0) {
     fg_resp_error(resp, rc == FG_EINVAL || rc == FG_ERANGE ? 400 : 500,

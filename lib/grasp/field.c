@@ -312,7 +312,7 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
                           double *weight_out, fg_grasp_scratch *s) {
   const int n = p->n;
   const int want_grad = d_t || d_w;
-  double num = 0.0, den2 = 0.0, wsum = 0.0;
+  double num = 0.0, den2 = 0.0, wsum = 0.0, nsum = 0.0;
   fg_grasp_transform_points(T, p->p, n, s->x);
   for (int i = 0; i < n; i++) {
     float *u = s->u + (size_t)i * H;
@@ -321,6 +321,7 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
     s->m[i] = m;
     if (m == 0) { /* free space: u = 0 adds nothing */
       for (int j = 0; j < H; j++) u[j] = 0.0f;
+      s->nrm[i] = 0.0f;
       continue;
     }
     {
@@ -346,8 +347,10 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
     num += a;
     den2 += b;
     wsum += e;
+    s->nrm[i] = sqrtf(b);
+    nsum += s->nrm[i];
   }
-  const double weight = p->has_q ? wsum / n : 1.0;
+  const double weight = !p->has_q ? 1.0 : nsum > 1e-30 ? wsum / nsum : 0.0;
   double cosv = 0.0;
   if (den2 > 1e-30) cosv = num / (sqrt(den2) * p->z_norm);
   if (cos_out) *cos_out = cosv;
@@ -356,16 +359,20 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
   if (!want_grad) return J;
   double gt[3] = {0, 0, 0}, gw[3] = {0, 0, 0};
   if (den2 > 1e-30) {
-    /* dJ/du_i = -weight (C_i - (num / den2) u_i) / (|u| |Z|) - cos cq / n */
+    /* dJ/du_i = -weight (C_i - (num / den2) u_i) / (|u| |Z|) - cos dw/du_i with
+     * dw/du_i = cq / S - (E / S^2) u_i / |u_i| (E = sum q.z_i, S = sum |z_i|) */
     const float a = (float)(-weight / (sqrt(den2) * p->z_norm));
     const float b = (float)(-(num / den2) * -weight / (sqrt(den2) * p->z_norm));
-    const float e = p->has_q ? (float)(-cosv / n) : 0.0f;
+    const int lang = p->has_q && nsum > 1e-30;
+    const float e = lang ? (float)(-cosv / nsum) : 0.0f;
+    const double f0 = lang ? cosv * wsum / (nsum * nsum) : 0.0;
     float gu[H];
     for (int i = 0; i < n; i++) {
       const float *u = s->u + (size_t)i * H;
       const float *Ci = p->C + (size_t)i * H;
+      const float bi = b + (lang && s->nrm[i] > 0.0f ? (float)(f0 / s->nrm[i]) : 0.0f);
 #pragma omp simd
-      for (int j = 0; j < H; j++) gu[j] = a * Ci[j] + b * u[j] + e * p->cq[j];
+      for (int j = 0; j < H; j++) gu[j] = a * Ci[j] + bi * u[j] + e * p->cq[j];
       const fg_grasp_corner *c = s->c + (size_t)i * 8;
       double gx[3] = {0, 0, 0};
       for (int k = 0; k < s->m[i]; k++) {
@@ -393,7 +400,8 @@ int fg_grasp_scratch_init(fg_grasp_scratch *s, int n) {
   s->u = malloc((size_t)n * H * sizeof *s->u);
   s->c = malloc((size_t)n * 8 * sizeof *s->c);
   s->m = malloc((size_t)n * sizeof *s->m);
-  if (s->x && s->u && s->c && s->m) return 0;
+  s->nrm = malloc((size_t)n * sizeof *s->nrm);
+  if (s->x && s->u && s->c && s->m && s->nrm) return 0;
   fg_grasp_scratch_release(s);
   return fg_fail(FG_ENOMEM, "grasp: out of memory");
 }
@@ -403,6 +411,7 @@ void fg_grasp_scratch_release(fg_grasp_scratch *s) {
   free(s->u);
   free(s->c);
   free(s->m);
+  free(s->nrm);
   memset(s, 0, sizeof *s);
 }
 
@@ -450,7 +459,7 @@ double fg_grasp_cost_ref(const fg_voxel_features *vf, const fg_grasp_target *t,
     free(f);
     return NAN;
   }
-  double num = 0.0, den2 = 0.0, z2 = 0.0, wsum = 0.0;
+  double num = 0.0, den2 = 0.0, z2 = 0.0, wsum = 0.0, nsum = 0.0;
   const int n[3] = {g->nx, g->ny, g->nz};
   for (int i = 0; i < t->n_points; i++) {
     const float *p = t->p_gripper + 3 * i;
@@ -481,16 +490,19 @@ double fg_grasp_cost_ref(const fg_voxel_features *vf, const fg_grasp_target *t,
       for (int dd = 0; dd < D; dd++) z[dd] += w * alpha[flat] * f[dd];
     }
     const float *Zi = t->Z + (size_t)i * D;
+    double zz = 0.0;
     for (int dd = 0; dd < D; dd++) {
       num += z[dd] * Zi[dd];
-      den2 += z[dd] * z[dd];
+      zz += z[dd] * z[dd];
       z2 += (double)Zi[dd] * Zi[dd];
       if (t->q) wsum += z[dd] * t->q[dd];
     }
+    den2 += zz;
+    nsum += sqrt(zz);
   }
   free(z);
   free(f);
   const double cosv = den2 > 1e-30 ? num / (sqrt(den2) * sqrt(z2)) : 0.0;
-  const double weight = t->q ? wsum / t->n_points : 1.0;
+  const double weight = !t->q ? 1.0 : nsum > 1e-30 ? wsum / nsum : 0.0;
   return -weight * cosv;
 }

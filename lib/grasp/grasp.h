@@ -19,7 +19,11 @@
  * Cost (F3RM). A task embedding Z (N_q x D) is the mean of its demos' z. The cost of a pose is
  *   J(T) = -cos(z_T, Z)                    (0 when z_T = 0: every point in free space)
  * and with a language query q (unit, D) the cost is weighted by the query's similarity at the
- * query points, J_lang(T) = w(T) J(T) with w(T) = mean_i q . z_T,i.
+ * query points, J_lang(T) = w(T) J(T) with w(T) = sum_i q . z_T,i / sum_i |z_T,i|: the
+ * cosine of q with each point's feature, averaged with the points' alpha-weighted lengths
+ * as weights (0 when every point is in free space). The issue's mean_i q . z_T,i grows with
+ * density as much as with likeness to q, and pulled poses into the middle of solid objects,
+ * away from the demonstrated geometry; this w is scale-free and in [-1, 1].
  *
  * Search (fg_grasp_search). Candidates are the centres of every voxel with alpha >= the
  * candidate threshold (optionally only those a mask allows, e.g. a language heatmap), each
@@ -132,6 +136,8 @@ int fg_grasp_collides(const fg_grasp_field *gf, fg_gripper_model m, double width
 typedef struct fg_grasp_options {
   float candidate_alpha;      /* candidates: voxel centres with alpha >= this (0.1) */
   const uint8_t *candidate_mask; /* (nz, ny, nx): 0 rules a voxel out; NULL: none ruled out */
+  int mask_dilation;          /* the mask grows by this many voxels first (0..16): the TCP
+                               * sits between the fingers, often in air beside the object */
   int n_rotations;            /* per candidate, >= FG_GRASP_MIN_ROTATIONS */
   int n_keep;                 /* best collision-free candidate poses optimised */
   int n_final;                /* pruned down to this many while optimising */
@@ -149,7 +155,7 @@ typedef struct fg_grasp_options {
   int n_threads;              /* <= 0: OpenMP's default */
 } fg_grasp_options;
 
-/* The defaults: candidate_alpha 0.1, no mask, 24 rotations, n_keep 1024, n_final 64,
+/* The defaults: candidate_alpha 0.1, no mask, mask_dilation 2, 24 rotations, n_keep 1024, n_final 64,
  * 100 iterations, lr 2 mm and 0.03 rad, top_k 10, NMS 1 cm and 15 degrees, panda at its
  * stroke, collisions checked at alpha 0.1, seed 0, n_threads 0. */
 void fg_grasp_options_default(fg_grasp_options *o);

@@ -56,6 +56,7 @@ typedef struct fg_grasp_scratch {
   float *u;             /* (n, 64) */
   fg_grasp_corner *c;   /* (n, 8) */
   int *m;               /* (n) */
+  float *nrm;           /* (n) |u_i| */
 } fg_grasp_scratch;
 
 int fg_grasp_scratch_init(fg_grasp_scratch *s, int n);

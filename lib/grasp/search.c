@@ -128,6 +128,7 @@ int fg_grasp_collides(const fg_grasp_field *gf, fg_gripper_model m, double width
 void fg_grasp_options_default(fg_grasp_options *o) {
   memset(o, 0, sizeof *o);
   o->candidate_alpha = 0.1f;
+  o->mask_dilation = 2;
   o->n_rotations = 24;
   o->n_keep = 1024;
   o->n_final = 64;
@@ -151,6 +152,8 @@ static int check_options(const fg_grasp_options *o) {
     return fg_fail(FG_EINVAL, "rotations must be in %d..%d, got %d", FG_GRASP_MIN_ROTATIONS,
                    FG_GRASP_MAX_ROTATIONS,
                    o->n_rotations);
+  if (o->mask_dilation < 0 || o->mask_dilation > 16)
+    return fg_fail(FG_EINVAL, "mask_dilation must be in 0..16 voxels, got %d", o->mask_dilation);
   if (o->n_keep < 1 || o->n_final < 1 || o->n_final > o->n_keep || o->n_keep > 1 << 20)
     return fg_fail(FG_EINVAL, "need 1 <= n_final <= n_keep <= 2^20");
   if (o->iterations < 0 || o->iterations > 10000)
@@ -217,6 +220,7 @@ typedef struct search_bufs {
   scored *sc;                /* (n_cand * n_rot) */
   pose_state *ps;            /* (n_keep) */
   uint8_t *hit;              /* (SCORE_CHUNK) */
+  uint8_t *dilated;          /* (nz, ny, nx) the candidate mask grown, or NULL */
 } search_bufs;
 
 static void bufs_release(search_bufs *b) {
@@ -231,6 +235,36 @@ static void bufs_release(search_bufs *b) {
   free(b->sc);
   free(b->ps);
   free(b->hit);
+  free(b->dilated);
+}
+
+/* mask (nz, ny, nx) grown by r voxels along every axis (a cube of side 2r + 1: a separable
+ * maximum), into a new array the caller frees; NULL when out of memory. */
+static uint8_t *dilate(const fg_voxel_grid *g, const uint8_t *mask, int r) {
+  const size_t N = fg_voxel_grid_count(g);
+  uint8_t *a = malloc(N), *t = malloc(N);
+  if (!a || !t) {
+    free(a);
+    free(t);
+    return NULL;
+  }
+  memcpy(a, mask, N);
+  const int n[3] = {g->nx, g->ny, g->nz};
+  const size_t stride[3] = {1, (size_t)g->nx, (size_t)g->nx * g->ny};
+  for (int ax = 0; ax < 3; ax++) {
+    for (size_t i = 0; i < N; i++) {
+      const int c = (int)((i / stride[ax]) % (size_t)n[ax]);
+      uint8_t v = 0;
+      for (int d = -r; d <= r && !v; d++) {
+        const int cc = c + d;
+        if (cc >= 0 && cc < n[ax]) v = a[i + (ptrdiff_t)d * (ptrdiff_t)stride[ax]] != 0;
+      }
+      t[i] = v;
+    }
+    memcpy(a, t, N);
+  }
+  free(t);
+  return a;
 }
 
 /* The pose of candidate id: voxel centre, rotation id % n_rot. */
@@ -330,9 +364,15 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
     if (fg_grasp_scratch_init(&b.scratch[i], t->n_points) < 0) goto nomem;
 
   /* candidates */
+  const uint8_t *mask = o.candidate_mask;
+  if (mask && o.mask_dilation > 0) {
+    b.dilated = dilate(&gf->grid, mask, o.mask_dilation);
+    if (!b.dilated) goto nomem;
+    mask = b.dilated;
+  }
   size_t n_cand = 0;
   for (size_t i = 0; i < gf->n_vox; i++)
-    if (gf->alpha[i] >= o.candidate_alpha && (!o.candidate_mask || o.candidate_mask[i]))
+    if (gf->alpha[i] >= o.candidate_alpha && (!mask || mask[i]))
       b.cand[n_cand++] = (uint32_t)i;
   st->candidates = n_cand;
   if (n_cand == 0) {
@@ -418,14 +458,21 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   st->poses_optimised = (size_t)n_keep;
   const int n_left = optimise(gf, &b, &o, b.ps, n_keep, st);
 
-  /* collisions after optimising, then non-maximum suppression */
+  /* collisions after optimising, then non-maximum suppression: the survivors best first,
+   * then, while fewer than top_k are free, the pruned poses from the last pruned (ps keeps
+   * them behind the survivors, the latest first), each scored again where it stands */
   out->poses = calloc((size_t)o.top_k, sizeof *out->poses);
   if (!out->poses) goto nomem;
-  for (int k = 0; k < n_left && out->n < o.top_k; k++) {
-    const pose_state *p = &b.ps[k];
-    if (!(p->cosv > 0.0)) break; /* no likeness to the task left */
+  for (int k = 0; k < n_keep && out->n < o.top_k; k++) {
+    pose_state *p = &b.ps[k];
     double T[16];
     fg_pose_from_rotmat(p->R, p->t, T);
+    if (k >= n_left) {
+      p->cost = fg_grasp_cost_fast(gf, &b.prep, T, NULL, NULL, &p->cosv, &p->weight,
+                                   &b.scratch[0]);
+      st->evaluations++;
+    }
+    if (!(p->cosv > 0.0)) continue; /* no likeness to the task */
     if (o.check_collisions) {
       st->collision_checks++;
       if (gripper_collides(gf, b.occ, boxes, T)) {

@@ -222,6 +222,12 @@ int main(int argc, char **argv) {
     ASSERT_STREQ(JSTR(r->json, "task"), objs[i]);
     h_resp_free(r);
     free(q);
+    /* the same with the cost weighted by the query (J_lang): a well-formed answer */
+    q = h_fmt("{\"embedding\": %s, \"top_k\": 3, \"language_weight\": true}", e);
+    r = grasps_ok(q);
+    ASSERT_STREQ(JSTR(r->json, "task"), objs[i]);
+    h_resp_free(r);
+    free(q);
     /* the opposite direction scores below 0.5 everywhere: nothing passes the mask */
     json_error_t je;
     json_t *v = json_loads(e, 0, &je);
@@ -247,6 +253,8 @@ int main(int argc, char **argv) {
   expect_error("{\"task\": \"ball\", \"rotations\": 4}", 400, "invalid_request");
   expect_error("{\"task\": \"ball\", \"seed\": -1}", 400, "invalid_request");
   expect_error("{\"task\": \"ball\", \"gripper\": \"x\"}", 400, "invalid_request");
+  expect_error("{\"task\": \"ball\", \"language_weight\": true}", 400, "invalid_request");
+  expect_error("{\"task\": \"ball\", \"language_weight\": 1}", 400, "invalid_request");
   expect_error("{\"task\": \"nope\"}", 404, "task_not_found");
   expect_error("{\"embedding\": [1, 0, 0]}", 400, "invalid_query");
   expect_error("{\"text\": \"a ball\"}", 409, "clip_not_configured");
