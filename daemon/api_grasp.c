@@ -63,18 +63,13 @@ static int int_key(json_t *body, const char *key, json_int_t lo, json_int_t hi, 
 }
 
 static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
-  const char *key;
-  json_t *v;
-  json_object_foreach(body, key, v) {
-    int known = fg_query_is_key(key);
-    for (size_t i = 0; !known && i < N_GRASP_KEYS; i++) known = strcmp(key, grasp_keys[i]) == 0;
-    if (!known)
-      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a grasp request "
-                           "takes \"task\" and/or a query (\"text\" or \"embedding\", "
-                           "\"negatives\" or \"negative_embeddings\", \"temperature\"), and "
-                           "\"top_k\", \"seed\", \"rotations\", \"language_weight\"", key),
+  const char *key = fg_query_unknown_key(body, grasp_keys, N_GRASP_KEYS);
+  if (key)
+    return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a grasp request "
+                         "takes \"task\" and/or a query (\"text\" or \"embedding\", "
+                         "\"negatives\" or \"negative_embeddings\", \"temperature\"), and "
+                         "\"top_k\", \"seed\", \"rotations\", \"language_weight\"", key),
            -1;
-  }
   memset(r, 0, sizeof *r);
   fg_grasp_options_default(&r->opt);
   if (fg_json_string(body, "task", &r->task) < 0)

@@ -36,18 +36,13 @@ typedef struct heatmap_req {
  * answers 400 itself and returns -1 when they are wrong. */
 static int parse_heatmap(json_t *body, const fg_scene_params *params, heatmap_req *r,
                          fg_resp *resp) {
-  const char *key;
-  json_t *v;
-  json_object_foreach(body, key, v) {
-    int known = fg_query_is_key(key);
-    for (size_t i = 0; !known && i < N_HEATMAP_KEYS; i++) known = strcmp(key, heatmap_keys[i]) == 0;
-    if (!known)
-      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a heatmap takes a "
-                           "query (\"text\" or \"embedding\", \"negatives\" or "
-                           "\"negative_embeddings\", \"temperature\") and \"format\", "
-                           "\"alpha_threshold\", \"min_score\", \"max_points\", \"voxel_size\"",
-                           key), -1;
-  }
+  const char *key = fg_query_unknown_key(body, heatmap_keys, N_HEATMAP_KEYS);
+  if (key)
+    return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a heatmap takes a "
+                         "query (\"text\" or \"embedding\", \"negatives\" or "
+                         "\"negative_embeddings\", \"temperature\") and \"format\", "
+                         "\"alpha_threshold\", \"min_score\", \"max_points\", \"voxel_size\"",
+                         key), -1;
   const char *format = "json";
   if (fg_json_string(body, "format", &format) < 0 ||
       (strcmp(format, "json") != 0 && strcmp(format, "npy") != 0 && strcmp(format, "ply") != 0))

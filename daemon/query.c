@@ -24,6 +24,17 @@ int fg_query_is_key(const char *key) {
   return 0;
 }
 
+const char *fg_query_unknown_key(json_t *body, const char *const *keys, size_t n) {
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    int known = fg_query_is_key(key);
+    for (size_t i = 0; !known && i < n; i++) known = strcmp(key, keys[i]) == 0;
+    if (!known) return key;
+  }
+  return NULL;
+}
+
 int fg_query_present(json_t *body) {
   for (size_t i = 0; i < N_QUERY_KEYS; i++)
     if (json_object_get(body, query_keys[i])) return 1;

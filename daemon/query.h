@@ -32,6 +32,10 @@
 /* 1 when key is one of the query keys above (for handlers that refuse unknown keys). */
 int fg_query_is_key(const char *key);
 
+/* The first key of body that is neither a query key nor one of keys (n of them), or NULL
+ * when every key is known (for handlers that refuse unknown keys). The string is body's. */
+const char *fg_query_unknown_key(json_t *body, const char *const *keys, size_t n);
+
 /* 1 when body holds any query key. */
 int fg_query_present(json_t *body);
 
