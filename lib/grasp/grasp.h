@@ -26,15 +26,17 @@
  * away from the demonstrated geometry; this w is scale-free and in [-1, 1].
  *
  * Search (fg_grasp_search). Candidates are the centres of every voxel with alpha >= the
- * candidate threshold (optionally only those a mask allows, e.g. a language heatmap), each
- * with the same deterministic near-uniform cover of SO(3) (a super-Fibonacci spiral, Alexa
- * 2022), optionally turned as a whole by a rotation drawn from the seed. Every candidate pose
- * is scored; the best collision-free ones (up to n_keep) are optimised with Adam over
- * translation and a world-frame rotation vector, dropping the worst 2.5 % every iteration
- * down to n_final; the survivors are checked for collisions again, sorted by cost and thinned
- * by non-maximum suppression in position and angle. Every pose is optimised on its own, so the
- * result is bit-identical for any thread count, and the same inputs and seed give the same
- * poses.
+ * candidate threshold (optionally only those a mask allows, e.g. a language heatmap, grown by
+ * mask_dilation voxels), each with the same deterministic near-uniform cover of SO(3) (a
+ * super-Fibonacci spiral, Alexa 2022), optionally turned as a whole by a rotation drawn from
+ * the seed. Every candidate pose is scored on the first 32 query points; the best ones whose
+ * palm is free (up to n_keep) are optimised with Adam over translation and a world-frame
+ * rotation vector on all the query points, dropping the worst 2.5 % every iteration down to
+ * n_final; the survivors, then the pruned poses (latest pruned first), are checked for
+ * collisions with the whole gripper and thinned by non-maximum suppression in position and
+ * angle (a parallel gripper turned by 180 degrees about its approach axis is the same grasp).
+ * Every pose is optimised on its own, so the result is bit-identical for any thread count,
+ * and the same inputs and seed give the same poses.
  *
  * Collisions. A pose collides when a sample point of one of the gripper's boxes (a lattice of
  * at most half a voxel's spacing over each box) falls in a voxel whose alpha is at least the
