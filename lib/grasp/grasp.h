@@ -39,8 +39,8 @@
  * and the same inputs and seed give the same poses.
  *
  * Collisions. A pose collides when a sample point of one of the gripper's boxes (a lattice of
- * at most half a voxel's spacing over each box) falls in a voxel whose alpha is at least the
- * collision threshold. Space outside the workspace grid counts as free. */
+ * spacing at most voxel_size / sqrt(3) over each box, so every voxel whose inscribed ball lies
+ * in a box holds a point) falls in a voxel whose alpha is at least the collision threshold. Space outside the workspace grid counts as free. */
 #ifndef FG_GRASP_GRASP_H
 #define FG_GRASP_GRASP_H
 
