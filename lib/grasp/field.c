@@ -10,6 +10,7 @@
 #include "core/blas.h"
 #include "core/error.h"
 #include "core/half.h"
+#include "core/pose.h"
 #include "core/rng.h"
 #include "grasp/grasp.h"
 #include "grasp/internal.h"
@@ -209,14 +210,6 @@ int fg_grasp_corners(const fg_voxel_grid *g, const int32_t *slot, const float x[
   return corners_at(g, slot, x, c);
 }
 
-void fg_grasp_transform_points(const double T[16], const float *p, int n, float *x) {
-  for (int i = 0; i < n; i++) {
-    const double px = p[3 * i], py = p[3 * i + 1], pz = p[3 * i + 2];
-    for (int a = 0; a < 3; a++)
-      x[3 * i + a] = (float)(T[4 * a] * px + T[4 * a + 1] * py + T[4 * a + 2] * pz + T[4 * a + 3]);
-  }
-}
-
 int fg_grasp_sample(const fg_grasp_field *gf, const double T_world_gripper[16],
                     const float *p_gripper, int n, float *z) {
   if (!gf || !T_world_gripper || !p_gripper || !z)
@@ -226,7 +219,7 @@ int fg_grasp_sample(const fg_grasp_field *gf, const double T_world_gripper[16],
   const int D = gf->dim;
   for (int i = 0; i < n; i++) {
     float x[3], u[H] = {0};
-    fg_grasp_transform_points(T_world_gripper, p_gripper + 3 * i, 1, x);
+    fg_pose_apply_points(T_world_gripper, p_gripper + 3 * i, 1, x);
     fg_grasp_corner c[8];
     const int m = fg_grasp_corners(&gf->grid, gf->slot, x, c);
     for (int k = 0; k < m; k++) {
@@ -313,7 +306,7 @@ double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
   const int n = p->n;
   const int want_grad = d_t || d_w;
   double num = 0.0, den2 = 0.0, wsum = 0.0, nsum = 0.0;
-  fg_grasp_transform_points(T, p->p, n, s->x);
+  fg_pose_apply_points(T, p->p, (size_t)n, s->x);
   for (int i = 0; i < n; i++) {
     float *u = s->u + (size_t)i * H;
     fg_grasp_corner *c = s->c + (size_t)i * 8;

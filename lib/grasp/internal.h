@@ -34,9 +34,6 @@ typedef struct fg_grasp_corner {
 int fg_grasp_corners(const fg_voxel_grid *g, const int32_t *slot, const float x[3],
                      fg_grasp_corner c[8]);
 
-/* x (n, 3) = T p (n, 3). */
-void fg_grasp_transform_points(const double T[16], const float *p, int n, float *x);
-
 /* A target resolved against a field: C (n, 64) = Z_i projected by Q^T, cq (64) = Q^T q. */
 typedef struct fg_grasp_prepared {
   int n;

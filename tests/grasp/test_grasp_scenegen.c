@@ -49,24 +49,6 @@ typedef struct layout {
   fg_grasp_field *gf;
 } layout;
 
-/* C = A B, 4x4 row-major. */
-static void mul4(const double A[16], const double B[16], double C[16]) {
-  for (int r = 0; r < 4; r++)
-    for (int c = 0; c < 4; c++) {
-      double s = 0.0;
-      for (int k = 0; k < 4; k++) s += A[4 * r + k] * B[4 * k + c];
-      C[4 * r + c] = s;
-    }
-}
-
-static double rot_angle(const double A[16], const double B[16]) {
-  double tr = 0.0;
-  for (int r = 0; r < 3; r++)
-    for (int c = 0; c < 3; c++) tr += A[4 * r + c] * B[4 * r + c];
-  const double c = (tr - 1.0) / 2.0;
-  return acos(c > 1 ? 1 : c < -1 ? -1 : c);
-}
-
 /* T with its rotation post-multiplied by a turn of 180 degrees about its own axis a. */
 static void turn_half(const double T[16], int a, double out[16]) {
   memcpy(out, T, 16 * sizeof *out);
@@ -97,7 +79,7 @@ static void task_pose(const sg_gt *gt, int task, double T_world_gripper[16]) {
                                   0, 1, 0, s->handle_center[1],
                                   0, 0, -1, s->handle_center[2],
                                   0, 0, 0, 1};
-  mul4(s->T_world_obj, T_obj_grasp, T_world_gripper);
+  fg_pose_compose(s->T_world_obj, T_obj_grasp, T_world_gripper);
 }
 
 /* Position and symmetry-aware angle errors of T against the truth of task in layout gt. */
@@ -116,13 +98,10 @@ static void task_errors(const sg_gt *gt, int task, const double T[16], double *d
     double t1[16];
     if (obj_turn) { /* the box turned by 180 degrees about its vertical axis */
       const sg_gt_object *ob = &gt->objects[object_index(gt, "box")];
-      double Tz[16], Tinv[16];
-      memcpy(Tz, ob->shape.T_world_obj, sizeof Tz);
+      double Tz[16], M[16];
       turn_half(ob->shape.T_world_obj, 2, Tz);
-      memcpy(Tinv, ob->shape.T_obj_world, sizeof Tinv);
-      double M[16];
-      mul4(Tz, Tinv, M);
-      mul4(M, truth, t1);
+      fg_pose_compose(Tz, ob->shape.T_obj_world, M);
+      fg_pose_compose(M, truth, t1);
     } else {
       memcpy(t1, truth, sizeof t1);
     }
@@ -132,7 +111,7 @@ static void task_errors(const sg_gt *gt, int task, const double T[16], double *d
         turn_half(t1, 2, t2);
       else
         memcpy(t2, t1, sizeof t2);
-      const double a = rot_angle(T, t2) * 180.0 / M_PI;
+      const double a = fg_pose_angle_rad(T, t2) * 180.0 / M_PI;
       if (a < best) best = a;
     }
   }

@@ -39,28 +39,9 @@ static void random_quat(double q[4]) {
   for (int k = 0; k < 4; k++) q[k] /= sqrt(n);
 }
 
-/* Angle between the rotations of two poses. */
-static double angle_between(const double A[16], const double B[16]) {
-  double tr = 0.0;
-  for (int r = 0; r < 3; r++)
-    for (int c = 0; c < 3; c++) tr += A[4 * r + c] * B[4 * r + c];
-  double c = (tr - 1.0) / 2.0;
-  return acos(c > 1 ? 1 : c < -1 ? -1 : c);
-}
-
 static double dist_between(const double A[16], const double B[16]) {
   const double d[3] = {A[3] - B[3], A[7] - B[7], A[11] - B[11]};
   return sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-}
-
-/* C = A B for 4x4 row-major. */
-static void mul4(const double A[16], const double B[16], double C[16]) {
-  for (int r = 0; r < 4; r++)
-    for (int c = 0; c < 4; c++) {
-      double s = 0.0;
-      for (int k = 0; k < 4; k++) s += A[4 * r + k] * B[4 * k + c];
-      C[4 * r + c] = s;
-    }
 }
 
 /* ---------------------------------------------------------------- query points */
@@ -222,7 +203,7 @@ static void test_cost(void) {
             double qr[4] = {cos(hw / 2), 0, 0, 0}, Rw[16];
             qr[1 + a] = (sgn ? -1 : 1) * sin(hw / 2);
             ASSERT_OK(fg_pose_from_quat(zero, qr, Rw));
-            mul4(Rw, T, Tr[sgn]);
+            fg_pose_compose(Rw, T, Tr[sgn]);
             Tr[sgn][3] = T[3], Tr[sgn][7] = T[7], Tr[sgn][11] = T[11];
           }
           const double fdw = (fg_grasp_cost(gf, &t, Tr[0], NULL, NULL, NULL, NULL) -
@@ -334,7 +315,7 @@ static void test_search_synthetic(void) {
   const double M[16] = {0, -1, 0, pb[0] + pa[1], 1, 0, 0, pb[1] - pa[0], 0, 0, 1, pb[2] - pa[2],
                         0, 0, 0, 1};
   double T_copy[16];
-  mul4(M, T_demo, T_copy);
+  fg_pose_compose(M, T_demo, T_copy);
   ASSERT_NEAR(fg_grasp_cost(gf, &t, T_copy, NULL, NULL, NULL, NULL), -1.0, 1e-4);
 
   fg_grasp_options o;
@@ -354,11 +335,11 @@ static void test_search_synthetic(void) {
     const double *T = r2.poses[k].T_world_gripper;
     printf("  %d: score %.5f, %.2f mm / %.2f deg from the demo, %.2f mm / %.2f deg from the "
            "copy\n", k, r2.poses[k].score, 1e3 * dist_between(T, T_demo),
-           angle_between(T, T_demo) * 180 / M_PI, 1e3 * dist_between(T, T_copy),
-           angle_between(T, T_copy) * 180 / M_PI);
+           fg_pose_angle_rad(T, T_demo) * 180 / M_PI, 1e3 * dist_between(T, T_copy),
+           fg_pose_angle_rad(T, T_copy) * 180 / M_PI);
     ASSERT(r2.poses[k].score > 0.99);
-    found_demo |= dist_between(T, T_demo) < 0.003 && angle_between(T, T_demo) < 3 * M_PI / 180;
-    found_copy |= dist_between(T, T_copy) < 0.003 && angle_between(T, T_copy) < 3 * M_PI / 180;
+    found_demo |= dist_between(T, T_demo) < 0.003 && fg_pose_angle_rad(T, T_demo) < 3 * M_PI / 180;
+    found_copy |= dist_between(T, T_copy) < 0.003 && fg_pose_angle_rad(T, T_copy) < 3 * M_PI / 180;
   }
   ASSERT(found_demo && found_copy);
   /* bit-identical for another thread count, different for another seed */
