@@ -356,6 +356,74 @@ void fg_act_sigmoid_backward(float *dx, const float *out, const float *dout, siz
 
 /* ---- losses --------------------------------------------------------------------------- */
 
+/* One ray of fg_loss_ray_weights: weights first (as forward_ray computes them), then the
+ * losses and g in a second pass over the same samples. */
+static void ray_weights_loss(int32_t r, const int32_t *ray_offset, const int32_t *n_used,
+                             const float *restrict sigma, const float *restrict dt,
+                             const float *restrict t, float z, float margin, float w_depth,
+                             float w_dist, float *restrict g, double *ld, double *lw) {
+  const int32_t o = ray_offset[r], m = n_used[r];
+  float *restrict w = g + o; /* the weights are parked in g, then overwritten in place */
+  float T = 1.0f;
+  double W = 0.0, WT = 0.0, E = 0.0, front = 0.0, window = 0.0, self = 0.0;
+  for (int32_t i = 0; i < m; i++) {
+    const float x = sigma[o + i] * dt[o + i], e = expf(-x);
+    w[i] = T * alpha_of(x, e);
+    T *= e;
+    W += w[i];
+    WT += (double)w[i] * t[o + i];
+    const double rel = (double)t[o + i] - z;
+    front += rel < -margin ? w[i] : 0.0;
+    if (fabs(rel) <= margin) {
+      window += w[i];
+      E += w[i] * rel;
+    }
+    self += (double)w[i] * w[i] * dt[o + i];
+  }
+  *ld = z > 0.0f ? 1.0 + front - window + (E / margin) * (E / margin) : 0.0;
+  /* sum_j w_j |t_i - t_j| from prefix sums (t rises along the ray) */
+  double A = 0.0, B = 0.0, pair = 0.0;
+  for (int32_t i = 0; i < m; i++) {
+    const double ti = t[o + i], wi = w[i];
+    const double spread = ti * A - B + (WT - B - wi * ti) - ti * (W - A - wi);
+    pair += wi * spread;
+    A += wi;
+    B += wi * ti;
+    double gi = w_dist * (2.0 * spread + (2.0 / 3.0) * wi * dt[o + i]);
+    if (z > 0.0f) {
+      const double rel = ti - z;
+      if (rel < -margin)
+        gi += w_depth;
+      else if (fabs(rel) <= margin)
+        gi += w_depth * (2.0 * E * rel / ((double)margin * margin) - 1.0);
+    }
+    w[i] = (float)gi;
+  }
+  *lw = pair + self / 3.0;
+}
+
+void fg_loss_ray_weights(int32_t n_rays, const int32_t *ray_offset, const int32_t *ray_count,
+                         const int32_t *n_used, const float *sigma, const float *dt,
+                         const float *t, const float *depth_z, float margin, float w_depth,
+                         float w_dist, float *g, double *loss_depth, int32_t *n_depth,
+                         double *loss_dist, int n_threads) {
+  double ld = 0.0, lw = 0.0;
+  int32_t nd = 0;
+#pragma omp parallel for schedule(static) num_threads(threads_for(n_threads)) reduction(+ : ld, lw, nd)
+  for (int32_t r = 0; r < n_rays; r++) {
+    const float z = depth_z && depth_z[r] > 0.0f ? depth_z[r] : 0.0f;
+    double a, b;
+    ray_weights_loss(r, ray_offset, n_used, sigma, dt, t, z, margin, w_depth, w_dist, g, &a, &b);
+    for (int32_t i = ray_offset[r] + n_used[r]; i < ray_offset[r] + ray_count[r]; i++) g[i] = 0.0f;
+    ld += a;
+    lw += b;
+    nd += z > 0.0f;
+  }
+  *loss_depth = ld;
+  *n_depth = nd;
+  *loss_dist = lw;
+}
+
 float fg_loss_l2(const float *pred, const float *target, size_t n, float *d_pred, float scale) {
   if (n == 0) return 0.0f;
   const float k = 2.0f * scale / (float)n;

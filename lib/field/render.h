@@ -99,6 +99,42 @@ void fg_act_sigmoid_backward(float *dx, const float *out, const float *dout, siz
  *   fg_loss_l2(rgb, rgb_gt, 3R, d_rgb, 1) + lambda * fg_loss_l2(feat, feat_gt, D R', d_feat,
  *   lambda), the feature loss taken over the R' rays that carry a feature target. */
 
+/* Losses on the compositing weights w_i = T_i alpha_i of each ray (geometry, not colour).
+ * Per ray r, over the samples it used (n_used from fg_render_forward), t_i its samples'
+ * distances and dt_i their lengths:
+ *
+ * Depth (rays with a measured distance z_r > 0 along the ray, in t's units; margin e > 0):
+ *   L_depth,r = 1 + sum_{t_i < z_r - e} w_i - sum_{|t_i - z_r| <= e} w_i + (E_r / e)^2,
+ *   E_r = sum_{|t_i - z_r| <= e} w_i (t_i - z_r).
+ * The two sums are Urban Radiance Fields' line-of-sight idea in its simplest form: a
+ * measured surface at z_r says space in front of it is empty (weight there costs 1) and the
+ * ray ends within e of it (weight there earns 1). They carve what colour cannot: the lid a
+ * photometric loss leaves over a uniformly coloured cavity is weight in front of the
+ * measured floor. Inside the window they are flat, so the last term, the first moment of the
+ * window's weight about the measurement, pulls the surface onto it to well below e. It is
+ * taken over the window only, so L_depth,r stays in [0, 3] and its gradient per weight in
+ * [-3, 3] however far the field is from the measurement: far weight is the sums' business.
+ * Unlike DS-NeRF's KL term it needs no per-ray variance, and unlike a plain expected-depth
+ * L2 it cannot be met by weight split in front of and behind the surface.
+ *
+ * Distortion (every ray; Mip-NeRF 360's L_dist on the samples' intervals):
+ *   L_dist,r = sum_{i,j} w_i w_j |t_i - t_j| + 1/3 sum_i w_i^2 dt_i,
+ * small when a ray's weight is one compact peak; it removes floaters and thin fog.
+ *
+ * fg_loss_ray_weights writes g (S): g_i = w_depth dL_depth,r/dw_i + w_dist dL_dist,r/dw_i
+ * for the samples a ray used, 0 for the others, and returns the sums over rays of L_depth,r
+ * (*loss_depth, over rays with z_r > 0, counted in *n_depth) and of L_dist,r (*loss_dist).
+ * depth_z may be NULL (no depth term); w_dist 0 skips the distortion term. The gradient with
+ * respect to sigma follows from fg_render_backward with feat = g, D = 1, d_out_feat = 1 per
+ * ray and d_out_rgb = 0, since sum_i g_i w_i is then the composited "feature".
+ * Rays are split across threads; each is computed by one thread, so g is identical for any
+ * thread count (the three sums may differ in their last bits). */
+void fg_loss_ray_weights(int32_t n_rays, const int32_t *ray_offset, const int32_t *ray_count,
+                         const int32_t *n_used, const float *sigma, const float *dt,
+                         const float *t, const float *depth_z, float margin, float w_depth,
+                         float w_dist, float *g, double *loss_depth, int32_t *n_depth,
+                         double *loss_dist, int n_threads);
+
 /* Mean squared error: mean_i (pred_i - target_i)^2. */
 float fg_loss_l2(const float *pred, const float *target, size_t n, float *d_pred, float scale);
 

@@ -53,6 +53,7 @@ struct fg_trainer {
   size_t *feat_idx, n_feat;    /* training frames with features */
   size_t *held_idx, n_held;    /* held-out frames */
   int D;                       /* feature dim (0: no feature branch) */
+  int geometry;                /* the depth or distortion loss is on */
   int64_t step;
   int32_t n_rays;              /* rays of the next step */
   int32_t cap_s, cap_r;        /* sample and ray capacity */
@@ -63,12 +64,14 @@ struct fg_trainer {
 
   /* Per ray. */
   float *o, *d, *sh, *bg, *target, *out_rgb, *out_opacity, *d_out_rgb, *zero_rgb, *frgb;
+  float *depth_z, *ones;       /* measured distance along the ray (cube units, 0: none); 1s */
   float *ftarget, *hc, *fpred, *d_fpred, *d_hc; /* feature rays (R_f, .) */
   int32_t *off, *cnt, *used, *used_f;
   /* Per sample. */
   float *x, *dts, *ts, *enc, *dacts, *dout, *cin, *cacts, *rgb, *sigma;
   float *d_sigma, *d_rgb, *d_cin, *d_dout, *d_enc;
   float *fenc, *facts, *h, *d_h, *d_fenc, *d_sigma_f, *d_rgb_f;
+  float *wg, *d_sigma_g, *d_rgb_g; /* geometry losses: dL/dw, and their backward's output */
   float *mlp_scratch;
   /* Occupancy updates. */
   int32_t *occ_cells;
@@ -85,6 +88,8 @@ void fg_train_opts_default(fg_train_opts *o) {
   o->feature_weight = 1.0f;
   o->lr = 1e-2f;
   o->background[0] = o->background[1] = o->background[2] = 1.0f;
+  o->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
+  o->depth_margin = 0.01f;
 }
 
 static int check_opts(const fg_train_opts *o) {
@@ -99,6 +104,12 @@ static int check_opts(const fg_train_opts *o) {
   if (!(o->feature_weight >= 0.0f && isfinite(o->feature_weight)))
     return fg_fail(FG_EINVAL, "feature_weight must be finite and >= 0");
   if (!(o->lr > 0.0f && o->lr < 1.0f)) return fg_fail(FG_EINVAL, "lr must be in (0, 1)");
+  if (!(o->depth_weight >= 0.0f && isfinite(o->depth_weight)))
+    return fg_fail(FG_EINVAL, "depth_weight must be finite and >= 0");
+  if (!(o->depth_margin > 0.0f && o->depth_margin < 1.0f))
+    return fg_fail(FG_EINVAL, "depth_margin must be in (0, 1) metres");
+  if (!(o->distortion_weight >= 0.0f && isfinite(o->distortion_weight)))
+    return fg_fail(FG_EINVAL, "distortion_weight must be finite and >= 0");
   for (int c = 0; c < 3; c++)
     if (!(o->background[c] >= 0.0f && o->background[c] <= 1.0f))
       return fg_fail(FG_EINVAL, "background must be in [0, 1]");
@@ -115,6 +126,7 @@ static void trainer_carve(fg_trainer *t, fg_arena *a) {
   const size_t F = sizeof(float), S = (size_t)t->cap_s, R = (size_t)t->cap_r;
   const size_t P = t->f->n_params, ld = (size_t)t->f->density_net.n_in;
   const size_t fs = t->D ? S : 0, fr = t->D ? R : 0, lf = (size_t)t->f->feat_net.n_in;
+  const size_t gs = t->geometry ? S : 0, gr = t->geometry ? R : 0;
   const size_t D = (size_t)t->D;
   t->grad = fg_arena_take(a, P * F);
   t->m = fg_arena_take(a, P * F);
@@ -127,7 +139,12 @@ static void trainer_carve(fg_trainer *t, fg_arena *a) {
   t->out_rgb = fg_arena_take(a, 3 * R * F);
   t->out_opacity = fg_arena_take(a, R * F);
   t->d_out_rgb = fg_arena_take(a, 3 * R * F);
-  t->zero_rgb = fg_arena_take(a, 3 * fr * F);
+  t->zero_rgb = fg_arena_take(a, 3 * (fr > gr ? fr : gr) * F);
+  t->depth_z = fg_arena_take(a, gr * F);
+  t->ones = fg_arena_take(a, gr * F);
+  t->wg = fg_arena_take(a, gs * F);
+  t->d_sigma_g = fg_arena_take(a, gs * F);
+  t->d_rgb_g = fg_arena_take(a, 3 * gs * F);
   t->frgb = fg_arena_take(a, 3 * fr * F);
   t->ftarget = fg_arena_take(a, D * fr * F);
   t->hc = fg_arena_take(a, 64 * fr * F);
@@ -209,6 +226,9 @@ int fg_trainer_new(fg_trainer **out, fg_field *field, const fg_frame *frames, si
     t->train_idx[t->n_train++] = i;
     if (frames[i].feat_d) t->feat_idx[t->n_feat++] = i;
   }
+  int has_depth = 0;
+  for (size_t k = 0; k < t->n_train; k++) has_depth |= frames[t->train_idx[k]].depth != NULL;
+  t->geometry = (has_depth && opts->depth_weight > 0.0f) || opts->distortion_weight > 0.0f;
   if (!t->n_train) {
     const size_t n_held = t->n_held;
     fg_trainer_free(t);
@@ -232,7 +252,11 @@ int fg_trainer_new(fg_trainer **out, fg_field *field, const fg_frame *frames, si
   t->mem = a.base;
   memset(t->m, 0, field->n_params * sizeof(float));
   memset(t->v, 0, field->n_params * sizeof(float));
-  if (t->D) memset(t->zero_rgb, 0, (size_t)t->cap_r * 3 * sizeof(float));
+  if (t->D || t->geometry) memset(t->zero_rgb, 0, (size_t)t->cap_r * 3 * sizeof(float));
+  if (t->geometry) {
+    memset(t->depth_z, 0, (size_t)t->cap_r * sizeof(float));
+    for (int32_t r = 0; r < t->cap_r; r++) t->ones[r] = 1.0f;
+  }
   t->step = field->trained_steps;
   *out = t;
   return 0;
@@ -255,9 +279,9 @@ size_t fg_trainer_n_heldout(const fg_trainer *t) { return t->n_held; }
 /* ---- rays ----------------------------------------------------------------------------- */
 
 /* World ray through pixel position (px, py) (pixel units, corner origin) of frame fr, in the
- * field's cube: o (3), d (3, unit). */
-static void frame_ray(const fg_field *f, const fg_frame *fr, float px, float py, float *o,
-                      float *d) {
+ * field's cube: o (3), d (3, unit). Returns the ray's length per metre of z-depth. */
+static double frame_ray(const fg_field *f, const fg_frame *fr, float px, float py, float *o,
+                        float *d) {
   const double *T = fr->T_world_cam;
   const double dc[3] = {(px - fr->cam.cx) / fr->cam.fl_x, -(py - fr->cam.cy) / fr->cam.fl_y,
                         -1.0};
@@ -271,6 +295,7 @@ static void frame_ray(const fg_field *f, const fg_frame *fr, float px, float py,
     o[k] = (float)((T[4 * k + 3] - f->cfg.box_min[k]) / f->cfg.box_size);
     d[k] = (float)(dw[k] / norm);
   }
+  return norm; /* |dc| with a unit z component; rotation keeps it */
 }
 
 static inline void pixel_rgb(const fg_frame *fr, int u, int v, float *rgb) {
@@ -306,9 +331,13 @@ static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
     const uint64_t hj = hash4(seed, step, (uint64_t)r, STREAM_JITTER);
     const int u = (int)below(hp, (uint32_t)fr->cam.w);
     const int v = (int)below(hp << 32, (uint32_t)fr->cam.h);
-    frame_ray(t->f, fr, (float)u + unit24(hj, 0), (float)v + unit24(hj, 24), t->o + 3 * r,
-              t->d + 3 * r);
+    const double per_z = frame_ray(t->f, fr, (float)u + unit24(hj, 0),
+                                   (float)v + unit24(hj, 24), t->o + 3 * r, t->d + 3 * r);
     pixel_rgb(fr, u, v, t->target + 3 * r);
+    if (t->geometry) /* 0 where the frame has no depth or the pixel none */
+      t->depth_z[r] = fr->depth ? (float)(fr->depth[(size_t)v * (size_t)fr->cam.w + (size_t)u] *
+                                          per_z / t->f->cfg.box_size)
+                                : 0.0f;
     if (r < R_f) pixel_feature(fr, u, v, t->ftarget + (size_t)r * (size_t)t->D);
   }
 }
@@ -402,6 +431,14 @@ static void backward_colour(fg_trainer *t, int32_t R, int32_t S) {
   const int nt = t->opts.n_threads;
   fg_render_backward(R, t->off, t->cnt, t->used, t->sigma, t->rgb, t->dts, t->ts, NULL, 0, t->bg,
                      1, t->d_out_rgb, NULL, NULL, NULL, t->d_sigma, t->d_rgb, NULL, nt);
+  if (t->geometry) {
+    /* the geometry losses' dL/dw (t->wg) composited as a one-channel feature: render.h */
+    fg_render_backward(R, t->off, t->cnt, t->used, t->sigma, t->rgb, t->dts, t->ts, t->wg, 1,
+                       t->bg, 1, t->zero_rgb, NULL, NULL, t->ones, t->d_sigma_g, t->d_rgb_g,
+                       NULL, nt);
+#pragma omp parallel for schedule(static) num_threads(nt)
+    for (int32_t i = 0; i < S; i++) t->d_sigma[i] += t->d_sigma_g[i];
+  }
   if (f->cfg.learn_background) {
     /* d bg_r = T_n d_out_rgb_r; bg = sigmoid(W_bg sh): summed over rays in order. */
     float *gW = t->grad + f->group_offset[FG_FIELD_BACKGROUND];
@@ -486,13 +523,31 @@ int fg_trainer_loss_grad(fg_trainer *t, fg_train_stats *stats) {
   fg_render_forward(R, t->off, t->cnt, t->sigma, t->rgb, t->dts, t->ts, NULL, 0, t->bg, 1, T_MIN,
                     t->out_rgb, NULL, t->out_opacity, NULL, t->used, t->opts.n_threads);
   const float loss_rgb = fg_loss_l2(t->out_rgb, t->target, (size_t)R * 3, t->d_out_rgb, 1.0f);
+  float loss_depth = NAN, loss_dist = NAN;
+  int32_t n_depth = 0;
+  if (t->geometry) {
+    const fg_train_opts *op = &t->opts;
+    const int use_depth = op->depth_weight > 0.0f;
+    for (int32_t r = 0; use_depth && r < R; r++) n_depth += t->depth_z[r] > 0.0f;
+    double ld, lw;
+    int32_t nd;
+    fg_loss_ray_weights(R, t->off, t->cnt, t->used, t->sigma, t->dts, t->ts,
+                        use_depth ? t->depth_z : NULL,
+                        (float)(op->depth_margin / f->cfg.box_size),
+                        n_depth ? op->depth_weight / (float)n_depth : 0.0f,
+                        op->distortion_weight / (float)R, t->wg, &ld, &nd, &lw, op->n_threads);
+    if (nd) loss_depth = (float)(ld / nd);
+    if (op->distortion_weight > 0.0f) loss_dist = (float)(lw / R);
+  }
   float loss_feat = NAN;
   if (R_f) {
     forward_features(t, R_f, S_f);
     loss_feat = fg_loss_l2(t->fpred, t->ftarget, (size_t)R_f * (size_t)t->D, t->d_fpred,
                            t->opts.feature_weight);
   }
-  const float loss = loss_rgb + (R_f ? t->opts.feature_weight * loss_feat : 0.0f);
+  const float loss = loss_rgb + (R_f ? t->opts.feature_weight * loss_feat : 0.0f) +
+                     (n_depth ? t->opts.depth_weight * loss_depth : 0.0f) +
+                     (isnan(loss_dist) ? 0.0f : t->opts.distortion_weight * loss_dist);
   if (stats) {
     stats->step = t->step;
     stats->rays = R;
@@ -500,6 +555,9 @@ int fg_trainer_loss_grad(fg_trainer *t, fg_train_stats *stats) {
     stats->loss = loss;
     stats->loss_rgb = loss_rgb;
     stats->loss_feat = loss_feat;
+    stats->loss_depth = loss_depth;
+    stats->loss_dist = loss_dist;
+    stats->depth_rays = n_depth;
     stats->occupancy = (float)((double)fg_occgrid_n_occupied(f->occ) /
                                pow((double)fg_occgrid_resolution(f->occ), 3.0));
   }

@@ -8,7 +8,12 @@
  *      the samples of the first R_f = ceil(feature_ray_fraction R) rays when the frames have
  *      features (each such ray's target is its frame's feature cell per SPEC.md "Files");
  *   4. composites (render.h) against the learned background, or the scene background when
- *      learn_background is 0, and takes L = L2(rgb) + feature_weight L2(feature);
+ *      learn_background is 0, and takes
+ *        L = L2(rgb) + feature_weight L2(feature)
+ *            + depth_weight mean_{rays with depth} L_depth + distortion_weight mean L_dist
+ *      (render.h, fg_loss_ray_weights: the depth term on rays whose pixel has a measured
+ *      depth, its window depth_margin metres either side of the measured surface, turned
+ *      into a distance along the jittered ray; the distortion term on every ray);
  *   5. back-propagates through everything (the feature loss does not reach the density: F3RM's
  *      features follow the geometry that colour found) and takes one Adam step per group
  *      (tables: lr 1e-2, no L2, entries without gradient skipped; MLPs: lr 1e-2, L2 1e-6);
@@ -39,7 +44,12 @@ typedef struct fg_train_opts {
   float feature_weight;       /* lambda (1) */
   float lr;                   /* Adam learning rate (1e-2) */
   float background[3];        /* the scene's background, sRGB in [0,1] */
+  float depth_weight;         /* weight of the depth loss on rays with depth (FG_TRAIN_DEPTH_WEIGHT) */
+  float depth_margin;         /* half-width of the depth loss's surface window, metres (0.01) */
+  float distortion_weight;    /* weight of the distortion loss (0: off) */
 } fg_train_opts;
+
+#define FG_TRAIN_DEPTH_WEIGHT 0.1f
 
 void fg_train_opts_default(fg_train_opts *o);
 
@@ -50,6 +60,9 @@ typedef struct fg_train_stats {
   float loss;        /* last step's total loss */
   float loss_rgb;    /* its colour part (mean squared error over the rays' channels) */
   float loss_feat;   /* its feature part before weighting (NaN when no features) */
+  float loss_depth;  /* its depth part before weighting (NaN when no ray had depth) */
+  float loss_dist;   /* its distortion part before weighting (NaN when off) */
+  int32_t depth_rays; /* rays of the last step with a measured depth */
   float occupancy;   /* share of occupied grid cells */
 } fg_train_stats;
 

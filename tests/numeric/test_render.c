@@ -544,6 +544,108 @@ static void test_losses(void) {
   }
 }
 
+/* The geometry losses of fg_loss_ray_weights, straight from their definitions (render.h) in
+ * double: weights, then the depth and distortion sums, O(n^2) per ray. */
+static double ray_weights_ref(const batch *b, const double *sigma, const float *z, double margin,
+                              double w_depth, double w_dist, double *ld_out, double *lw_out) {
+  double ld = 0.0, lw = 0.0;
+  for (int32_t r = 0; r < b->R; r++) {
+    const int32_t o = b->offset[r], m = b->count[r];
+    double w[64], T = 1.0;
+    for (int32_t i = 0; i < m; i++) {
+      const double a = 1.0 - exp(-sigma[o + i] * b->dt[o + i]);
+      w[i] = T * a;
+      T *= 1.0 - a;
+    }
+    for (int32_t i = 0; i < m; i++) {
+      for (int32_t j = 0; j < m; j++) lw += w[i] * w[j] * fabs((double)b->t[o + i] - b->t[o + j]);
+      lw += w[i] * w[i] * b->dt[o + i] / 3.0;
+    }
+    if (z[r] > 0.0f) {
+      double E = 0.0, l = 1.0;
+      for (int32_t i = 0; i < m; i++) {
+        const double rel = (double)b->t[o + i] - z[r];
+        if (rel < -margin) l += w[i];
+        if (fabs(rel) <= margin) l -= w[i], E += w[i] * rel;
+      }
+      ld += l + (E / margin) * (E / margin);
+    }
+  }
+  if (ld_out) *ld_out = ld;
+  if (lw_out) *lw_out = lw;
+  return w_depth * ld + w_dist * lw;
+}
+
+/* fg_loss_ray_weights' sums against the reference, and its gradient, taken to sigma through
+ * fg_render_backward as render.h says, against central differences of the reference. */
+static void test_ray_weight_losses(void) {
+  batch b = batch_new(40, 12, 1, 0, SIGMA_MODERATE);
+  float *z = xcalloc((size_t)b.R, sizeof(float)), *g = xcalloc((size_t)b.S, sizeof(float));
+  float *ones = xcalloc((size_t)b.R, sizeof(float));
+  int with_depth = 0;
+  for (int32_t r = 0; r < b.R; r++) {
+    ones[r] = 1.0f;
+    memset(b.g_rgb + 3 * r, 0, 3 * sizeof(float));
+    if (r % 5 != 4 && b.count[r] > 0) { /* a measurement inside the ray's samples */
+      const int32_t o = b.offset[r], m = b.count[r];
+      z[r] = rng_uniform(b.t[o], b.t[o + m - 1]);
+      with_depth++;
+    }
+  }
+  const float margin = 0.03f, w_depth = 0.7f, w_dist = 2.5f;
+  run_forward(&b, 0.0f, 2); /* every sample used */
+  double ld, lw;
+  int32_t nd;
+  fg_loss_ray_weights(b.R, b.offset, b.count, b.n_used, b.sigma, b.dt, b.t, z, margin, w_depth,
+                      w_dist, g, &ld, &nd, &lw, 2);
+  double *sig = to_double(b.sigma, (size_t)b.S);
+  double ld_ref, lw_ref;
+  ray_weights_ref(&b, sig, z, margin, w_depth, w_dist, &ld_ref, &lw_ref);
+  ASSERT_EQ(nd, with_depth);
+  ASSERT_NEAR(ld, ld_ref, 1e-4 * fabs(ld_ref) + 1e-5);
+  ASSERT_NEAR(lw, lw_ref, 1e-4 * fabs(lw_ref) + 1e-6);
+  ASSERT(ld_ref > 1.0 && lw_ref > 0.01); /* both terms have something to say */
+
+  /* identical g on one and on three threads */
+  float *g1 = xcalloc((size_t)b.S, sizeof(float));
+  double ld1, lw1;
+  int32_t nd1;
+  fg_loss_ray_weights(b.R, b.offset, b.count, b.n_used, b.sigma, b.dt, b.t, z, margin, w_depth,
+                      w_dist, g1, &ld1, &nd1, &lw1, 1);
+  ASSERT(memcmp(g, g1, (size_t)b.S * sizeof(float)) == 0);
+  free(g1);
+
+  fg_render_backward(b.R, b.offset, b.count, b.n_used, b.sigma, b.rgb, b.dt, b.t, g, 1, b.bg, 0,
+                     b.g_rgb, NULL, NULL, ones, b.d_sigma, b.d_rgb, NULL, 2);
+  int checked = 0;
+  for (int32_t s = 0; s < b.S; s++) {
+    const double keep = sig[s], h = 1e-4 * fmax(1.0, keep);
+    sig[s] = keep + h;
+    const double lp = ray_weights_ref(&b, sig, z, margin, w_depth, w_dist, NULL, NULL);
+    sig[s] = keep - h;
+    const double lm = ray_weights_ref(&b, sig, z, margin, w_depth, w_dist, NULL, NULL);
+    sig[s] = keep;
+    const double fd = (lp - lm) / (2.0 * h);
+    if (!(fabs(fd - b.d_sigma[s]) <= 2e-3 * fabs(fd) + 2e-4))
+      FG_TEST_FAIL("d sigma[%d]: analytic %.9g, finite difference %.9g", s,
+                   (double)b.d_sigma[s], fd);
+    checked += fabs(fd) > 1e-3;
+  }
+  ASSERT(checked > b.S / 2);
+
+  /* without depth and distortion weight: g is zero, the sums still come back */
+  fg_loss_ray_weights(b.R, b.offset, b.count, b.n_used, b.sigma, b.dt, b.t, NULL, margin, 0.0f,
+                      0.0f, g, &ld, &nd, &lw, 2);
+  ASSERT_EQ(nd, 0);
+  ASSERT(ld == 0.0);
+  for (int32_t s = 0; s < b.S; s++) ASSERT(g[s] == 0.0f);
+  free(sig);
+  free(z);
+  free(g);
+  free(ones);
+  batch_free(&b);
+}
+
 int main(void) {
   rng_state = 12345;
   test_fast_vs_ref();
@@ -556,6 +658,7 @@ int main(void) {
   test_optional_null();
   test_activations();
   test_losses();
+  test_ray_weight_losses();
   printf("render: all tests passed\n");
   return 0;
 }

@@ -84,14 +84,32 @@ static fg_train_opts small_opts(void) {
   return o;
 }
 
+enum { LOSS_RGB, LOSS_FEATURE, LOSS_GEOMETRY };
+
+/* The part of a step's loss a check differentiates. The geometry part is summed in double
+ * from its float parts: taken as loss - loss_rgb it would drown in the total's rounding. */
+static double loss_part(const fg_train_stats *s, int which, double wd, double wdist) {
+  if (which == LOSS_RGB) return s->loss_rgb;
+  if (which == LOSS_FEATURE) return (double)s->loss - s->loss_rgb;
+  return (isnan(s->loss_depth) ? 0.0 : wd * s->loss_depth) +
+         (isnan(s->loss_dist) ? 0.0 : wdist * s->loss_dist);
+}
+
 /* Central differences of the loss for a few parameters of group g with the largest
- * gradients; which_loss 0: colour loss, 1: weighted feature loss. */
-static void check_group(fg_trainer *t, fg_field *f, int g, int which_loss, const char *name) {
+ * gradients; which_loss: the part of the loss (loss_part) whose gradient is checked, with
+ * the weights wd, wdist of the geometry losses. The trainer's gradient is of the whole loss:
+ * base, when given, is the gradient of the other parts (n_params floats), subtracted. */
+static void check_group_w(fg_trainer *t, fg_field *f, int g, int which_loss, double wd,
+                          double wdist, const float *base, const char *name) {
   size_t n;
   float *p = fg_field_group(f, g, &n);
   if (!n) return;
   ASSERT_OK(fg_trainer_loss_grad(t, NULL));
-  const float *grad = fg_trainer_grad(t) + f->group_offset[g];
+  float *grad = malloc(n * sizeof *grad);
+  ASSERT(grad);
+  memcpy(grad, fg_trainer_grad(t) + f->group_offset[g], n * sizeof *grad);
+  if (base)
+    for (size_t i = 0; i < n; i++) grad[i] -= base[f->group_offset[g] + i];
   /* The 4 largest |gradient| entries (many table entries see no sample). */
   size_t pick[4] = {0, 0, 0, 0};
   for (int k = 0; k < 4; k++) {
@@ -113,8 +131,8 @@ static void check_group(fg_trainer *t, fg_field *f, int g, int which_loss, const
     p[i] = keep - h;
     ASSERT_OK(fg_trainer_loss_grad(t, &sm));
     p[i] = keep;
-    const double lp = which_loss ? sp.loss - sp.loss_rgb : sp.loss_rgb;
-    const double lm = which_loss ? sm.loss - sm.loss_rgb : sm.loss_rgb;
+    const double lp = loss_part(&sp, which_loss, wd, wdist);
+    const double lm = loss_part(&sm, which_loss, wd, wdist);
     const double fd = (lp - lm) / (2.0 * h);
     const double tol = 0.05 * fabs(analytic[k]) + 2e-6;
     printf("%-10s param %6zu: analytic %+.6e  finite difference %+.6e\n", name, i,
@@ -124,6 +142,11 @@ static void check_group(fg_trainer *t, fg_field *f, int g, int which_loss, const
                    (double)analytic[k], fd);
   }
   ASSERT(fabs(analytic[0]) > 5e-6); /* the check saw a gradient worth checking */
+  free(grad);
+}
+
+static void check_group(fg_trainer *t, fg_field *f, int g, int which_loss, const char *name) {
+  check_group_w(t, f, g, which_loss, 0.0, 0.0, NULL, name);
 }
 
 static void test_gradient(void) {
@@ -145,14 +168,81 @@ static void test_gradient(void) {
   fg_train_opts o = small_opts();
   fg_trainer *t;
   ASSERT_OK(fg_trainer_new(&t, f, fr, N_FRAMES, &o));
-  check_group(t, f, FG_FIELD_GRID, 0, "grid");
-  check_group(t, f, FG_FIELD_DENSITY, 0, "density");
-  check_group(t, f, FG_FIELD_COLOUR, 0, "colour");
-  check_group(t, f, FG_FIELD_BACKGROUND, 0, "background");
-  check_group(t, f, FG_FIELD_FEAT_GRID, 1, "feat_grid");
-  check_group(t, f, FG_FIELD_FEAT_MLP, 1, "feat_mlp");
-  check_group(t, f, FG_FIELD_FEAT_OUT, 1, "feat_out");
+  check_group(t, f, FG_FIELD_GRID, LOSS_RGB, "grid");
+  check_group(t, f, FG_FIELD_DENSITY, LOSS_RGB, "density");
+  check_group(t, f, FG_FIELD_COLOUR, LOSS_RGB, "colour");
+  check_group(t, f, FG_FIELD_BACKGROUND, LOSS_RGB, "background");
+  check_group(t, f, FG_FIELD_FEAT_GRID, LOSS_FEATURE, "feat_grid");
+  check_group(t, f, FG_FIELD_FEAT_MLP, LOSS_FEATURE, "feat_mlp");
+  check_group(t, f, FG_FIELD_FEAT_OUT, LOSS_FEATURE, "feat_out");
   fg_trainer_free(t);
+  fg_field_free(f);
+  for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
+}
+
+/* The same check with the geometry losses: depth maps on every frame (a few pixels without
+ * a measurement) and the distortion term, through the density path they act on. */
+/* The same check with the geometry losses: depth maps on every frame (a few pixels without
+ * a measurement), then the distortion term, through the density path they act on. */
+static void test_gradient_geometry(void) {
+  fg_frame fr[N_FRAMES];
+  make_frames(fr, 0);
+  for (int i = 0; i < N_FRAMES; i++) {
+    fr[i].depth_w = W;
+    fr[i].depth_h = H;
+    fr[i].depth = malloc(sizeof(float) * W * H);
+    for (int k = 0; k < W * H; k++) fr[i].depth[k] = k % 7 == 3 ? 0.0f : 0.7f + 0.6f * urand();
+  }
+  fg_field_config cfg;
+  small_config(&cfg, 0);
+  fg_field *f;
+  ASSERT_OK(fg_field_new(&f, &cfg, 13));
+  size_t n;
+  float *tab = fg_field_group(f, FG_FIELD_GRID, &n);
+  for (size_t i = 0; i < n; i++) tab[i] = (urand() - 0.5f) * 2.0f;
+  fg_train_opts o = small_opts();
+  fg_trainer *t;
+  fg_train_stats st;
+  const float weights[2][2] = {{0.5f, 0.0f}, {0.0f, 0.05f}}; /* depth, then distortion */
+  /* the colour loss's gradient alone, on the same rays */
+  o.depth_weight = 0.0f;
+  ASSERT_OK(fg_trainer_new(&t, f, fr, N_FRAMES, &o));
+  ASSERT_OK(fg_trainer_loss_grad(t, &st));
+  float *base = malloc(f->n_params * sizeof *base);
+  ASSERT(base);
+  memcpy(base, fg_trainer_grad(t), f->n_params * sizeof *base);
+  fg_trainer_free(t);
+  for (int c = 0; c < 2; c++) {
+    o.depth_weight = weights[c][0];
+    o.distortion_weight = weights[c][1];
+    ASSERT_OK(fg_trainer_new(&t, f, fr, N_FRAMES, &o));
+    ASSERT_OK(fg_trainer_loss_grad(t, &st));
+    printf("geometry losses: depth %.4f over %d of %d rays, distortion %.5f\n",
+           (double)st.loss_depth, st.depth_rays, st.rays, (double)st.loss_dist);
+    if (c == 0)
+      ASSERT(st.depth_rays > 0 && st.depth_rays < st.rays && isnan(st.loss_dist));
+    else
+      ASSERT(st.depth_rays == 0 && isnan(st.loss_depth) && st.loss_dist > 0.0f);
+    check_group_w(t, f, FG_FIELD_GRID, LOSS_GEOMETRY, o.depth_weight, o.distortion_weight,
+                  base, c ? "grid (distortion)" : "grid (depth)");
+    check_group_w(t, f, FG_FIELD_DENSITY, LOSS_GEOMETRY, o.depth_weight, o.distortion_weight,
+                  base, c ? "density (distortion)" : "density (depth)");
+    fg_trainer_free(t);
+  }
+  /* without depth maps and distortion the geometry losses are off */
+  for (int i = 0; i < N_FRAMES; i++) {
+    free(fr[i].depth);
+    fr[i].depth = NULL;
+    fr[i].depth_w = fr[i].depth_h = 0;
+  }
+  o.depth_weight = 0.5f;
+  o.distortion_weight = 0.0f;
+  ASSERT_OK(fg_trainer_new(&t, f, fr, N_FRAMES, &o));
+  ASSERT_OK(fg_trainer_loss_grad(t, &st));
+  ASSERT(st.depth_rays == 0 && isnan(st.loss_depth) && isnan(st.loss_dist));
+  ASSERT(st.loss == st.loss_rgb);
+  fg_trainer_free(t);
+  free(base);
   fg_field_free(f);
   for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
 }
@@ -270,6 +360,7 @@ static void test_bad_input(void) {
 
 int main(void) {
   test_gradient();
+  test_gradient_geometry();
   test_determinism_and_checkpoint();
   test_bad_input();
   printf("ok\n");
