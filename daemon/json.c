@@ -249,11 +249,14 @@ json_t *fg_json_frame(const fg_frame *f, int index) {
     ? json_pack("{s:i,s:i,s:i,s:s}", "h", f->feat_h, "w", f->feat_w, "d", f->feat_d, "dtype",
                 f->feat_dtype == FG_DTYPE_F16 ? "float16" : "float32")
     : json_null();
-  return json_pack("{s:i,s:s,s:o,s:s,s:{s:f,s:f,s:f,s:f,s:i,s:i,s:s},s:[i,i],s:b,s:o,s:s}",
+  json_t *depth = f->depth_w ? json_pack("{s:i,s:i,s:f}", "w", f->depth_w, "h", f->depth_h,
+                                         "valid_fraction", f->depth_valid)
+                             : json_null();
+  return json_pack("{s:i,s:s,s:o,s:s,s:{s:f,s:f,s:f,s:f,s:i,s:i,s:s},s:[i,i],s:b,s:o,s:o,s:s}",
                    "frame", index, "source", f->source, "transform_matrix",
                    fg_json_from_matrix4(f->T_world_cam), "convention", "opengl", "camera", "fl_x",
                    f->cam.fl_x, "fl_y", f->cam.fl_y, "cx", f->cam.cx, "cy", f->cam.cy, "w",
                    f->cam.w, "h", f->cam.h, "camera_model", fg_camera_model_name(f->cam.model),
                    "source_size", f->src_w, f->src_h, "undistorted", f->undistorted, "features",
-                   features, "created", created);
+                   features, "depth", depth, "created", created);
 }

@@ -796,6 +796,7 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
       fg_frame h = frames[i];
       h.rgb = NULL;
       h.feat = NULL;
+      h.depth = NULL;
       s->frames[s->n_frames] = h;
       s->indices[s->n_frames++] = s->next_index + (int)i;
       if (h.feat_d) s->feature_dim = h.feat_d;

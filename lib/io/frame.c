@@ -36,13 +36,16 @@ struct fg_frame_file_header {
   int32_t feat_h, feat_w;       /* 208: feature grid, 0 when absent */
   int32_t feat_d, feat_dtype;   /* 216: fg_dtype */
   char source[FG_FRAME_SOURCE_MAX]; /* 224: NUL-terminated */
-  uint8_t reserved[32];         /* 480: zero */
+  int32_t depth_w, depth_h;     /* 480: depth map, 0 when absent (version 2) */
+  double depth_valid;           /* 488: share of valid depth pixels (version 2) */
+  uint8_t reserved[16];         /* 496: zero */
 };
 _Static_assert(sizeof(struct fg_frame_file_header) == FG_FRAME_HEADER_SIZE,
                "the frame header must be exactly FG_FRAME_HEADER_SIZE bytes");
 _Static_assert(offsetof(struct fg_frame_file_header, created_ms) == 200, "header layout");
 _Static_assert(offsetof(struct fg_frame_file_header, source) == 224, "header layout");
-_Static_assert(offsetof(struct fg_frame_file_header, reserved) == 480, "header layout");
+_Static_assert(offsetof(struct fg_frame_file_header, depth_valid) == 488, "header layout");
+_Static_assert(offsetof(struct fg_frame_file_header, reserved) == 496, "header layout");
 
 #define HOFF(field) offsetof(struct fg_frame_file_header, field)
 
@@ -102,6 +105,9 @@ static void header_encode(const struct fg_frame_file_header *h, uint8_t b[FG_FRA
   put_u32(b + HOFF(feat_d), (uint32_t)h->feat_d);
   put_u32(b + HOFF(feat_dtype), (uint32_t)h->feat_dtype);
   memcpy(b + HOFF(source), h->source, sizeof h->source);
+  put_u32(b + HOFF(depth_w), (uint32_t)h->depth_w);
+  put_u32(b + HOFF(depth_h), (uint32_t)h->depth_h);
+  put_f64(b + HOFF(depth_valid), h->depth_valid);
 }
 
 static void header_decode(const uint8_t b[FG_FRAME_HEADER_SIZE], struct fg_frame_file_header *h) {
@@ -127,6 +133,9 @@ static void header_decode(const uint8_t b[FG_FRAME_HEADER_SIZE], struct fg_frame
   h->feat_dtype = (int32_t)get_u32(b + HOFF(feat_dtype));
   memcpy(h->source, b + HOFF(source), sizeof h->source);
   h->source[sizeof h->source - 1] = '\0';
+  h->depth_w = (int32_t)get_u32(b + HOFF(depth_w));
+  h->depth_h = (int32_t)get_u32(b + HOFF(depth_h));
+  h->depth_valid = get_f64(b + HOFF(depth_valid));
 }
 
 /* ---- sizes -------------------------------------------------------------------------- */
@@ -138,9 +147,18 @@ static size_t feat_bytes(const fg_frame *f) {
   return (size_t)f->feat_h * (size_t)f->feat_w * (size_t)f->feat_d * fg_dtype_size(f->feat_dtype);
 }
 
+static size_t depth_bytes(const fg_frame *f) {
+  return (size_t)f->depth_w * (size_t)f->depth_h * sizeof(float);
+}
+
 /* Checks the declared sizes of a frame (from a header or from a caller) against the limits,
  * so that the byte counts computed from them cannot overflow. */
 static int check_frame_sizes(const fg_frame *f) {
+  if ((f->depth_w || f->depth_h) && (f->depth_w != f->cam.w || f->depth_h != f->cam.h))
+    return fg_fail(FG_EFORMAT, "depth map %dx%d is not the image's size %dx%d", f->depth_w,
+                   f->depth_h, f->cam.w, f->cam.h);
+  if (!(f->depth_valid >= 0.0 && f->depth_valid <= 1.0))
+    return fg_fail(FG_EFORMAT, "depth valid fraction %g is outside [0, 1]", f->depth_valid);
   if (f->cam.w <= 0 || f->cam.h <= 0 || f->cam.w > FG_IMAGE_MAX_SIDE ||
       f->cam.h > FG_IMAGE_MAX_SIDE ||
       (size_t)f->cam.w * (size_t)f->cam.h > (size_t)FG_IMAGE_MAX_PIXELS)
@@ -337,6 +355,51 @@ static int image_pipeline(fg_frame *out, const float *rgb, int w, int h, fg_came
   return 0;
 }
 
+/* Checks a depth map's values: NaN is invalid (read as 0), negative or infinite is an error. */
+static int depth_check_values(const fg_depth_map *d) {
+  for (int v = 0; v < d->h; v++)
+    for (int u = 0; u < d->w; u++) {
+      const float z = d->m[(size_t)v * (size_t)d->w + (size_t)u];
+      if (!isnan(z) && !(z >= 0.0f && isfinite(z)))
+        return fg_fail(FG_EINVAL, "depth pixel [row %d, column %d] is %g m; depth must be finite "
+                                  "and >= 0 metres (0 or NaN where the camera has no value)",
+                       v, u, (double)z);
+    }
+  return 0;
+}
+
+/* Resamples depth d of the image as received (camera src, sized to the image) onto the
+ * stored camera dst by nearest sampling: each stored pixel's centre goes to undistorted
+ * normalised coordinates, through src's distortion, to the received image's pixels and so
+ * to the depth pixel under it. Outside the map: invalid. */
+static int depth_resample(fg_frame *out, const fg_depth_map *d, const fg_camera *src,
+                          const fg_camera *dst) {
+  const int W = dst->w, H = dst->h;
+  float *m = malloc((size_t)W * (size_t)H * sizeof *m);
+  if (!m) return fg_fail(FG_ENOMEM, "out of memory for a %dx%d depth map", W, H);
+  const int distorted = src->model == FG_CAMERA_OPENCV && fg_camera_is_distorted(src);
+  size_t valid = 0;
+  for (int v = 0; v < H; v++)
+    for (int u = 0; u < W; u++) {
+      double x = (u + 0.5 - dst->cx) / dst->fl_x, y = (v + 0.5 - dst->cy) / dst->fl_y;
+      if (distorted) fg_camera_distort_normalized(src, x, y, &x, &y);
+      const double du = (src->fl_x * x + src->cx) * d->w / src->w;
+      const double dv = (src->fl_y * y + src->cy) * d->h / src->h;
+      float z = 0.0f;
+      if (du >= 0.0 && dv >= 0.0 && du < d->w && dv < d->h) { /* false for NaN too */
+        z = d->m[(size_t)dv * (size_t)d->w + (size_t)du];
+        if (isnan(z)) z = 0.0f;
+      }
+      m[(size_t)v * (size_t)W + (size_t)u] = z;
+      valid += z > 0.0f;
+    }
+  out->depth = m;
+  out->depth_w = W;
+  out->depth_h = H;
+  out->depth_valid = (double)valid / ((double)W * (double)H);
+  return 0;
+}
+
 /* The checks of fg_frame_prepare that need no pixels, so that a bad pose or feature file
  * costs no image decode; copies the features into out. */
 static int prepare_inputs(fg_frame *out, const fg_camera *cam, const double T_world_cam[16],
@@ -357,7 +420,8 @@ static int prepare_inputs(fg_frame *out, const fg_camera *cam, const double T_wo
 /* The rest of the ingest once the pixels are known: camera against image size, then the
  * image pipeline. */
 static int prepare_pixels(fg_frame *out, const fg_image *img, const fg_camera *cam,
-                          const double T_world_cam[16], const fg_ingest_opts *opts) {
+                          const double T_world_cam[16], const fg_depth_map *depth,
+                          const fg_ingest_opts *opts) {
   fg_camera c = *cam;
   if (c.w == 0) c.w = img->w;
   if (c.h == 0) c.h = img->h;
@@ -366,9 +430,16 @@ static int prepare_pixels(fg_frame *out, const fg_image *img, const fg_camera *c
                               "the image the intrinsics belong to",
                    c.w, c.h, img->w, img->h);
   FG_TRY(fg_camera_validate(&c));
+  if (depth) {
+    if (!depth->m) return fg_fail(FG_EINVAL, "depth map without values");
+    FG_TRY(fg_depth_check_grid(depth->w, depth->h, img->w, img->h));
+    FG_TRY(depth_check_values(depth));
+  }
+  const fg_camera received = c;
   out->src_w = img->w;
   out->src_h = img->h;
   FG_TRY(image_pipeline(out, img->rgb, img->w, img->h, &c, opts->max_image_side));
+  if (depth) FG_TRY(depth_resample(out, depth, &received, &c));
   memcpy(out->T_world_cam, T_world_cam, 16 * sizeof(double));
   out->cam = c;
   out->created_ms = now_ms();
@@ -381,12 +452,18 @@ static int prepare_pixels(fg_frame *out, const fg_image *img, const fg_camera *c
 int fg_frame_prepare_image(fg_frame *out, const fg_image *img, const fg_camera *cam,
                            const double T_world_cam[16], const fg_npy *features,
                            const fg_ingest_opts *opts) {
+  return fg_frame_prepare_image_depth(out, img, cam, T_world_cam, features, NULL, opts);
+}
+
+int fg_frame_prepare_image_depth(fg_frame *out, const fg_image *img, const fg_camera *cam,
+                                 const double T_world_cam[16], const fg_npy *features,
+                                 const fg_depth_map *depth, const fg_ingest_opts *opts) {
   if (!out) return fg_fail(FG_EINVAL, "fg_frame_prepare_image: no output frame");
   memset(out, 0, sizeof *out);
   if (!img || !img->rgb || img->w <= 0 || img->h <= 0)
     return fg_fail(FG_EINVAL, "fg_frame_prepare_image: no decoded image given");
   int rc = prepare_inputs(out, cam, T_world_cam, features, opts);
-  if (rc == 0) rc = prepare_pixels(out, img, cam, T_world_cam, opts);
+  if (rc == 0) rc = prepare_pixels(out, img, cam, T_world_cam, depth, opts);
   if (rc < 0) fg_frame_clear(out);
   return rc;
 }
@@ -395,6 +472,7 @@ void fg_frame_clear(fg_frame *frame) {
   if (!frame) return;
   free(frame->rgb);
   free(frame->feat);
+  free(frame->depth);
   memset(frame, 0, sizeof *frame);
 }
 
@@ -430,6 +508,7 @@ int fg_frame_save(const fg_frame *f, const char *path) {
     return fg_fail(FG_EINVAL, "cannot save frame to %s: %s", path, why);
   }
   if (f->feat_d > 0 && !f->feat) return fg_fail(FG_EINVAL, "cannot save frame: features missing");
+  if (f->depth_w > 0 && !f->depth) return fg_fail(FG_EINVAL, "cannot save frame: depth missing");
   if (f->cam.model != FG_CAMERA_PINHOLE || fg_camera_is_distorted(&f->cam))
     return fg_fail(FG_EINVAL, "cannot save frame to %s: its camera must be the undistorted "
                               "PINHOLE one that fg_frame_prepare produces",
@@ -459,6 +538,9 @@ int fg_frame_save(const fg_frame *f, const char *path) {
   h.feat_dtype = (int32_t)f->feat_dtype;
   memcpy(h.source, f->source, sizeof h.source);
   h.source[sizeof h.source - 1] = '\0';
+  h.depth_w = f->depth_w;
+  h.depth_h = f->depth_h;
+  h.depth_valid = f->depth_valid;
   uint8_t hb[FG_FRAME_HEADER_SIZE];
   header_encode(&h, hb);
 
@@ -469,7 +551,9 @@ int fg_frame_save(const fg_frame *f, const char *path) {
   size_t nfeat = esize ? feat_bytes(f) / esize : 0;
   if (write_le(af.fp, hb, sizeof hb, 1, &crc) < 0 ||
       write_le(af.fp, f->rgb, rgb_bytes(f) / 2, 2, &crc) < 0 ||
-      (nfeat > 0 && write_le(af.fp, f->feat, nfeat, esize, &crc) < 0)) {
+      (nfeat > 0 && write_le(af.fp, f->feat, nfeat, esize, &crc) < 0) ||
+      (f->depth_w > 0 &&
+       write_le(af.fp, f->depth, depth_bytes(f) / sizeof(float), sizeof(float), &crc) < 0)) {
     int e = errno;
     fg_atomic_file_abort(&af);
     return fg_fail(FG_EIO, "writing %s failed: %s", path, strerror(e));
@@ -525,9 +609,9 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
     rc = fg_fail(FG_EFORMAT, "%s is not a fieldgrip frame file (bad magic)", path);
     goto error;
   }
-  if (h.version != FG_FRAME_VERSION || h.header_size != FG_FRAME_HEADER_SIZE) {
+  if (h.version < 1 || h.version > FG_FRAME_VERSION || h.header_size != FG_FRAME_HEADER_SIZE) {
     rc = fg_fail(FG_EFORMAT, "frame file %s has version %u (header %u bytes); this build reads "
-                             "version %d",
+                             "versions 1 to %d",
                  path, h.version, h.header_size, FG_FRAME_VERSION);
     goto error;
   }
@@ -548,6 +632,11 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
   out->feat_d = h.feat_d;
   out->feat_dtype = (fg_dtype)h.feat_dtype;
   memcpy(out->source, h.source, sizeof out->source);
+  if (h.version >= 2) {
+    out->depth_w = h.depth_w;
+    out->depth_h = h.depth_h;
+    out->depth_valid = h.depth_valid;
+  }
   if (h.model != FG_CAMERA_PINHOLE || check_frame_sizes(out) < 0 ||
       fg_camera_validate(&out->cam) < 0) {
     char why[256];
@@ -556,7 +645,7 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
     rc = fg_fail(FG_EFORMAT, "frame file %s has an invalid header (%s)", path, why);
     goto error;
   }
-  size_t want = FG_FRAME_HEADER_SIZE + rgb_bytes(out) + feat_bytes(out) + 4;
+  size_t want = FG_FRAME_HEADER_SIZE + rgb_bytes(out) + feat_bytes(out) + depth_bytes(out) + 4;
   if ((unsigned long long)st.st_size != want) {
     rc = fg_fail(FG_EFORMAT, "frame file %s is %lld bytes but its header declares %zu; it is %s",
                  path, (long long)st.st_size, want,
@@ -586,16 +675,17 @@ int fg_frame_load(const char *path, fg_frame *out) {
   uint8_t hb[FG_FRAME_HEADER_SIZE];
   FG_TRY(open_and_read_header(path, out, &fp, hb));
   int rc = 0;
-  size_t nrgb = rgb_bytes(out), nfeat = feat_bytes(out);
+  size_t nrgb = rgb_bytes(out), nfeat = feat_bytes(out), ndepth = depth_bytes(out);
   out->rgb = malloc(nrgb);
   if (nfeat) out->feat = malloc(nfeat);
-  if (!out->rgb || (nfeat && !out->feat)) {
+  if (ndepth) out->depth = malloc(ndepth);
+  if (!out->rgb || (nfeat && !out->feat) || (ndepth && !out->depth)) {
     rc = fg_fail(FG_ENOMEM, "out of memory loading frame %s", path);
     goto error;
   }
   uint8_t cb[4];
   if (fread(out->rgb, 1, nrgb, fp) != nrgb || (nfeat && fread(out->feat, 1, nfeat, fp) != nfeat) ||
-      fread(cb, 1, 4, fp) != 4) {
+      (ndepth && fread(out->depth, 1, ndepth, fp) != ndepth) || fread(cb, 1, 4, fp) != 4) {
     rc = fg_fail(FG_EFORMAT, "frame file %s is truncated (it shrank while being read)", path);
     goto error;
   }
@@ -603,6 +693,7 @@ int fg_frame_load(const char *path, fg_frame *out) {
   crc = crc32_z(crc, hb, sizeof hb);
   crc = crc32_z(crc, (const Bytef *)out->rgb, nrgb);
   if (nfeat) crc = crc32_z(crc, out->feat, nfeat);
+  if (ndepth) crc = crc32_z(crc, (const Bytef *)out->depth, ndepth);
   if ((uint32_t)crc != get_u32(cb)) {
     rc = fg_fail(FG_EFORMAT, "frame file %s is corrupt: CRC mismatch (stored %08x, computed "
                              "%08x); delete the frame and upload it again",
@@ -612,6 +703,7 @@ int fg_frame_load(const char *path, fg_frame *out) {
   swap_in_place(out->rgb, nrgb / 2, 2);
   size_t esize = fg_dtype_size(out->feat_dtype);
   if (nfeat) swap_in_place(out->feat, nfeat / esize, esize);
+  if (ndepth) swap_in_place(out->depth, ndepth / sizeof(float), sizeof(float));
   fclose(fp);
   return 0;
 error:

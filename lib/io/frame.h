@@ -6,7 +6,11 @@
  *   header  struct fg_frame_file_header (FG_FRAME_HEADER_SIZE bytes, magic "FGFRAME\0")
  *   pixels  uint16 [h][w][3], sRGB-encoded, 0..65535
  *   feats   feat_dtype [feat_h][feat_w][feat_d] (absent when feat_d is 0)
+ *   depth   float32 [depth_h][depth_w], z-depth in metres, 0 where invalid (absent when
+ *           depth_w is 0; version 2 only)
  *   crc     uint32, zlib crc32 of everything before it
+ * Version 1 files (no depth fields) are still read. The depth map, when there is one, is
+ * stored at the image's stored size, pixel for pixel (see fg_frame_prepare_image_depth).
  * A reader refuses a wrong magic, an unknown version, sizes that disagree with the file's
  * length, and a CRC mismatch. */
 #ifndef FG_IO_FRAME_H
@@ -16,10 +20,11 @@
 #include <stdint.h>
 
 #include "io/camera.h"
+#include "io/depth.h"
 #include "io/image.h"
 #include "io/npy.h"
 
-#define FG_FRAME_VERSION 1
+#define FG_FRAME_VERSION 2
 #define FG_FRAME_HEADER_SIZE 512
 #define FG_FRAME_SOURCE_MAX 256
 #define FG_FRAME_MAX_FEAT_D 4096
@@ -35,6 +40,10 @@ typedef struct fg_frame {
   int feat_h, feat_w, feat_d;
   fg_dtype feat_dtype;     /* FG_DTYPE_NONE when the frame has no features */
   void *feat;              /* [feat_h][feat_w][feat_d]; owned; NULL when none or header only */
+  int depth_w, depth_h;    /* == cam.w, cam.h when the frame has depth, else 0 */
+  double depth_valid;      /* share of depth pixels that are valid, [0, 1] */
+  float *depth;            /* [depth_h][depth_w] z-depth in metres, 0 where invalid; owned;
+                              NULL when none or header only */
 } fg_frame;
 
 /* Options of fg_frame_prepare. */
@@ -58,6 +67,17 @@ int fg_frame_prepare(fg_frame *out, const void *image, size_t image_len, const f
                      const double T_world_cam[16], const fg_npy *features,
                      const fg_ingest_opts *opts);
 
+/* fg_frame_prepare_image with an aligned depth map (io/depth.h) of the image as received:
+ * depth->w x depth->h must lie on the image's pixel grid (fg_depth_check_grid, FG_EINVAL
+ * otherwise). The map goes through the image's own undistortion and downscaling by nearest
+ * sampling (each stored pixel takes the depth pixel under its centre, so no value is ever an
+ * average across an edge) and is stored at the stored image's size. z-depth is unchanged by
+ * undistortion and scaling: the camera's centre and axis stay. NaN is read as invalid;
+ * negative or infinite values are FG_EINVAL. depth may be NULL. */
+int fg_frame_prepare_image_depth(fg_frame *out, const fg_image *img, const fg_camera *cam,
+                                 const double T_world_cam[16], const fg_npy *features,
+                                 const fg_depth_map *depth, const fg_ingest_opts *opts);
+
 /* fg_frame_prepare for an image the caller has already decoded (with fg_image_decode, alpha
  * composited), e.g. to learn its size before finishing the camera. img is only read; it stays
  * the caller's. opts->background_rgb is unused here. Same checks, same ownership of *out. */
@@ -79,7 +99,7 @@ int fg_frame_load(const char *path, fg_frame *out);
  * the sizes it declares but not the CRC: cheap enough for listings. */
 int fg_frame_load_header(const char *path, fg_frame *out);
 
-/* Frees pixels and features; safe on a zeroed frame. */
+/* Frees pixels, features and depth; safe on a zeroed frame. */
 void fg_frame_clear(fg_frame *frame);
 
 #endif
