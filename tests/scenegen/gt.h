@@ -12,7 +12,9 @@
  *             aabb {min, max} (world), shape {type, parameters of shapes.h},
  *             albedo [3] (linear RGB),
  *             grasp {position, quaternion, matrix, width}}],
- *   masks "masks/NNNN.png", mask_values (a sentence: pixel = class index = object index + 2).
+ *   masks "masks/NNNN.png", mask_values (a sentence: pixel = class index = object index + 2),
+ *   and only with depth maps: depth ("png" or "npy", scenegen's --depth), depth_maps
+ *   ("depth/NNNN.png" or ".npy"), depth_values (a sentence: the unit and what 0 means).
  * The object's pose is its object frame (shapes.h): origin on its vertical axis at half its
  * height. The grasp is the gripper frame of SPEC.md (TCP between the fingertips, +z the
  * approach direction, +y the closing axis); width is the distance between the contacts. */

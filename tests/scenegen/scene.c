@@ -512,12 +512,14 @@ static void camera_ray(const sg_scene *sc, const double T[16], double px, double
   normalize3(d);
 }
 
-void sg_scene_render(const sg_scene *sc, int view, uint8_t *rgb, uint8_t *mask) {
+void sg_scene_render(const sg_scene *sc, int view, uint8_t *rgb, uint8_t *mask, float *depth_m) {
   const double *T = sc->T_world_cam + 16 * (size_t)view;
   const double o[3] = {T[3], T[7], T[11]};
+  /* The optical axis in the world: OpenGL cameras look along their -z. */
+  const double axis_world[3] = {-T[2], -T[6], -T[10]};
   const int W = sc->cfg.w, H = sc->cfg.h;
-  /* Colour averages a 2x2 grid per pixel against aliasing; the mask is the class of the ray
-   * through the pixel's centre, the ray a NeRF renders for that pixel. */
+  /* Colour averages a 2x2 grid per pixel against aliasing; the mask and the depth are those of
+   * the ray through the pixel's centre, the ray a NeRF renders for that pixel. */
   static const double sub[4][2] = {{0.25, 0.25}, {0.75, 0.25}, {0.25, 0.75}, {0.75, 0.75}};
 #pragma omp parallel for schedule(dynamic, 2)
   for (int v = 0; v < H; v++) {
@@ -532,7 +534,16 @@ void sg_scene_render(const sg_scene *sc, int view, uint8_t *rgb, uint8_t *mask) 
       }
       camera_ray(sc, T, u + 0.5, v + 0.5, d);
       sg_hit hit;
-      mask[(size_t)v * W + u] = (uint8_t)sg_scene_trace(sc, o, d, 0, &hit);
+      cls = sg_scene_trace(sc, o, d, 0, &hit);
+      mask[(size_t)v * W + u] = (uint8_t)cls;
+      if (depth_m) {
+        /* (hit - o) . axis with hit - o = t d: the z-depth of the hit. */
+        double z = cls == SG_CLASS_BACKGROUND
+                       ? 0
+                       : hit.t * (d[0] * axis_world[0] + d[1] * axis_world[1] +
+                                  d[2] * axis_world[2]);
+        depth_m[(size_t)v * W + u] = (float)z;
+      }
       uint8_t *out = rgb + ((size_t)v * W + u) * 3;
       for (int k = 0; k < 3; k++) out[k] = srgb8(sc->srgb_thresholds, acc[k] * 0.25f);
     }

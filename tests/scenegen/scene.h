@@ -28,6 +28,13 @@ enum {
 /* Largest pairwise cosine between class embeddings. */
 #define SG_MAX_CLASS_COSINE 0.3
 
+/* Depth maps written beside the images (scenegen's --depth). */
+typedef enum sg_depth_format {
+  SG_DEPTH_NONE = 0, /* none: the data set of a plain RGB camera */
+  SG_DEPTH_PNG = 1,  /* depth/NNNN.png: 16-bit grey, millimetres */
+  SG_DEPTH_NPY = 2,  /* depth/NNNN.npy: float32 [h, w], metres */
+} sg_depth_format;
+
 typedef struct sg_config {
   uint64_t seed;
   int64_t embedding_seed; /* class embeddings' seed; -1: seed's (every layout its own) */
@@ -37,6 +44,7 @@ typedef struct sg_config {
   int patch;    /* feature cell size, pixels */
   double noise; /* expected norm of the noise added to a unit class embedding */
   int holdout;  /* view i goes to transforms_test.json when i % holdout == 0; 0: none */
+  sg_depth_format depth; /* depth maps to write; SG_DEPTH_NONE by default */
 } sg_config;
 
 /* Defaults of the command line. */
@@ -79,8 +87,11 @@ int sg_scene_build(sg_scene *sc, const sg_config *cfg);
 void sg_scene_free(sg_scene *sc);
 
 /* Renders view i: rgb is (h, w, 3) 8-bit sRGB, mask is (h, w) class indices of the ray
- * through each pixel's centre. OpenMP over rows; the result does not depend on threads. */
-void sg_scene_render(const sg_scene *sc, int view, uint8_t *rgb, uint8_t *mask);
+ * through each pixel's centre. depth_m, when not NULL, is (h, w): the z-depth of that same
+ * ray's hit in metres, measured along the camera's optical axis (an RGB-D camera's depth, not
+ * the distance along the ray), 0 where the ray hits nothing. OpenMP over rows; the result
+ * does not depend on threads. */
+void sg_scene_render(const sg_scene *sc, int view, uint8_t *rgb, uint8_t *mask, float *depth_m);
 
 /* The patch features of view i from its mask: feat is (feat_h, feat_w, dim); 0, or
  * FG_ENOMEM. A pixel (u, v)

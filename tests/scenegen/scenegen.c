@@ -6,6 +6,9 @@
  *                            (0 background, 1 table, 2 mug, 3 bowl, 4 box, 5 ball; object k of
  *                            gt.json has value k + 2)
  *   DIR/features/NNNN.npy    float16 [ceil(H/P), ceil(W/P), D], unit vectors
+ *   DIR/depth/NNNN.png       with --depth png: 16-bit grey, z-depth of the pixel centre's ray
+ *                            in millimetres (rounded), 0 where it hits nothing
+ *   DIR/depth/NNNN.npy       with --depth npy: float32 [H, W], the same in metres
  *   DIR/transforms.json      training views; DIR/transforms_test.json the held-out ones
  *                            (view i when i % holdout == 0; absent when none is held out)
  *   DIR/gt.json              poses, shapes, grasps and class embeddings (layout in gt.h)
@@ -36,6 +39,7 @@ static void usage(FILE *f) {
           "usage: fieldgrip-scenegen --out DIR [--seed N] [--embedding-seed N] [--views N]\n"
           "                          [--width W] [--height H]\n"
           "                          [--dim D] [--patch P] [--noise S] [--holdout K]\n"
+          "                          [--depth none|png|npy]\n"
           "  --out DIR     data set folder (created; existing files are replaced)\n"
           "  --seed N      object layout, cameras' start, embeddings, noise (default 0)\n"
           "  --embedding-seed N  class embeddings from N instead of --seed, so that\n"
@@ -47,11 +51,17 @@ static void usage(FILE *f) {
           "  --noise S     expected norm of the noise on a unit class embedding; each\n"
           "                component gets std S/sqrt(D) (default 0.05)\n"
           "  --holdout K   view i goes to transforms_test.json when i %% K == 0; 0: none\n"
-          "                (default 10)\n",
+          "                (default 10)\n"
+          "  --depth F     depth maps as an RGB-D camera gives them (z along the optical\n"
+          "                axis): none, png (16-bit millimetres) or npy (float32 metres)\n"
+          "                in DIR/depth (default none)\n",
           SG_N_CLASSES);
 }
 
 /* ---------------------------------------------------------------- arguments */
+
+/* --depth's values, indexed by sg_depth_format; also the depth files' extensions. */
+static const char *const depth_names[] = {"none", "png", "npy"};
 
 static int parse_int(const char *opt, const char *s, int lo, int hi, int *out) {
   char *end;
@@ -74,6 +84,7 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
       {"patch", required_argument, NULL, 'p'},   {"noise", required_argument, NULL, 'e'},
       {"holdout", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
       {"embedding-seed", required_argument, NULL, 'E'},
+      {"depth", required_argument, NULL, 'Z'},
       {NULL, 0, NULL, 0},
   };
   sg_config_default(cfg);
@@ -137,6 +148,18 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
     case 'k':
       if (parse_int("--holdout", optarg, 0, 9999, &cfg->holdout)) return -1;
       break;
+    case 'Z': {
+      size_t k = 0;
+      while (k < sizeof depth_names / sizeof depth_names[0] && strcmp(optarg, depth_names[k]))
+        k++;
+      if (k == sizeof depth_names / sizeof depth_names[0]) {
+        fprintf(stderr, "fieldgrip-scenegen: --depth wants none, png or npy, got \"%s\"\n",
+                optarg);
+        return -1;
+      }
+      cfg->depth = (sg_depth_format)k;
+      break;
+    }
     case 'h': usage(stdout); exit(0);
     default: usage(stderr); return -1;
     }
@@ -207,14 +230,43 @@ typedef struct buffers {
   uint8_t *rgb, *mask;
   float *feat;
   uint16_t *feat_h16;
+  float *depth_m;      /* (h, w); NULL without --depth */
+  uint16_t *depth_mm;  /* (h, w); NULL unless --depth png */
 } buffers;
+
+/* Millimetres of a z-depth for a 16-bit PNG, rounded to nearest (halves away from zero).
+ * Depths beyond the 65.535 m a uint16 holds become 0, invalid, as RGB-D cameras report what
+ * is out of their range; no ray of this scene goes that far. */
+static uint16_t depth_to_mm(float z_m) {
+  long mm = lround((double)z_m * 1000.0);
+  return mm > 0 && mm <= UINT16_MAX ? (uint16_t)mm : 0;
+}
+
+static int write_depth(const sg_scene *sc, const char *dir, int i, buffers *b) {
+  const int W = sc->cfg.w, H = sc->cfg.h;
+  const size_t n = (size_t)W * H;
+  char name[64];
+  uint8_t *enc = NULL;
+  size_t len = 0;
+  if (sc->cfg.depth == SG_DEPTH_PNG) {
+    for (size_t p = 0; p < n; p++) b->depth_mm[p] = depth_to_mm(b->depth_m[p]);
+    FG_TRY(fg_image_encode_png(b->depth_mm, W, H, 1, 16, &enc, &len));
+  } else {
+    const size_t shape[2] = {(size_t)H, (size_t)W};
+    FG_TRY(fg_npy_encode(FG_DTYPE_F32, 2, shape, b->depth_m, &enc, &len));
+  }
+  snprintf(name, sizeof name, "depth/%04d.%s", i, depth_names[sc->cfg.depth]);
+  int rc = write_in(dir, name, enc, len);
+  free(enc);
+  return rc;
+}
 
 static int write_view(const sg_scene *sc, const char *dir, int i, buffers *b) {
   const int W = sc->cfg.w, H = sc->cfg.h;
   char name[64];
   uint8_t *enc = NULL;
   size_t len = 0;
-  sg_scene_render(sc, i, b->rgb, b->mask);
+  sg_scene_render(sc, i, b->rgb, b->mask, b->depth_m);
 
   FG_TRY(fg_image_encode_png(b->rgb, W, H, 3, 8, &enc, &len));
   snprintf(name, sizeof name, "images/%04d.png", i);
@@ -227,6 +279,8 @@ static int write_view(const sg_scene *sc, const char *dir, int i, buffers *b) {
   rc = write_in(dir, name, enc, len);
   free(enc);
   if (rc) return rc;
+
+  if (sc->cfg.depth != SG_DEPTH_NONE) FG_TRY(write_depth(sc, dir, i, b));
 
   FG_TRY(sg_scene_features(sc, i, b->mask, b->feat));
   size_t n = (size_t)sc->feat_h * sc->feat_w * sc->cfg.dim;
@@ -252,6 +306,9 @@ static json_t *transforms_json(const sg_scene *sc, int held_out) {
   json_object_set_new(root, "w", json_integer(cam->w));
   json_object_set_new(root, "h", json_integer(cam->h));
   json_object_set_new(root, "camera_angle_x", json_real(2 * atan(0.5 * cam->w / cam->fl_x)));
+  /* nerfstudio's name for metres per unit of an integer depth image. */
+  if (sc->cfg.depth == SG_DEPTH_PNG)
+    json_object_set_new(root, "depth_unit_scale_factor", json_real(0.001));
   json_t *frames = json_array();
   for (int i = 0; i < sc->cfg.n_views; i++) {
     int test = sc->cfg.holdout > 0 && i % sc->cfg.holdout == 0;
@@ -262,6 +319,10 @@ static json_t *transforms_json(const sg_scene *sc, int held_out) {
     json_object_set_new(f, "file_path", json_string(path));
     snprintf(path, sizeof path, "features/%04d.npy", i);
     json_object_set_new(f, "features_path", json_string(path));
+    if (sc->cfg.depth != SG_DEPTH_NONE) {
+      snprintf(path, sizeof path, "depth/%04d.%s", i, depth_names[sc->cfg.depth]);
+      json_object_set_new(f, "depth_file_path", json_string(path));
+    }
     json_object_set_new(f, "transform_matrix", matrix_json(sc->T_world_cam + 16 * (size_t)i));
     json_array_append_new(frames, f);
   }
@@ -289,6 +350,9 @@ static json_t *gt_json(const sg_scene *sc) {
   json_object_set_new(root, "feature_grid", grid);
   json_object_set_new(root, "noise", json_real(cfg->noise));
   json_object_set_new(root, "holdout", json_integer(cfg->holdout));
+  /* Only with depth maps, so that a data set without them keeps the bytes it always had. */
+  if (cfg->depth != SG_DEPTH_NONE)
+    json_object_set_new(root, "depth", json_string(depth_names[cfg->depth]));
   json_object_set_new(root, "look_at", vec_json(sc->look_at_world, 3));
   json_object_set_new(root, "camera_radius", json_real(sc->camera_radius_m));
   json_t *light = json_object();
@@ -341,6 +405,19 @@ static json_t *gt_json(const sg_scene *sc) {
                       json_string("pixel = class index (0 background, 1 table, 2 mug, 3 bowl, "
                                   "4 box, 5 ball) of the ray through the pixel's centre; object "
                                   "k of \"objects\" has value k + 2"));
+  if (cfg->depth == SG_DEPTH_PNG) {
+    json_object_set_new(root, "depth_maps", json_string("depth/NNNN.png"));
+    json_object_set_new(root, "depth_values",
+                        json_string("uint16 z-depth (along the optical axis, not along the ray) "
+                                    "of the ray through the pixel's centre, in millimetres, "
+                                    "rounded; 0 where the ray hits nothing"));
+  } else if (cfg->depth == SG_DEPTH_NPY) {
+    json_object_set_new(root, "depth_maps", json_string("depth/NNNN.npy"));
+    json_object_set_new(root, "depth_values",
+                        json_string("float32 [height, width] z-depth (along the optical axis, "
+                                    "not along the ray) of the ray through the pixel's centre, "
+                                    "in metres; 0 where the ray hits nothing"));
+  }
   return root;
 }
 
@@ -352,10 +429,11 @@ static double now_s(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static int make_dirs(const char *dir) {
-  static const char *const subdirs[] = {"images", "masks", "features"};
+static int make_dirs(const char *dir, sg_depth_format depth) {
+  static const char *const subdirs[] = {"images", "masks", "features", "depth"};
+  const size_t n = sizeof subdirs / sizeof subdirs[0] - (depth == SG_DEPTH_NONE);
   FG_TRY(fg_mkdir_p(dir));
-  for (size_t i = 0; i < sizeof subdirs / sizeof subdirs[0]; i++) {
+  for (size_t i = 0; i < n; i++) {
     char *p = fg_path_join(dir, subdirs[i]);
     if (!p) return fg_fail(FG_ENOMEM, "out of memory");
     int rc = fg_mkdir_p(p);
@@ -377,9 +455,18 @@ static int write_views(const sg_scene *sc, const char *dir) {
   char detail[512] = "";
 #pragma omp parallel if (n >= 2 * omp_get_max_threads())
   {
-    buffers b = {malloc(px * 3), malloc(px), malloc(nf * sizeof(float)),
-                 malloc(nf * sizeof(uint16_t))};
-    int alloc_rc = (!b.rgb || !b.mask || !b.feat || !b.feat_h16) ? FG_ENOMEM : 0;
+    const sg_depth_format depth = sc->cfg.depth;
+    buffers b = {malloc(px * 3),
+                 malloc(px),
+                 malloc(nf * sizeof(float)),
+                 malloc(nf * sizeof(uint16_t)),
+                 depth != SG_DEPTH_NONE ? malloc(px * sizeof(float)) : NULL,
+                 depth == SG_DEPTH_PNG ? malloc(px * sizeof(uint16_t)) : NULL};
+    int alloc_rc = (!b.rgb || !b.mask || !b.feat || !b.feat_h16 ||
+                    (depth != SG_DEPTH_NONE && !b.depth_m) ||
+                    (depth == SG_DEPTH_PNG && !b.depth_mm))
+                       ? FG_ENOMEM
+                       : 0;
 #pragma omp for schedule(dynamic, 1)
     for (int i = 0; i < n; i++) {
       int rc = alloc_rc ? fg_fail(alloc_rc, "out of memory") : write_view(sc, dir, i, &b);
@@ -397,13 +484,15 @@ static int write_views(const sg_scene *sc, const char *dir) {
     free(b.mask);
     free(b.feat);
     free(b.feat_h16);
+    free(b.depth_m);
+    free(b.depth_mm);
   }
   if (first_err) return fg_fail(first_err, "%s", detail);
   return 0;
 }
 
 static int generate(const sg_scene *sc, const char *dir) {
-  FG_TRY(make_dirs(dir));
+  FG_TRY(make_dirs(dir, sc->cfg.depth));
   FG_TRY(write_views(sc, dir));
   int rc;
   json_t *j = transforms_json(sc, 0);

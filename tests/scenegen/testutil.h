@@ -1,10 +1,12 @@
 /* Helpers shared by the scene generator's tests: temporary folders, running
- * fieldgrip-scenegen, reading files, projecting world points into a view. */
+ * fieldgrip-scenegen (its output optionally to a file), reading files, projecting world
+ * points into a view. */
 #ifndef SG_TESTUTIL_H
 #define SG_TESTUTIL_H
 
 #include "test.h"
 
+#include <fcntl.h>
 #include <spawn.h>
 #include <stdint.h>
 #include <sys/wait.h>
@@ -27,20 +29,35 @@ static inline char *sg_test_tmpdir(const char *tag) {
   return dir;
 }
 
-/* Runs program with the given arguments (NULL-terminated, without argv[0]); returns its exit
- * status, or -1 when it did not exit normally. */
-static inline int sg_test_run(const char *program, const char *const *args) {
+/* Runs program with the given arguments (NULL-terminated, without argv[0]), its stdout and
+ * stderr going to the file log_path when that is not NULL; returns its exit status, or -1
+ * when it did not exit normally. */
+static inline int sg_test_run_logged(const char *program, const char *const *args,
+                                     const char *log_path) {
   const char *argv[32];
   int n = 0;
   argv[n++] = program;
   while (*args && n < 31) argv[n++] = *args++;
   argv[n] = NULL;
+  posix_spawn_file_actions_t fa;
+  ASSERT(posix_spawn_file_actions_init(&fa) == 0);
+  if (log_path) {
+    ASSERT(posix_spawn_file_actions_addopen(&fa, 2, log_path, O_WRONLY | O_CREAT | O_TRUNC,
+                                            0600) == 0);
+    ASSERT(posix_spawn_file_actions_adddup2(&fa, 2, 1) == 0);
+  }
   pid_t pid;
-  int rc = posix_spawn(&pid, program, NULL, NULL, (char *const *)argv, environ);
+  int rc = posix_spawn(&pid, program, &fa, NULL, (char *const *)argv, environ);
+  posix_spawn_file_actions_destroy(&fa);
   if (rc != 0) FG_TEST_FAIL("cannot start %s: %s", program, strerror(rc));
   int status;
   ASSERT(waitpid(pid, &status, 0) == pid);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/* sg_test_run_logged with the test's own stdout and stderr. */
+static inline int sg_test_run(const char *program, const char *const *args) {
+  return sg_test_run_logged(program, args, NULL);
 }
 
 /* The whole file dir/name; the caller frees *buf. */
