@@ -1,15 +1,20 @@
 /* Image decode and encode through OpenImageIO (oiio_shim.cpp): format checks, compositing
- * and colour conversion in C; and fg_frame_prepare, which decodes. Kept apart from image.c so
- * that only programs that call these functions link OpenImageIO; the daemon decodes in a
- * child process (fieldgrip-decode) and never does.
+ * and colour conversion in C; depth images (io/depth.h), read raw; and fg_frame_prepare,
+ * which decodes. Kept apart from image.c and depth.c so that only programs that call these
+ * functions link OpenImageIO; the daemon decodes in a child process (fieldgrip-decode) and
+ * never does.
  *
  * Pixel convention as in image.c: row-major [h][w][3], sRGB-encoded floats in [0, 1]. */
 #include "io/image.h"
 #include "core/error.h"
 #include "core/pose.h"
+#include "io/depth.h"
+#include "io/depth_priv.h"
 #include "io/frame.h"
+#include "io/npy.h"
 #include "io/shim.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -166,6 +171,127 @@ int fg_image_decode(const void *bytes, size_t len, const float background_rgb[3]
   out->h = d.h;
   out->rgb = rgb;
   return 0;
+}
+
+/* ---- depth -------------------------------------------------------------------------- */
+
+/* How refusals of a depth encoding end: what to send instead. */
+#define DEPTH_FORMATS                                                                      \
+  "one channel of 16-bit unsigned integers (PNG or TIFF; metres = value * scale, scale "  \
+  "0.001 for millimetres) or of floats in metres (OpenEXR or TIFF), or a float32 .npy of "  \
+  "metres"
+
+/* A bad scale is the caller's mistake whatever the bytes hold, so every encoding refuses it,
+ * including those that ignore it. */
+static int depth_check_scale(double scale) {
+  if (!isfinite(scale) || scale <= 0)
+    return fg_fail(FG_EINVAL, "the depth scale is %g; it must be a finite number > 0: the metres "
+                              "per unit of integer depth (%g for millimetres)",
+                   scale, FG_DEPTH_DEFAULT_SCALE);
+  return 0;
+}
+
+/* Refuses, from the header alone, files whose samples are not depth as io/depth.h takes it:
+ * one channel of 16-bit unsigned integers or of floats. name is the format ("PNG"). */
+static int depth_check_info(const fg_shim_info *in, const char *name) {
+  if (in->nch != 1)
+    return fg_fail(FG_EINVAL, "the depth %s has %d channels, so it looks like a colour image; "
+                              "send depth as " DEPTH_FORMATS,
+                   name, in->nch);
+  if (in->sample == FG_SHIM_SAMPLE_FLOAT) return 0;
+  if (in->sample == FG_SHIM_SAMPLE_UINT && in->bits == 16) return 0;
+  if (in->sample == FG_SHIM_SAMPLE_UINT && in->bits <= 8)
+    return fg_fail(FG_EINVAL, "the depth %s is %d-bit, too coarse for depth; send 16-bit "
+                              "millimetres as RGB-D cameras save them (scale 0.001), or floats "
+                              "in metres (OpenEXR, float TIFF or a float32 .npy)",
+                   name, in->bits);
+  return fg_fail(FG_EINVAL, "the depth %s holds %d-bit %s integers; send " DEPTH_FORMATS, name,
+                 in->bits, in->sample == FG_SHIM_SAMPLE_INT ? "signed" : "unsigned");
+}
+
+/* m = v * scale for n samples: float [n] metres from uint16 [n]; 0 stays 0 (invalid). */
+static void depth_from_u16(const uint16_t *v, size_t n, double scale, float *m) {
+  for (size_t i = 0; i < n; i++) m[i] = (float)((double)v[i] * scale);
+}
+
+int fg_depth_decode(const void *bytes, size_t len, double scale, fg_depth_map *out) {
+  if (!out) return fg_fail(FG_EINVAL, "fg_depth_decode: no output depth map");
+  memset(out, 0, sizeof *out);
+  FG_TRY(depth_check_scale(scale));
+  if (!bytes || len == 0)
+    return fg_fail(FG_EFORMAT, "the depth image is empty; send " DEPTH_FORMATS);
+  const uint8_t *b = bytes;
+  const char *name = fg_image_sniff(b, len);
+  if (!name) {
+    unsigned c[4] = {0, 0, 0, 0};
+    for (size_t i = 0; i < 4 && i < len; i++) c[i] = b[i];
+    return fg_fail(FG_EFORMAT,
+                   "unrecognised depth format (data starts with %02x %02x %02x %02x); send "
+                   DEPTH_FORMATS,
+                   c[0], c[1], c[2], c[3]);
+  }
+  if (strcmp(name, "JPEG") == 0)
+    return fg_fail(FG_EINVAL, "the depth image is a JPEG, whose lossy 8-bit compression does not "
+                              "keep depth; send " DEPTH_FORMATS);
+  const char *ext = reader_ext(name);
+  if (strcmp(ext, "png") == 0) FG_TRY(png_check_chunks(b, len));
+  /* The header first, so that a colour image sent as depth is refused before its pixels are
+   * decoded, and so that integer samples other than 16-bit never reach OIIO's conversion to
+   * float, which would normalise them. */
+  fg_shim_info info;
+  FG_TRY(fg_oiio_probe(bytes, len, ext, name, &info));
+  FG_TRY(depth_check_info(&info, name));
+  FG_TRY(fg_depth_check_size("the depth image", (size_t)info.w, (size_t)info.h));
+  int u16 = info.sample == FG_SHIM_SAMPLE_UINT;
+  if (u16) {
+    /* Every value lands in (0, FLT_MAX] when 1 and 65535 do: rounding is monotonic. */
+    float lo = (float)scale, hi = (float)(65535.0 * scale);
+    if (!(lo > 0) || !(hi <= FLT_MAX))
+      return fg_fail(FG_EINVAL, "the depth scale %g is out of range for 16-bit depth; it is the "
+                                "metres per unit (%g for millimetres)",
+                     scale, FG_DEPTH_DEFAULT_SCALE);
+  }
+  fg_shim_decoded d;
+  FG_TRY(fg_oiio_decode(bytes, len, ext, name, FG_IMAGE_MAX_SIDE, (size_t)FG_IMAGE_MAX_PIXELS,
+                        &d));
+  if (d.nch != 1 || d.w != info.w || d.h != info.h ||
+      d.type != (u16 ? FG_SHIM_U16 : FG_SHIM_F32)) {
+    free(d.px);
+    return fg_fail(FG_EFORMAT, "the %s data is corrupt: its pixels do not match its header",
+                   name);
+  }
+  size_t n = (size_t)d.w * (size_t)d.h;
+  float *m = d.px; /* float pixels are [h][w] metres already */
+  if (u16) {
+    m = malloc(n * sizeof(float));
+    if (!m) {
+      free(d.px);
+      return fg_fail(FG_ENOMEM, "out of memory decoding a %dx%d depth image", d.w, d.h);
+    }
+    depth_from_u16(d.px, n, scale, m);
+    free(d.px);
+  } else {
+    int rc = fg_depth_clean_metres(m, d.w, d.h);
+    if (rc != 0) {
+      free(m);
+      return rc;
+    }
+  }
+  out->w = d.w;
+  out->h = d.h;
+  out->m = m;
+  return 0;
+}
+
+int fg_depth_read(const void *bytes, size_t len, double scale, fg_depth_map *out) {
+  if (!out) return fg_fail(FG_EINVAL, "fg_depth_read: no output depth map");
+  memset(out, 0, sizeof *out);
+  if (!bytes || len < 6 || memcmp(bytes, "\x93NUMPY", 6) != 0)
+    return fg_depth_decode(bytes, len, scale, out);
+  FG_TRY(depth_check_scale(scale));
+  fg_npy npy;
+  FG_TRY(fg_npy_parse(bytes, len, &npy));
+  return fg_depth_from_npy(&npy, out);
 }
 
 /* ---- encode ------------------------------------------------------------------------- */

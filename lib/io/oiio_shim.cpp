@@ -1,6 +1,6 @@
-// OpenImageIO behind a C interface (shim.h): decode from memory, PNG encode to memory, and
-// file writing for tests and tools. Every entry point catches all exceptions; errors are
-// recorded with fg_fail() in the C library's per-thread detail.
+// OpenImageIO behind a C interface (shim.h): header probe and decode from memory, PNG encode
+// to memory, and file writing for tests and tools. Every entry point catches all exceptions;
+// errors are recorded with fg_fail() in the C library's per-thread detail.
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
@@ -44,9 +44,10 @@ bool spec_is_linear(const ImageSpec &spec) {
   return b == TypeDesc::FLOAT || b == TypeDesc::HALF || b == TypeDesc::DOUBLE;
 }
 
-int decode_impl(const void *bytes, size_t len, const char *ext, const char *format_name,
-                int max_side, size_t max_pixels, fg_shim_decoded *out) {
-  OIIO::Filesystem::IOMemReader mem(bytes, len);
+// Opens an image held in mem (which must outlive the reader) with the reader ext names.
+// nullptr with a detail recorded when the data cannot be opened or is not a 2-D image.
+std::unique_ptr<ImageInput> open_mem(OIIO::Filesystem::IOMemReader &mem, const char *ext,
+                                     const char *format_name) {
   ImageSpec config;
   // Straight alpha stays straight: premultiplying 8-bit data would lose precision that the
   // compositing pass needs, and the pass handles both kinds exactly.
@@ -57,15 +58,53 @@ int decode_impl(const void *bytes, size_t len, const char *ext, const char *form
   config.attribute("oiio:ioproxy", TypeDesc::PTR, &proxy);
   std::string name = std::string("upload.") + ext;
   std::unique_ptr<ImageInput> in = ImageInput::open(name, &config, &mem);
-  if (!in)
-    return fg_fail(FG_EFORMAT, "the %s data is truncated or corrupt: %s", format_name,
-                   first_line(OIIO::geterror()).c_str());
+  if (!in) {
+    fg_fail(FG_EFORMAT, "the %s data is truncated or corrupt: %s", format_name,
+            first_line(OIIO::geterror()).c_str());
+    return nullptr;
+  }
   const ImageSpec &spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
-    return fg_fail(FG_EFORMAT, "the %s data declares an empty image (%dx%d, %d channels)",
-                   format_name, spec.width, spec.height, spec.nchannels);
-  if (spec.depth > 1)
-    return fg_fail(FG_EFORMAT, "the %s data is a volume image; send a 2-D image", format_name);
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+    fg_fail(FG_EFORMAT, "the %s data declares an empty image (%dx%d, %d channels)", format_name,
+            spec.width, spec.height, spec.nchannels);
+    return nullptr;
+  }
+  if (spec.depth > 1) {
+    fg_fail(FG_EFORMAT, "the %s data is a volume image; send a 2-D image", format_name);
+    return nullptr;
+  }
+  return in;
+}
+
+int probe_impl(const void *bytes, size_t len, const char *ext, const char *format_name,
+               fg_shim_info *out) {
+  OIIO::Filesystem::IOMemReader mem(bytes, len);
+  std::unique_ptr<ImageInput> in = open_mem(mem, ext, format_name);
+  if (!in) return FG_EFORMAT;
+  const ImageSpec &spec = in->spec();
+  TypeDesc::BASETYPE b = TypeDesc::BASETYPE(spec.format.basetype);
+  out->w = spec.width;
+  out->h = spec.height;
+  out->nch = spec.nchannels;
+  out->sample = b == TypeDesc::FLOAT || b == TypeDesc::HALF || b == TypeDesc::DOUBLE
+                  ? FG_SHIM_SAMPLE_FLOAT
+                : b == TypeDesc::INT8 || b == TypeDesc::INT16 || b == TypeDesc::INT32 ||
+                    b == TypeDesc::INT64
+                  ? FG_SHIM_SAMPLE_INT
+                  : FG_SHIM_SAMPLE_UINT;
+  // Readers widen 1-, 2-, 4- and 12-bit data to the next type and say so here.
+  out->bits = spec.get_int_attribute("oiio:BitsPerSample", 0);
+  if (out->bits <= 0) out->bits = (int)spec.format.size() * 8;
+  in->close();
+  return 0;
+}
+
+int decode_impl(const void *bytes, size_t len, const char *ext, const char *format_name,
+                int max_side, size_t max_pixels, fg_shim_decoded *out) {
+  OIIO::Filesystem::IOMemReader mem(bytes, len);
+  std::unique_ptr<ImageInput> in = open_mem(mem, ext, format_name);
+  if (!in) return FG_EFORMAT;
+  const ImageSpec &spec = in->spec();
   if (spec.width > max_side || spec.height > max_side ||
       (size_t)spec.width * (size_t)spec.height > max_pixels)
     return fg_fail(FG_ERANGE,
@@ -161,6 +200,20 @@ extern "C" int fg_oiio_decode(const void *bytes, size_t len, const char *ext,
     return decode_impl(bytes, len, ext, format_name, max_side, max_pixels, out);
   } catch (const std::bad_alloc &) {
     return fg_fail(FG_ENOMEM, "out of memory decoding a %s image", format_name);
+  } catch (const std::exception &e) {
+    return fg_fail(FG_EFORMAT, "the %s data is truncated or corrupt: %s", format_name, e.what());
+  } catch (...) {
+    return fg_fail(FG_EFORMAT, "the %s data is truncated or corrupt", format_name);
+  }
+}
+
+extern "C" int fg_oiio_probe(const void *bytes, size_t len, const char *ext,
+                             const char *format_name, fg_shim_info *out) {
+  std::memset(out, 0, sizeof *out);
+  try {
+    return probe_impl(bytes, len, ext, format_name, out);
+  } catch (const std::bad_alloc &) {
+    return fg_fail(FG_ENOMEM, "out of memory reading a %s header", format_name);
   } catch (const std::exception &e) {
     return fg_fail(FG_EFORMAT, "the %s data is truncated or corrupt: %s", format_name, e.what());
   } catch (...) {

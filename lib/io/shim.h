@@ -32,6 +32,23 @@ typedef struct fg_shim_decoded {
 int fg_oiio_decode(const void *bytes, size_t len, const char *ext, const char *format_name,
                    int max_side, size_t max_pixels, fg_shim_decoded *out);
 
+/* Sample kinds of a file, as fg_oiio_probe reports them. */
+enum { FG_SHIM_SAMPLE_UINT = 0, FG_SHIM_SAMPLE_INT = 1, FG_SHIM_SAMPLE_FLOAT = 2 };
+
+/* What an image file holds, read from its header alone. */
+typedef struct fg_shim_info {
+  int w, h;
+  int nch;    /* channels in the file, alpha included */
+  int sample; /* FG_SHIM_SAMPLE_* */
+  int bits;   /* bits per sample as stored (1, 2, 4, 8, 12, 16, 32, ...) */
+} fg_shim_info;
+
+/* Reads the header of an image in memory, as fg_oiio_decode would open it, without reading
+ * any pixels: for callers that must refuse some files (depth: one channel, no 8-bit) before
+ * fg_oiio_decode allocates and converts. Sizes are not checked here. */
+int fg_oiio_probe(const void *bytes, size_t len, const char *ext, const char *format_name,
+                  fg_shim_info *out);
+
 /* Encodes [h][w][channels] uint8 or uint16 pixels as PNG into a malloc'd buffer. */
 int fg_oiio_encode_png(const void *pixels, int w, int h, int channels, int bits, uint8_t **out,
                        size_t *out_len);
