@@ -1,6 +1,6 @@
-/* fieldgrip-decode: decodes images (and encodes rendered ones to PNG) for fieldgripd in a
- * process of its own, so that the daemon never links OpenImageIO and a codec crashing on a
- * hostile image takes down only this child.
+/* fieldgrip-decode: decodes images and depth images (and encodes rendered ones to PNG) for
+ * fieldgripd in a process of its own, so that the daemon never links OpenImageIO and a codec
+ * crashing on a hostile image takes down only this child.
  * Reads requests on stdin and writes replies on stdout in the format decoder.h describes,
  * one at a time, until EOF on stdin. Not meant to be run by hand.
  *
@@ -11,6 +11,7 @@
 
 #include "config.h"
 #include "core/error.h"
+#include "io/depth.h"
 #include "io/image.h"
 
 #include <errno.h>
@@ -22,38 +23,26 @@
 #include <sys/prctl.h>
 #include <unistd.h>
 
-/* Sends one reply: header, message, pixels (float [h][w][3] when rc is 0). */
-static int send_reply(int fd, int rc, const char *message, fg_image *img) {
-  size_t mlen = strlen(message);
-  if (mlen > FG_DECODER_MAX_MESSAGE) mlen = FG_DECODER_MAX_MESSAGE;
-  size_t n = rc == 0 ? (size_t)img->w * (size_t)img->h * 3 : 0;
-  fg_decoder_reply rep = {.version = FG_DECODER_VERSION, .rc = rc,
-                          .w = rc == 0 ? img->w : 0, .h = rc == 0 ? img->h : 0,
-                          .message_len = (uint32_t)mlen, .pixel_bytes = n * sizeof(float)};
-  uint8_t hdr[FG_DECODER_REPLY_SIZE];
-  fg_decoder_reply_pack(&rep, hdr);
-  if (fg_decoder_write_full(fd, hdr, sizeof hdr) != 0 ||
-      fg_decoder_write_full(fd, message, mlen) != 0)
-    return -1;
-  if (n == 0) return 0;
-  fg_decoder_floats_le(img->rgb, n);
-  return fg_decoder_write_full(fd, img->rgb, n * sizeof(float));
-}
-
-/* Sends the reply to an encode: header, message, and the PNG when rc is 0. */
-static int send_encoded(int fd, int rc, const char *message, int w, int h, const uint8_t *png,
-                        size_t png_len) {
+/* Sends one reply: header, message, and when rc is 0 the data (already in wire order: float
+ * RGB, the PNG, or float metres, as decoder.h lists them per op). */
+static int send_reply(int fd, int rc, const char *message, int w, int h, const void *data,
+                      size_t data_len) {
   size_t mlen = strlen(message);
   if (mlen > FG_DECODER_MAX_MESSAGE) mlen = FG_DECODER_MAX_MESSAGE;
   fg_decoder_reply rep = {.version = FG_DECODER_VERSION, .rc = rc, .w = rc == 0 ? w : 0,
                           .h = rc == 0 ? h : 0, .message_len = (uint32_t)mlen,
-                          .pixel_bytes = rc == 0 ? png_len : 0};
+                          .pixel_bytes = rc == 0 ? data_len : 0};
   uint8_t hdr[FG_DECODER_REPLY_SIZE];
   fg_decoder_reply_pack(&rep, hdr);
   if (fg_decoder_write_full(fd, hdr, sizeof hdr) != 0 ||
       fg_decoder_write_full(fd, message, mlen) != 0)
     return -1;
-  return rc == 0 ? fg_decoder_write_full(fd, png, png_len) : 0;
+  return rc == 0 && data_len ? fg_decoder_write_full(fd, data, data_len) : 0;
+}
+
+/* An error reply, with no data. */
+static int send_error(int fd, int rc, const char *message) {
+  return send_reply(fd, rc, message, 0, 0, NULL, 0);
 }
 
 /* Encodes the payload of an encode request (decoder.h) to PNG and replies. */
@@ -71,7 +60,7 @@ static int encode_request(int fd, uint8_t *payload, uint64_t length) {
   }
   if (rc == 0 && (png_len == 0 || png_len > FG_DECODER_MAX_REQUEST))
     rc = fg_fail(FG_EIO, "the PNG encoder produced %zu bytes", png_len);
-  int sent = send_encoded(fd, rc, rc == 0 ? "" : fg_error_detail(), w, h, png, png_len);
+  int sent = send_reply(fd, rc, rc == 0 ? "" : fg_error_detail(), w, h, png, png_len);
   free(png);
   return sent;
 }
@@ -86,6 +75,39 @@ static void crash_if_asked(const void *bytes, size_t len) {
   if (starts_with_env("FG_DECODE_CRASH_ON", bytes, len)) abort();
   if (starts_with_env("FG_DECODE_HANG_ON", bytes, len))
     for (;;) pause();
+}
+
+/* Decodes the payload of a decode request (the encoded image) and replies. */
+static int decode_request(int fd, const uint8_t *bytes, uint64_t length,
+                          const float background[3]) {
+  crash_if_asked(bytes, (size_t)length);
+  fg_error_clear();
+  fg_image img = {0};
+  int rc = fg_image_decode(bytes, (size_t)length, background, &img);
+  size_t n = rc == 0 ? (size_t)img.w * (size_t)img.h * 3 : 0;
+  fg_decoder_floats_le(img.rgb, n);
+  int sent = send_reply(fd, rc, rc == 0 ? "" : fg_error_detail(), img.w, img.h, img.rgb,
+                        n * sizeof(float));
+  fg_image_release(&img);
+  return sent;
+}
+
+/* Decodes the payload of a depth request (scale, then the encoded depth image) and
+ * replies. */
+static int depth_request(int fd, const uint8_t *payload, uint64_t length) {
+  double scale = fg_decoder_depth_header_unpack(payload);
+  const uint8_t *bytes = payload + FG_DECODER_DEPTH_HEADER;
+  size_t len = (size_t)length - FG_DECODER_DEPTH_HEADER;
+  crash_if_asked(bytes, len);
+  fg_error_clear();
+  fg_depth_map d = {0};
+  int rc = fg_depth_decode(bytes, len, scale, &d);
+  size_t n = rc == 0 ? (size_t)d.w * (size_t)d.h : 0;
+  fg_decoder_floats_le(d.m, n);
+  int sent =
+      send_reply(fd, rc, rc == 0 ? "" : fg_error_detail(), d.w, d.h, d.m, n * sizeof(float));
+  fg_depth_release(&d);
+  return sent;
 }
 
 int main(int argc, char **argv) {
@@ -118,15 +140,13 @@ int main(int argc, char **argv) {
       return 1;
     }
     fg_decoder_request req;
-    fg_image img = {0};
     if (fg_decoder_request_unpack(hdr, &req) != 0) {
-      send_reply(out, FG_EINVAL, fg_error_detail(), &img);
+      send_error(out, FG_EINVAL, fg_error_detail());
       return 1;
     }
     uint8_t *bytes = malloc(req.length ? (size_t)req.length : 1);
     if (!bytes) {
-      send_reply(out, FG_ENOMEM, "the image decoder is out of memory for the encoded image",
-                 &img);
+      send_error(out, FG_ENOMEM, "the image decoder is out of memory for the encoded image");
       return 1;
     }
     if (fg_decoder_read_full(0, bytes, (size_t)req.length) != (ssize_t)req.length) {
@@ -134,22 +154,15 @@ int main(int argc, char **argv) {
       free(bytes);
       return 1;
     }
-    if (req.op == FG_DECODER_OP_ENCODE_PNG) {
+    int sent;
+    if (req.op == FG_DECODER_OP_ENCODE_PNG)
       /* bytes is malloc'd, so the pixels after the 16-byte header are aligned for uint16. */
-      int sent = encode_request(out, bytes, req.length);
-      free(bytes);
-      if (sent != 0) {
-        fprintf(stderr, "fieldgrip-decode: cannot send a reply: %s\n", strerror(errno));
-        return 1;
-      }
-      continue;
-    }
-    crash_if_asked(bytes, (size_t)req.length);
-    fg_error_clear();
-    int rc = fg_image_decode(bytes, (size_t)req.length, req.background, &img);
+      sent = encode_request(out, bytes, req.length);
+    else if (req.op == FG_DECODER_OP_DECODE_DEPTH)
+      sent = depth_request(out, bytes, req.length);
+    else
+      sent = decode_request(out, bytes, req.length, req.background);
     free(bytes);
-    int sent = send_reply(out, rc, rc == 0 ? "" : fg_error_detail(), &img);
-    fg_image_release(&img);
     if (sent != 0) {
       fprintf(stderr, "fieldgrip-decode: cannot send a reply: %s\n", strerror(errno));
       return 1;

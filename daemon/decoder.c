@@ -429,7 +429,7 @@ static int write_nosigpipe(int fd, const void *buf, size_t n) {
 enum { EXCHANGE_OK = 0, EXCHANGE_DEAD_BEFORE, EXCHANGE_BROKEN, EXCHANGE_VERSION };
 
 /* One request to a child: the header, a payload in up to two pieces, and where the reply's
- * data goes (image for a decode, bytes for an encode). */
+ * data goes (image for a decode, bytes for an encode, depth for a depth decode). */
 typedef struct job_io {
   fg_decoder_request req;
   const void *p1, *p2;
@@ -437,6 +437,7 @@ typedef struct job_io {
   fg_image *image;  /* op 1 */
   uint8_t **bytes;  /* op 2 */
   size_t *bytes_len;
+  fg_depth_map *depth; /* op 3 */
 } job_io;
 
 /* One request and its reply. Returns EXCHANGE_OK with *rc the child's result (the child
@@ -467,8 +468,10 @@ static int exchange(child *c, job_io *io, int *rc, char *why, size_t why_len) {
   }
   fg_decoder_reply rep;
   int encode = io->req.op == FG_DECODER_OP_ENCODE_PNG;
-  if ((encode ? fg_decoder_reply_unpack_encode(rhdr, &rep)
-              : fg_decoder_reply_unpack(rhdr, &rep)) != 0) {
+  int depth = io->req.op == FG_DECODER_OP_DECODE_DEPTH;
+  if ((encode  ? fg_decoder_reply_unpack_encode(rhdr, &rep)
+       : depth ? fg_decoder_reply_unpack_depth(rhdr, &rep)
+               : fg_decoder_reply_unpack(rhdr, &rep)) != 0) {
     snprintf(why, why_len, "%s", fg_error_detail());
     int other = memcmp(rhdr, "FGDR", 4) == 0 && rep.version != FG_DECODER_VERSION;
     return other ? EXCHANGE_VERSION : EXCHANGE_BROKEN;
@@ -499,6 +502,11 @@ static int exchange(child *c, job_io *io, int *rc, char *why, size_t why_len) {
   if (encode) {
     *io->bytes = data;
     *io->bytes_len = n;
+  } else if (depth) {
+    fg_decoder_floats_le(data, n / sizeof(float));
+    io->depth->w = rep.w;
+    io->depth->h = rep.h;
+    io->depth->m = data;
   } else {
     fg_decoder_floats_le(data, n / sizeof(float));
     io->image->w = rep.w;
@@ -510,7 +518,7 @@ static int exchange(child *c, job_io *io, int *rc, char *why, size_t why_len) {
 }
 
 /* Runs one request on a child of the pool, replacing children found dead; what names the
- * work in messages ("image", "image to encode"). */
+ * work in messages ("image", "image to encode", "depth image"). */
 static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
   /* A child found dead before it saw the request is replaced; twice is plenty (each try
    * after the first runs on a child started for it). */
@@ -544,7 +552,7 @@ static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
     if (how == EXCHANGE_VERSION)
       return fg_fail(FG_EIO, "the image decoder does not speak this daemon's protocol (%s); "
                      "install fieldgrip-decode from the same build as fieldgripd", why);
-    fg_warn("image decoder pid %d stopped on an %s of %zu bytes (%s; %s)", (int)pid, what, len,
+    fg_warn("image decoder pid %d stopped on one %s of %zu bytes (%s; %s)", (int)pid, what, len,
             ended, why);
     if (WIFSIGNALED(status))
       return fg_fail(FG_EFORMAT, "the image decoder stopped on this %s (killed by signal %d); "
@@ -570,6 +578,22 @@ int fg_decoder_decode(fg_decoder *d, const void *bytes, size_t len,
   job_io io = {.req = {.op = FG_DECODER_OP_DECODE}, .p1 = bytes, .n1 = len, .image = out};
   for (int k = 0; k < 3; k++) io.req.background[k] = bg[k];
   return run_job(d, &io, len, "image");
+}
+
+int fg_decoder_decode_depth(fg_decoder *d, const void *bytes, size_t len, double scale,
+                            fg_depth_map *out) {
+  if (!out) return fg_fail(FG_EINVAL, "fg_decoder_decode_depth: no output depth map");
+  memset(out, 0, sizeof *out);
+  if (!d) return fg_fail(FG_EINVAL, "fg_decoder_decode_depth: no decoder");
+  if (!bytes && len) return fg_fail(FG_EINVAL, "fg_decoder_decode_depth: no bytes");
+  if (len > FG_DECODER_MAX_REQUEST - FG_DECODER_DEPTH_HEADER)
+    return fg_fail(FG_ERANGE, "the depth image is %zu bytes; the decoder takes at most %llu",
+                   len, (unsigned long long)(FG_DECODER_MAX_REQUEST - FG_DECODER_DEPTH_HEADER));
+  uint8_t head[FG_DECODER_DEPTH_HEADER];
+  fg_decoder_depth_header_pack(scale, head);
+  job_io io = {.req = {.op = FG_DECODER_OP_DECODE_DEPTH}, .p1 = head, .n1 = sizeof head,
+               .p2 = bytes, .n2 = len, .depth = out};
+  return run_job(d, &io, len, "depth image");
 }
 
 int fg_decoder_encode_png(fg_decoder *d, const void *pixels, int w, int h, int channels,

@@ -10,6 +10,7 @@
 #include <stdint.h>
 #include <sys/types.h>
 
+#include "io/depth.h"
 #include "io/image.h"
 
 typedef struct fg_decoder fg_decoder;
@@ -48,6 +49,16 @@ int fg_decoder_check(fg_decoder *dec);
 int fg_decoder_decode(fg_decoder *dec, const void *bytes, size_t len,
                       const float background_rgb[3], fg_image *out);
 
+/* fg_depth_decode (io/depth.h) in a child: a PNG, TIFF or OpenEXR depth image read raw,
+ * 16-bit values times scale (metres per unit), float values as metres. Same contract and
+ * codes as fg_depth_decode, the child's detail re-raised with fg_fail on the calling thread,
+ * and otherwise the codes of fg_decoder_decode (FG_EFORMAT for a child that died on the
+ * image, FG_ENOENT, FG_EIO). .npy depth needs no codec: read it with fg_depth_from_npy.
+ * Thread-safe; shares the pool and its limits with decoding. On success the caller owns
+ * out->m (fg_depth_release); on failure *out is empty. */
+int fg_decoder_decode_depth(fg_decoder *dec, const void *bytes, size_t len, double scale,
+                            fg_depth_map *out);
+
 /* Encodes pixels to PNG with fg_image_encode_png (io/image.h) in a child, so that the
  * daemon never loads the encoder's libraries either. pixels are [h][w][channels] of uint8_t
  * (bits 8) or uint16_t (bits 16, host order), channels 1, 3 or 4, w and h within
@@ -74,31 +85,43 @@ size_t fg_decoder_child_pids(fg_decoder *dec, pid_t *pids, size_t max);
 
 /* ---- wire format -----------------------------------------------------------------------
  * The daemon writes a request on the child's stdin and reads the reply on its stdout; every
- * integer is little-endian, floats are IEEE 754 binary32 in little-endian byte order.
+ * integer is little-endian, floats are IEEE 754 binary32 (f32) or binary64 (f64) in
+ * little-endian byte order.
  *
- *   request (40 bytes): "FGDQ", u32 version (1), u32 op, u32 reserved (0),
+ *   request (40 bytes): "FGDQ", u32 version (2), u32 op, u32 reserved (0),
  *                       f32 background[3], u32 pad (0), u64 length; then length bytes of
  *                       payload:
  *                       op 1 (decode): the encoded image;
  *                       op 2 (encode PNG): u32 w, u32 h, u32 channels (1, 3, 4), u32 bits
  *                       (8, 16), then the pixels [h][w][channels] (uint16 little-endian
  *                       when bits is 16); length = 16 + w h channels bits / 8; background
- *                       is unused (zero).
+ *                       is unused (zero);
+ *                       op 3 (decode depth): f64 scale (metres per unit of 16-bit depth,
+ *                       passed on unchecked: the child's fg_depth_decode judges it), then
+ *                       the encoded depth image; length = 8 + its length; background is
+ *                       unused (zero).
  *   reply (32 bytes):   "FGDR", u32 version, i32 rc (0 or an FG_E* code), i32 w, i32 h,
  *                       u32 message length, u64 pixel bytes; then the message (the child's
  *                       fg_error_detail(), no NUL), then, when rc is 0:
  *                       op 1: float RGB [h][w][3] (pixel bytes = w h 12);
  *                       op 2: the PNG file (pixel bytes = its length; w, h echo the
- *                       request's).
+ *                       request's);
+ *                       op 3: float metres [h][w], 0 where invalid (pixel bytes = w h 4).
+ *
+ * Version 2 added op 3. Daemon and child come from one build; a child that answers with
+ * another version is refused as a broken installation rather than asked for ops it may not
+ * know, and a request of another version gets an FG_EINVAL reply.
  *
  * The child reads a whole request before it replies, so the daemon may write the request and
  * then read the reply. A request the child cannot parse gets an FG_EINVAL reply, after which
  * the child exits; EOF on its stdin makes it exit 0. */
 
-#define FG_DECODER_VERSION 1u
+#define FG_DECODER_VERSION 2u
 #define FG_DECODER_OP_DECODE 1u
 #define FG_DECODER_OP_ENCODE_PNG 2u
+#define FG_DECODER_OP_DECODE_DEPTH 3u
 #define FG_DECODER_ENCODE_HEADER 16 /* the encode payload's w, h, channels, bits */
+#define FG_DECODER_DEPTH_HEADER 8   /* the depth payload's scale */
 #define FG_DECODER_REQUEST_SIZE 40
 #define FG_DECODER_REPLY_SIZE 32
 #define FG_DECODER_MAX_REQUEST (1ull << 30) /* bytes of encoded image */
@@ -131,6 +154,10 @@ int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_
 int fg_decoder_reply_unpack_encode(const uint8_t in[FG_DECODER_REPLY_SIZE],
                                    fg_decoder_reply *rep);
 
+/* The same for a reply to a depth decode (op 3): one float per pixel. */
+int fg_decoder_reply_unpack_depth(const uint8_t in[FG_DECODER_REPLY_SIZE],
+                                  fg_decoder_reply *rep);
+
 /* The encode payload's header (FG_DECODER_ENCODE_HEADER bytes), packed and checked against
  * the request's length: sizes within the image limits, channels 1, 3 or 4, bits 8 or 16.
  * FG_EINVAL with a detail otherwise. */
@@ -138,6 +165,11 @@ void fg_decoder_encode_header_pack(int w, int h, int channels, int bits,
                                    uint8_t out[FG_DECODER_ENCODE_HEADER]);
 int fg_decoder_encode_header_unpack(const uint8_t in[FG_DECODER_ENCODE_HEADER], uint64_t length,
                                     int *w, int *h, int *channels, int *bits);
+
+/* The depth payload's header (FG_DECODER_DEPTH_HEADER bytes): the scale as f64. Any value
+ * travels, NaN included; fg_depth_decode in the child refuses the bad ones. */
+void fg_decoder_depth_header_pack(double scale, uint8_t out[FG_DECODER_DEPTH_HEADER]);
+double fg_decoder_depth_header_unpack(const uint8_t in[FG_DECODER_DEPTH_HEADER]);
 
 /* Converts n floats between host order and the wire's little-endian order, in place (a no-op
  * on little-endian hosts). */

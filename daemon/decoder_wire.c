@@ -39,6 +39,19 @@ static float get_f32(const uint8_t *p) {
   return v;
 }
 
+static void put_f64(uint8_t *p, double v) {
+  uint64_t u;
+  memcpy(&u, &v, 8);
+  put_u64(p, u);
+}
+
+static double get_f64(const uint8_t *p) {
+  uint64_t u = get_u64(p);
+  double v;
+  memcpy(&v, &u, 8);
+  return v;
+}
+
 void fg_decoder_request_pack(const fg_decoder_request *req, uint8_t out[FG_DECODER_REQUEST_SIZE]) {
   memcpy(out, "FGDQ", 4);
   put_u32(out + 4, req->version);
@@ -60,7 +73,8 @@ int fg_decoder_request_unpack(const uint8_t in[FG_DECODER_REQUEST_SIZE], fg_deco
   if (req->version != FG_DECODER_VERSION)
     return fg_fail(FG_EINVAL, "decoder request: protocol version %u, this decoder speaks %u",
                    (unsigned)req->version, FG_DECODER_VERSION);
-  if (req->op != FG_DECODER_OP_DECODE && req->op != FG_DECODER_OP_ENCODE_PNG)
+  if (req->op != FG_DECODER_OP_DECODE && req->op != FG_DECODER_OP_ENCODE_PNG &&
+      req->op != FG_DECODER_OP_DECODE_DEPTH)
     return fg_fail(FG_EINVAL, "decoder request: unknown op %u", (unsigned)req->op);
   if (req->length > FG_DECODER_MAX_REQUEST)
     return fg_fail(FG_EINVAL, "decoder request: %llu bytes of image, more than the %llu allowed",
@@ -69,7 +83,19 @@ int fg_decoder_request_unpack(const uint8_t in[FG_DECODER_REQUEST_SIZE], fg_deco
     return fg_fail(FG_EINVAL, "decoder request: an encode request of %llu bytes has no room for "
                    "its %d-byte header", (unsigned long long)req->length,
                    FG_DECODER_ENCODE_HEADER);
+  if (req->op == FG_DECODER_OP_DECODE_DEPTH && req->length < FG_DECODER_DEPTH_HEADER)
+    return fg_fail(FG_EINVAL, "decoder request: a depth request of %llu bytes has no room for "
+                   "its %d-byte scale", (unsigned long long)req->length,
+                   FG_DECODER_DEPTH_HEADER);
   return 0;
+}
+
+void fg_decoder_depth_header_pack(double scale, uint8_t out[FG_DECODER_DEPTH_HEADER]) {
+  put_f64(out, scale);
+}
+
+double fg_decoder_depth_header_unpack(const uint8_t in[FG_DECODER_DEPTH_HEADER]) {
+  return get_f64(in);
 }
 
 void fg_decoder_encode_header_pack(int w, int h, int channels, int bits,
@@ -155,16 +181,27 @@ int fg_decoder_reply_unpack_encode(const uint8_t in[FG_DECODER_REPLY_SIZE],
   return 0;
 }
 
-int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep) {
+/* A reply that carries nch floats per pixel of a w x h image within the image limits. */
+static int reply_unpack_floats(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep,
+                               uint64_t nch) {
   int done;
   FG_TRY(reply_unpack_common(in, rep, &done));
   if (done) return 0;
   if (rep->w <= 0 || rep->h <= 0 || rep->w > FG_IMAGE_MAX_SIDE || rep->h > FG_IMAGE_MAX_SIDE ||
       (uint64_t)rep->w * (uint64_t)rep->h > FG_IMAGE_MAX_PIXELS ||
-      rep->pixel_bytes != (uint64_t)rep->w * (uint64_t)rep->h * 3 * sizeof(float))
+      rep->pixel_bytes != (uint64_t)rep->w * (uint64_t)rep->h * nch * sizeof(float))
     return fg_fail(FG_EINVAL, "decoder reply: %dx%d image with %llu bytes of pixels", (int)rep->w,
                    (int)rep->h, (unsigned long long)rep->pixel_bytes);
   return 0;
+}
+
+int fg_decoder_reply_unpack(const uint8_t in[FG_DECODER_REPLY_SIZE], fg_decoder_reply *rep) {
+  return reply_unpack_floats(in, rep, 3);
+}
+
+int fg_decoder_reply_unpack_depth(const uint8_t in[FG_DECODER_REPLY_SIZE],
+                                  fg_decoder_reply *rep) {
+  return reply_unpack_floats(in, rep, 1);
 }
 
 void fg_decoder_floats_le(float *v, size_t n) {

@@ -1,5 +1,6 @@
-/* Unit tests of daemon/decoder: images decoded by fieldgrip-decode children give the same
- * floats as fg_image_decode in process, errors come back with the child's detail, a child
+/* Unit tests of daemon/decoder: images and depth images decoded by fieldgrip-decode children
+ * give the same floats as fg_image_decode and fg_depth_decode in process, errors come back
+ * with the child's detail, a child
  * that crashes or is killed is replaced, the pool stays within max_procs under concurrent
  * use, idle children are reaped, and fg_decoder_free leaves no process behind.
  * argv[1] is the fieldgrip-decode program. */
@@ -8,6 +9,7 @@
 #include "config.h"
 #include "core/error.h"
 #include "decoder.h"
+#include "io/depth.h"
 #include "io/image.h"
 
 #include <errno.h>
@@ -127,6 +129,97 @@ static void test_errors(void) {
   ASSERT_EQ(fg_decoder_child_pids(d, again, 2), 1);
   ASSERT_EQ(again[0], pids[0]);
   fg_decoder_free(d);
+  free(png);
+}
+
+/* A 16-bit depth PNG in millimetres, with zeros (no reading) and the extremes. The caller
+ * frees *png. */
+static void make_depth_png(uint8_t **png, size_t *len) {
+  static uint16_t mm[H][W];
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) mm[y][x] = (uint16_t)((x * 977 + y * 1783) % 65536);
+  mm[0][0] = 0;
+  mm[1][2] = 65535;
+  mm[H - 1][W - 1] = 0;
+  ASSERT_OK(fg_image_encode_png(mm, W, H, 1, 16, png, len));
+}
+
+static void test_depth(void) {
+  uint8_t *png;
+  size_t len;
+  make_depth_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  /* The same metres as in process, for both common scales. */
+  static const double scales[2] = {0.001, 0.0001};
+  for (int i = 0; i < 2; i++) {
+    fg_depth_map direct, via;
+    ASSERT_OK(fg_depth_decode(png, len, scales[i], &direct));
+    ASSERT_OK(fg_decoder_decode_depth(d, png, len, scales[i], &via));
+    ASSERT_EQ(via.w, W);
+    ASSERT_EQ(via.h, H);
+    ASSERT(memcmp(direct.m, via.m, (size_t)W * H * sizeof(float)) == 0);
+    ASSERT(via.m[0] == 0 && via.m[1 * W + 2] == (float)(65535 * scales[i]));
+    fg_depth_release(&direct);
+    fg_depth_release(&via);
+  }
+  pid_t pids[2];
+  ASSERT_EQ(fg_decoder_child_pids(d, pids, 2), 1);
+
+  /* Refusals come back with the very detail fg_depth_decode gives, and the child lives. */
+  static uint8_t grey8[H][W];
+  uint8_t *png8;
+  size_t len8;
+  ASSERT_OK(fg_image_encode_png(grey8, W, H, 1, 8, &png8, &len8));
+  static const struct {
+    int cut, code;
+    double scale;
+    const char *says;
+  } cases[] = {
+      {0, FG_EINVAL, 0.001, "depth PNG is 8-bit"},  /* the 8-bit PNG */
+      {1, FG_EINVAL, NAN, "depth scale is nan"},   /* the 16-bit PNG from here on */
+      {1, FG_EINVAL, 0, "depth scale is 0"},
+      {2, FG_EFORMAT, 0.001, "truncated"},
+  };
+  for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+    const uint8_t *b = cases[k].cut == 0 ? png8 : png;
+    size_t n = cases[k].cut == 0 ? len8 : cases[k].cut == 1 ? len : len / 2;
+    fg_depth_map m;
+    ASSERT_ERR(fg_depth_decode(b, n, cases[k].scale, &m), cases[k].code, cases[k].says);
+    char direct[1024];
+    snprintf(direct, sizeof direct, "%s", fg_error_detail());
+    fg_error_clear();
+    ASSERT_ERR(fg_decoder_decode_depth(d, b, n, cases[k].scale, &m), cases[k].code,
+               cases[k].says);
+    ASSERT_STREQ(fg_error_detail(), direct);
+    ASSERT(m.m == NULL && m.w == 0);
+  }
+  /* A colour image is refused as depth, and decodes as an image on the same child. */
+  uint8_t *rgba;
+  size_t rgba_len;
+  make_rgba_png(&rgba, &rgba_len);
+  fg_depth_map m;
+  ASSERT_ERR(fg_decoder_decode_depth(d, rgba, rgba_len, 0.001, &m), FG_EINVAL,
+             "looks like a colour image");
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, rgba, rgba_len, NULL, &img));
+  fg_image_release(&img);
+  pid_t again[2];
+  ASSERT_EQ(fg_decoder_child_pids(d, again, 2), 1);
+  ASSERT_EQ(again[0], pids[0]);
+
+  /* A child that crashes on a depth image: FG_EFORMAT, and the next one gets a new child. */
+  static const char hostile[] = CRASH_MAGIC " in place of a depth image";
+  ASSERT_ERR(fg_decoder_decode_depth(d, hostile, sizeof hostile, 0.001, &m), FG_EFORMAT,
+             "the image decoder stopped on this depth image (killed by signal 6)");
+  ASSERT(m.m == NULL);
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  ASSERT_OK(fg_decoder_decode_depth(d, png, len, 0.001, &m));
+  fg_depth_release(&m);
+  ASSERT_ERR(fg_decoder_decode_depth(NULL, png, len, 0.001, &m), FG_EINVAL, "no decoder");
+  fg_decoder_free(d);
+  free(rgba);
+  free(png8);
   free(png);
 }
 
@@ -373,19 +466,21 @@ static void write_script(const char *path, const char *body) {
 static void test_impostors(void) {
   char dir[] = "/tmp/fg-test-decoder-XXXXXX";
   ASSERT(mkdtemp(dir) != NULL);
-  char v2[64], junk[64];
-  snprintf(v2, sizeof v2, "%s/v2", dir);
+  char old[64], junk[64];
+  snprintf(old, sizeof old, "%s/old", dir);
   snprintf(junk, sizeof junk, "%s/junk", dir);
   /* Each script waits for the first byte of its request: one that answered and exited at once
    * could be gone before the request is written, which is the "died while idle" case.
-   * v2: a reply header of version 2: "FGDR", 2, then 24 zero bytes. */
-  write_script(v2, "head -c 1 >/dev/null; printf 'FGDR\\002\\000\\000\\000'; head -c 24 /dev/zero");
+   * old: a reply header of version 1 (a fieldgrip-decode from before depth): "FGDR", 1,
+   * then 24 zero bytes. */
+  write_script(old,
+               "head -c 1 >/dev/null; printf 'FGDR\\001\\000\\000\\000'; head -c 24 /dev/zero");
   write_script(junk,
                "head -c 1 >/dev/null; printf 'HTTP/1.1 200 OK\\r\\nContent-Length: 0\\r\\n\\r\\n'");
   fg_decoder *d;
   fg_image img;
-  ASSERT_OK(fg_decoder_new(&d, v2, 1, 30));
-  ASSERT_ERR(fg_decoder_decode(d, "\x89PNG", 4, NULL, &img), FG_EIO, "protocol version 2");
+  ASSERT_OK(fg_decoder_new(&d, old, 1, 30));
+  ASSERT_ERR(fg_decoder_decode(d, "\x89PNG", 4, NULL, &img), FG_EIO, "protocol version 1");
   ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
   fg_decoder_free(d);
   ASSERT_OK(fg_decoder_new(&d, junk, 1, 30));
@@ -393,7 +488,7 @@ static void test_impostors(void) {
              "the image decoder stopped on this image (exited with status 0)");
   ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
   fg_decoder_free(d);
-  ASSERT_EQ(unlink(v2), 0);
+  ASSERT_EQ(unlink(old), 0);
   ASSERT_EQ(unlink(junk), 0);
   ASSERT_EQ(rmdir(dir), 0);
 }
@@ -440,7 +535,7 @@ static void test_wire(void) {
   fg_decoder_request r = {.version = FG_DECODER_VERSION, .op = FG_DECODER_OP_DECODE,
                           .background = {0.25f, 0.5f, 1.0f}, .length = 123456789012ull};
   fg_decoder_request_pack(&r, req);
-  ASSERT(memcmp(req, "FGDQ\x01\0\0\0\x01\0\0\0", 12) == 0);
+  ASSERT(memcmp(req, "FGDQ\x02\0\0\0\x01\0\0\0", 12) == 0);
   fg_decoder_request back;
   ASSERT_ERR(fg_decoder_request_unpack(req, &back), FG_EINVAL, "more than");
   ASSERT_EQ(back.length, 123456789012ull);
@@ -458,6 +553,31 @@ static void test_wire(void) {
   rep.pixel_bytes = 2 * 3 * 12;
   fg_decoder_reply_pack(&rep, rb);
   ASSERT_OK(fg_decoder_reply_unpack(rb, &rback));
+  /* A depth reply carries one float per pixel, not three. */
+  ASSERT_ERR(fg_decoder_reply_unpack_depth(rb, &rback), FG_EINVAL, "2x3");
+  rep.pixel_bytes = 2 * 3 * 4;
+  fg_decoder_reply_pack(&rep, rb);
+  ASSERT_OK(fg_decoder_reply_unpack_depth(rb, &rback));
+
+  /* A depth request: the op and the scale, bit for bit; no room for the scale is refused. */
+  r.op = FG_DECODER_OP_DECODE_DEPTH;
+  r.length = FG_DECODER_DEPTH_HEADER - 1;
+  fg_decoder_request_pack(&r, req);
+  ASSERT(memcmp(req + 8, "\x03\0\0\0", 4) == 0);
+  ASSERT_ERR(fg_decoder_request_unpack(req, &back), FG_EINVAL, "no room for its 8-byte scale");
+  r.length = FG_DECODER_DEPTH_HEADER;
+  fg_decoder_request_pack(&r, req);
+  ASSERT_OK(fg_decoder_request_unpack(req, &back));
+  ASSERT_EQ(back.op, FG_DECODER_OP_DECODE_DEPTH);
+  uint8_t dh[FG_DECODER_DEPTH_HEADER];
+  fg_decoder_depth_header_pack(0.0001, dh);
+  ASSERT(memcmp(dh, "\x2d\x43\x1c\xeb\xe2\x36\x1a\x3f", 8) == 0); /* 0.0001, little-endian */
+  ASSERT(fg_decoder_depth_header_unpack(dh) == 0.0001);
+  fg_decoder_depth_header_pack(NAN, dh);
+  ASSERT(isnan(fg_decoder_depth_header_unpack(dh)));
+  r.op = FG_DECODER_OP_DECODE;
+  r.length = 10;
+  fg_decoder_request_pack(&r, req);
 
   /* The program refuses a bad magic, a wrong version and an oversized image, and exits. */
   int rc, status;
@@ -469,11 +589,11 @@ static void test_wire(void) {
   ASSERT_EQ(rc, FG_EINVAL);
   ASSERT_STRCONTAINS(msg, "magic");
   ASSERT(WIFEXITED(status) && WEXITSTATUS(status) != 0);
-  r.version = 2;
+  r.version = 1; /* a daemon from before depth */
   fg_decoder_request_pack(&r, bad);
   raw_exchange(bad, sizeof bad, &rc, msg, sizeof msg, &status);
   ASSERT_EQ(rc, FG_EINVAL);
-  ASSERT_STRCONTAINS(msg, "version 2");
+  ASSERT_STRCONTAINS(msg, "version 1");
   r.version = FG_DECODER_VERSION;
   r.length = FG_DECODER_MAX_REQUEST + 1;
   fg_decoder_request_pack(&r, bad);
@@ -499,6 +619,7 @@ int main(int argc, char **argv) {
   test_wire();
   test_same_pixels();
   test_errors();
+  test_depth();
   test_crash_and_kill();
   test_concurrent();
   test_reap_idle();
