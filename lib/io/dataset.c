@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/fsutil.h"
+#include "io/depth.h"
 #include "io/image.h"
 #include "io/npy.h"
 #include "io/transforms.h"
@@ -14,8 +15,9 @@
 #define MAX_FILE ((size_t)1 << 30)
 
 static int load_one(fg_transforms_frame *tf, const fg_ingest_opts *opts, fg_frame *out) {
-  char *bytes = NULL, *npy_bytes = NULL;
-  size_t len = 0, npy_len = 0;
+  char *bytes = NULL, *npy_bytes = NULL, *depth_bytes = NULL;
+  size_t len = 0, npy_len = 0, depth_len = 0;
+  fg_depth_map depth = {0};
   fg_image img = {0};
   fg_npy npy, *features = NULL;
   int rc = fg_read_file(tf->image_path, MAX_FILE, &bytes, &len);
@@ -26,9 +28,17 @@ static int load_one(fg_transforms_frame *tf, const fg_ingest_opts *opts, fg_fram
     if (rc == 0) rc = fg_npy_parse(npy_bytes, npy_len, &npy);
     features = &npy;
   }
-  if (rc == 0) rc = fg_frame_prepare_image(out, &img, &tf->cam, tf->T_world_cam, features, opts);
+  if (rc == 0 && tf->depth_path) {
+    rc = fg_read_file(tf->depth_path, MAX_FILE, &depth_bytes, &depth_len);
+    if (rc == 0) rc = fg_depth_read(depth_bytes, depth_len, tf->depth_scale, &depth);
+  }
+  if (rc == 0)
+    rc = fg_frame_prepare_image_depth(out, &img, &tf->cam, tf->T_world_cam, features,
+                                      tf->depth_path ? &depth : NULL, opts);
   if (rc == 0) snprintf(out->source, sizeof out->source, "%s", tf->file_path);
   fg_image_release(&img);
+  fg_depth_release(&depth);
+  free(depth_bytes);
   free(npy_bytes);
   free(bytes);
   return rc;

@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "io/camera.h"
+#include "io/depth.h"
 
 #include <jansson.h>
 
@@ -325,10 +326,24 @@ static void frame_free(fg_transforms_frame *f) {
   free(f->image_path);
   free(f->file_path);
   free(f->features_path);
+  free(f->depth_path);
+}
+
+/* depth_unit_scale_factor of obj into *scale when present: a number > 0. */
+static int get_depth_scale(const char *path, const char *where, const json_t *obj,
+                           double *scale) {
+  int has;
+  double v;
+  FG_TRY(get_number(path, where, obj, "depth_unit_scale_factor", &has, &v));
+  if (has && !(v > 0))
+    return fg_fail(FG_EFORMAT, "%s: %s: depth_unit_scale_factor must be > 0 (metres per unit of "
+                   "the depth images, 0.001 for millimetres), got %g", path, where, v);
+  if (has) *scale = v;
+  return 0;
 }
 
 static int read_frame(const char *path, const char *dir, size_t i, const json_t *fo,
-                      const cam_keys *top, fg_transforms_frame *f) {
+                      const cam_keys *top, double depth_scale, fg_transforms_frame *f) {
   char where[48];
   snprintf(where, sizeof where, "frame %zu", i);
   if (!json_is_object(fo))
@@ -340,9 +355,17 @@ static int read_frame(const char *path, const char *dir, size_t i, const json_t 
   FG_TRY(build_camera(path, i, &merged, f));
   FG_TRY(read_matrix(path, i, fo, f->T_world_cam));
 
-  const char *file_path, *features_path;
+  const char *file_path, *features_path, *depth_path;
   FG_TRY(get_path_key(path, i, fo, "file_path", 1, &file_path));
   FG_TRY(get_path_key(path, i, fo, "features_path", 0, &features_path));
+  FG_TRY(get_path_key(path, i, fo, "depth_file_path", 0, &depth_path));
+  f->depth_scale = depth_scale;
+  FG_TRY(get_depth_scale(path, where, fo, &f->depth_scale));
+  if (depth_path) {
+    FG_TRY(resolve_file(dir, depth_path, image_exts, &f->depth_path));
+    if (!f->depth_path) FG_TRY(resolve_file(dir, depth_path, features_exts, &f->depth_path));
+    f->depth_missing = !f->depth_path;
+  }
   f->file_path = strdup(file_path);
   if (!f->file_path) return fg_fail(FG_ENOMEM, "out of memory");
   FG_TRY(resolve_file(dir, file_path, image_exts, &f->image_path));
@@ -389,7 +412,7 @@ int fg_transforms_load(const char *path, fg_transforms *out) {
   int rc = 0;
   char *dir = NULL;
   fg_transforms_frame *frames = NULL;
-  size_t n = 0, n_missing = 0;
+  size_t n = 0, n_missing = 0, n_depth_missing = 0;
   if (!json_is_object(root)) {
     rc = fg_fail(FG_EFORMAT, "%s: the top level must be an object with a \"frames\" array, got %s",
                  path, type_name(root));
@@ -405,6 +428,9 @@ int fg_transforms_load(const char *path, fg_transforms *out) {
   cam_keys top;
   rc = read_cam_keys(path, "top level", root, &top);
   if (rc < 0) goto error;
+  double depth_scale = FG_DEPTH_DEFAULT_SCALE;
+  rc = get_depth_scale(path, "top level", root, &depth_scale);
+  if (rc < 0) goto error;
 
   dir = folder_of(path);
   n = json_array_size(jframes);
@@ -414,15 +440,17 @@ int fg_transforms_load(const char *path, fg_transforms *out) {
     goto error;
   }
   for (size_t i = 0; i < n; i++) {
-    rc = read_frame(path, dir, i, json_array_get(jframes, i), &top, &frames[i]);
+    rc = read_frame(path, dir, i, json_array_get(jframes, i), &top, depth_scale, &frames[i]);
     if (rc < 0) goto error;
     if (!frames[i].image_path) n_missing++;
+    else if (frames[i].depth_missing) n_depth_missing++;
   }
   free(dir);
   json_decref(root);
   out->frames = frames;
   out->n_frames = n;
   out->n_missing = n_missing;
+  out->n_depth_missing = n_depth_missing;
   return 0;
 
 error:

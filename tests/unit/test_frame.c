@@ -11,6 +11,7 @@
 #include "io/npy.h"
 
 #include <stdint.h>
+#include <zlib.h>
 
 static char tmpdir[64];
 
@@ -175,10 +176,10 @@ static void test_prepare_save_load(void) {
   ASSERT_ERR(fg_frame_load(bad, &g), FG_EFORMAT, "magic");
   ASSERT_ERR(fg_frame_load_header(bad, &hdr), FG_EFORMAT, "magic");
   raw[0] = 'F';
-  raw[8] = 2;
+  raw[8] = FG_FRAME_VERSION + 1;
   write_bytes(bad, raw, raw_len);
   ASSERT_ERR(fg_frame_load(bad, &g), FG_EFORMAT, "version");
-  raw[8] = 1;
+  raw[8] = FG_FRAME_VERSION;
   raw[179] = 0x7f; /* width becomes huge */
   write_bytes(bad, raw, raw_len);
   ASSERT_ERR(fg_frame_load_header(bad, &hdr), FG_EFORMAT, "header");
@@ -447,12 +448,149 @@ static void test_prepare_opencv(void) {
   free(png);
 }
 
+/* A depth map of the image as received (a k-times smaller grid): value per depth pixel, 0
+ * and NaN for some, through the downscale by nearest sampling, stored and loaded again. */
+static void test_depth(void) {
+  uint8_t *png;
+  size_t png_len;
+  make_rgba_png(&png, &png_len);
+  fg_image img;
+  ASSERT_OK(fg_image_decode(png, png_len, bg, &img));
+  double T[16];
+  make_pose(T);
+  fg_ingest_opts opts = {.background_rgb = {bg[0], bg[1], bg[2]}, .max_image_side = 400};
+  enum { DW = W / 2, DH = H / 2 };
+  static float dm[DH][DW];
+  size_t valid = 0;
+  for (int v = 0; v < DH; v++)
+    for (int u = 0; u < DW; u++) {
+      dm[v][u] = (u + v) % 11 == 0 ? 0.0f : (u + v) % 13 == 0 ? NAN : 0.4f + 0.001f * u + 0.01f * (v % 7);
+      valid += dm[v][u] > 0.0f;
+    }
+  fg_depth_map d = {.w = DW, .h = DH, .m = &dm[0][0]};
+  fg_frame f;
+  ASSERT_OK(fg_frame_prepare_image_depth(&f, &img, &cam800, T, NULL, &d, &opts));
+  ASSERT_EQ(f.cam.w, 400);
+  ASSERT_EQ(f.depth_w, 400);
+  ASSERT_EQ(f.depth_h, 300);
+  /* stored pixel (u, v) is received pixel (2u + 1, 2v + 1): depth pixel (u, v), exactly */
+  for (int v = 0; v < DH; v++)
+    for (int u = 0; u < DW; u++) {
+      const float want = dm[v][u] > 0.0f ? dm[v][u] : 0.0f;
+      if (f.depth[v * DW + u] != want)
+        FG_TEST_FAIL("depth (%d, %d): %g, want %g", u, v, (double)f.depth[v * DW + u], (double)want);
+    }
+  ASSERT_NEAR(f.depth_valid, (double)valid / (DW * DH), 1e-12);
+
+  /* saved and loaded whole; the header alone names it */
+  char *path = tmp_path("depth.fgf");
+  ASSERT_OK(fg_frame_save(&f, path));
+  fg_frame g, hdr;
+  ASSERT_OK(fg_frame_load(path, &g));
+  ASSERT(g.depth && g.depth_w == 400 && g.depth_h == 300 && g.depth_valid == f.depth_valid);
+  ASSERT(memcmp(g.depth, f.depth, sizeof(float) * 400 * 300) == 0);
+  ASSERT_OK(fg_frame_load_header(path, &hdr));
+  ASSERT(!hdr.depth && hdr.depth_w == 400 && hdr.depth_valid == f.depth_valid);
+  /* a flipped bit in the depth section fails the CRC */
+  char *raw;
+  size_t raw_len;
+  ASSERT_OK(fg_read_file(path, 1u << 26, &raw, &raw_len));
+  raw[raw_len - 40] ^= 0x01;
+  char *bad = tmp_path("depth-bad.fgf");
+  write_bytes(bad, raw, raw_len);
+  ASSERT_ERR(fg_frame_load(bad, &hdr), FG_EFORMAT, "CRC");
+  free(raw);
+  fg_frame_clear(&g);
+
+  /* a version 1 file (no depth fields) from an earlier build still loads */
+  fg_frame plain;
+  ASSERT_OK(fg_frame_prepare_image(&plain, &img, &cam800, T, NULL, &opts));
+  ASSERT_OK(fg_frame_save(&plain, path));
+  ASSERT_OK(fg_read_file(path, 1u << 26, &raw, &raw_len));
+  raw[8] = 1;
+  const uint32_t crc = (uint32_t)crc32_z(crc32_z(0L, Z_NULL, 0), (const Bytef *)raw, raw_len - 4);
+  for (int i = 0; i < 4; i++) raw[raw_len - 4 + i] = (char)(crc >> (8 * i));
+  write_bytes(bad, raw, raw_len);
+  ASSERT_OK(fg_frame_load(bad, &g));
+  ASSERT(!g.depth && g.depth_w == 0 && g.cam.w == 400);
+  fg_frame_clear(&g);
+  fg_frame_clear(&plain);
+  free(raw);
+
+  /* refused: off the image's grid, negative or infinite metres */
+  fg_depth_map off = {.w = DW + 1, .h = DH, .m = &dm[0][0]};
+  ASSERT_ERR(fg_frame_prepare_image_depth(&g, &img, &cam800, T, NULL, &off, &opts), FG_EINVAL,
+             "800x600");
+  const float keep = dm[5][7];
+  dm[5][7] = -0.5f;
+  ASSERT_ERR(fg_frame_prepare_image_depth(&g, &img, &cam800, T, NULL, &d, &opts), FG_EINVAL,
+             "row 5, column 7");
+  dm[5][7] = INFINITY;
+  ASSERT_ERR(fg_frame_prepare_image_depth(&g, &img, &cam800, T, NULL, &d, &opts), FG_EINVAL,
+             "finite");
+  dm[5][7] = keep;
+  fg_frame_clear(&f);
+  fg_image_release(&img);
+  free(path);
+  free(bad);
+  free(png);
+}
+
+/* Depth through an OPENCV camera's undistortion: nearest sampling keeps every value one of
+ * the map's, never a blend across the step between two surfaces. */
+static void test_depth_opencv(void) {
+  static uint8_t px[UH][UW][3];
+  memset(px, 128, sizeof px);
+  uint8_t *png;
+  size_t png_len;
+  ASSERT_OK(fg_image_encode_png(px, UW, UH, 3, 8, &png, &png_len));
+  fg_image img;
+  const float white[3] = {1, 1, 1};
+  ASSERT_OK(fg_image_decode(png, png_len, white, &img));
+  const fg_camera cam = {.fl_x = 250, .fl_y = 250, .cx = 161.3, .cy = 118.7, .w = UW, .h = UH,
+                         .model = FG_CAMERA_OPENCV, .k1 = -0.25, .k2 = 0.08, .p1 = 0.001,
+                         .p2 = -0.0015};
+  double T[16];
+  make_pose(T);
+  fg_ingest_opts opts = {.background_rgb = {1, 1, 1}, .max_image_side = 0};
+  static float dm[UH][UW];
+  for (int v = 0; v < UH; v++)
+    for (int u = 0; u < UW; u++) dm[v][u] = u < UW / 2 ? 1.0f : 2.5f;
+  fg_depth_map d = {.w = UW, .h = UH, .m = &dm[0][0]};
+  fg_frame f;
+  ASSERT_OK(fg_frame_prepare_image_depth(&f, &img, &cam, T, NULL, &d, &opts));
+  ASSERT(f.undistorted && f.depth_w == f.cam.w && f.depth_h == f.cam.h);
+  size_t near = 0, far = 0;
+  for (int i = 0; i < f.depth_w * f.depth_h; i++) {
+    /* 0 only where a pixel's centre maps outside the received image, at the border */
+    ASSERT(f.depth[i] == 1.0f || f.depth[i] == 2.5f || f.depth[i] == 0.0f);
+    near += f.depth[i] == 1.0f;
+    far += f.depth[i] == 2.5f;
+  }
+  ASSERT(f.depth_valid > 0.99 && near > 1000 && far > 1000);
+  /* the step stays where the lens puts it: the pixel whose centre maps to the received
+   * image's left half has the near depth */
+  for (int v = 0; v < f.cam.h; v += 17)
+    for (int u = 0; u < f.cam.w; u += 13) {
+      double x = (u + 0.5 - f.cam.cx) / f.cam.fl_x, y = (v + 0.5 - f.cam.cy) / f.cam.fl_y, xd, yd;
+      fg_camera_distort_normalized(&cam, x, y, &xd, &yd);
+      const double ud = cam.fl_x * xd + cam.cx, vd = cam.fl_y * yd + cam.cy;
+      if (ud < 0 || vd < 0 || ud >= UW || vd >= UH) continue;
+      ASSERT(f.depth[v * f.cam.w + u] == (ud < UW / 2 ? 1.0f : 2.5f));
+    }
+  fg_frame_clear(&f);
+  fg_image_release(&img);
+  free(png);
+}
+
 int main(void) {
   snprintf(tmpdir, sizeof tmpdir, "/tmp/fg_test_frame_XXXXXX");
   ASSERT(mkdtemp(tmpdir) != NULL);
   test_prepare_save_load();
   test_prepare_refuse();
   test_prepare_opencv();
+  test_depth();
+  test_depth_opencv();
   ASSERT_OK(fg_rmtree(tmpdir));
   printf("frame: ok\n");
   return 0;

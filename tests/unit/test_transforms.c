@@ -455,6 +455,56 @@ static void test_real_lego(void) {
   fg_transforms_free(&t);
 }
 
+/* nerfstudio's depth keys: depth_file_path resolved like file_path, depth_unit_scale_factor
+ * from the top level or the frame; a missing depth file is counted, not an error. */
+static void test_depth_keys(void) {
+  free(put("dp/images/a.png", "png"));
+  free(put("dp/images/b.png", "png"));
+  free(put("dp/images/c.png", "png"));
+  free(put("dp/depth/a.png", "png"));
+  free(put("dp/depth/b.npy", "npy"));
+  char *path = put("dp/transforms.json",
+                   "{\"fl_x\": 500, \"depth_unit_scale_factor\": 0.0001, \"frames\": [\n"
+                   "  {\"file_path\": \"images/a.png\", \"transform_matrix\": " IDENTITY
+                   ", \"depth_file_path\": \"depth/a.png\"},\n"
+                   "  {\"file_path\": \"images/b.png\", \"transform_matrix\": " IDENTITY
+                   ", \"depth_file_path\": \"depth/b\", \"depth_unit_scale_factor\": 0.001},\n"
+                   "  {\"file_path\": \"images/c.png\", \"transform_matrix\": " IDENTITY
+                   ", \"depth_file_path\": \"depth/c.png\"},\n"
+                   "  {\"file_path\": \"images/d.png\", \"transform_matrix\": " IDENTITY
+                   ", \"depth_file_path\": \"depth/d.png\"}\n"
+                   "]}\n");
+  fg_transforms t;
+  ASSERT_OK(fg_transforms_load(path, &t));
+  ASSERT_EQ(t.n_frames, 4);
+  ASSERT_EQ(t.n_missing, 1);       /* d: no image */
+  ASSERT_EQ(t.n_depth_missing, 1); /* c: image but no depth file */
+  ASSERT(strstr(t.frames[0].depth_path, "dp/depth/a.png"));
+  ASSERT(strstr(t.frames[1].depth_path, "dp/depth/b.npy"));
+  ASSERT(t.frames[2].depth_path == NULL && t.frames[2].depth_missing);
+  ASSERT_NEAR(t.frames[0].depth_scale, 0.0001, 0);
+  ASSERT_NEAR(t.frames[1].depth_scale, 0.001, 0);
+  fg_transforms_free(&t);
+  free(path);
+  /* without the key: millimetres */
+  path = put("dp/t2.json", "{\"fl_x\": 500, \"frames\": [{\"file_path\": \"images/a.png\", "
+             "\"transform_matrix\": " IDENTITY ", \"depth_file_path\": \"depth/a.png\"}]}");
+  ASSERT_OK(fg_transforms_load(path, &t));
+  ASSERT_NEAR(t.frames[0].depth_scale, 0.001, 0);
+  ASSERT(t.frames[0].depth_path && !t.frames[0].depth_missing);
+  fg_transforms_free(&t);
+  free(path);
+  EXPECT_FAIL("dp/t3.json", "{\"fl_x\": 500, \"depth_unit_scale_factor\": 0, \"frames\": "
+              "[{\"file_path\": \"images/a.png\", \"transform_matrix\": " IDENTITY "}]}",
+              FG_EFORMAT, "top level", "depth_unit_scale_factor must be > 0");
+  EXPECT_FAIL("dp/t4.json", "{\"fl_x\": 500, \"frames\": [{\"file_path\": \"images/a.png\", "
+              "\"transform_matrix\": " IDENTITY ", \"depth_unit_scale_factor\": -1}]}",
+              FG_EFORMAT, "frame 0", "depth_unit_scale_factor");
+  EXPECT_FAIL("dp/t5.json", "{\"fl_x\": 500, \"frames\": [{\"file_path\": \"images/a.png\", "
+              "\"transform_matrix\": " IDENTITY ", \"depth_file_path\": 3}]}",
+              FG_EFORMAT, "frame 0", "depth_file_path must be a non-empty path");
+}
+
 int main(void) {
   char tmpl[] = "/tmp/fg_test_transforms.XXXXXX";
   ASSERT(mkdtemp(tmpl) != NULL);
@@ -464,6 +514,7 @@ int main(void) {
   test_nerfstudio_style();
   test_intrinsics();
   test_errors();
+  test_depth_keys();
   test_real_lego();
 
   char cmd[PATH_MAX + 16];
