@@ -45,7 +45,7 @@
 #include "core/fsutil.h"
 #include "field/model.h"
 #include "field/train.h"
-#include "gt.h"
+#include "gtvox.h"
 #include "io/dataset.h"
 #include "io/image.h"
 #include "query/heatmap.h"
@@ -56,7 +56,6 @@
 #define OTHERS_CEIL 0.2
 #define TOP_PIXELS 50   /* brightest pixels of a held-out view that must lie on the mask */
 #define TOP_ON_MASK 0.9 /* ... the fraction of them */
-#define LATTICE_PER_VOXEL 8 /* ground-truth lattice points per voxel side */
 
 static const double ws_min[3] = {0.10, -0.45, 0.005}, ws_max[3] = {0.80, 0.45, 0.35};
 
@@ -64,70 +63,6 @@ static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-/* 1 when p_world lies in the open interior of a mug (above its floor, below its rim) or of a
- * bowl (inside its inner sphere, below its rim); 0 elsewhere and for the box and the ball. */
-static int in_cavity(const sg_shape *s, const double p_world[3]) {
-  double p[3];
-  sg_xform_point(s->T_obj_world, p_world, p);
-  const double r2 = p[0] * p[0] + p[1] * p[1], h2 = s->height / 2;
-  if (s->type == SG_SHAPE_MUG)
-    return r2 < s->inner_radius * s->inner_radius && p[2] > -h2 + s->bottom && p[2] <= h2;
-  if (s->type == SG_SHAPE_BOWL) {
-    const double dz = p[2] - s->sphere_center_z;
-    return r2 + dz * dz < s->inner_radius * s->inner_radius && p[2] <= h2;
-  }
-  return 0;
-}
-
-/* 1 when object k's solid meets the ball of radius radius_m around p_world, tested on a
- * lattice of spacing voxel_size / 8 (finer than the thinnest wall). */
-static int solid_meets_ball(const sg_gt *gt, int k, const double p_world[3], double radius_m,
-                            double voxel_size) {
-  const double h = voxel_size / LATTICE_PER_VOXEL;
-  const int m = (int)floor(radius_m / h + 1e-9);
-  for (int dz = -m; dz <= m; dz++)
-    for (int dy = -m; dy <= m; dy++)
-      for (int dx = -m; dx <= m; dx++) {
-        if ((dx * dx + dy * dy + dz * dz) * h * h > radius_m * radius_m * (1 + 1e-9)) continue;
-        const double p[3] = {p_world[0] + dx * h, p_world[1] + dy * h, p_world[2] + dz * h};
-        if (sg_gt_inside(gt, k, p)) return 1;
-      }
-  return 0;
-}
-
-/* Ground truth of grid g: owner (nz, ny, nx) the object whose solid meets the voxel's
- * inscribed ball, or -1; cavity (nz, ny, nx) the container whose cavity holds the centre of a
- * voxel that is not its own, or -1. Objects stand at least 2 cm apart, so no voxel is within
- * half a voxel of two. Both arrays are the caller's. */
-static void ground_truth(const sg_gt *gt, const fg_voxel_grid *g, signed char *owner,
-                         signed char *cavity) {
-  const size_t N = fg_voxel_grid_count(g);
-  memset(owner, -1, N);
-  memset(cavity, -1, N);
-  for (int k = 0; k < gt->n_objects; k++) {
-    const sg_gt_object *ob = &gt->objects[k];
-    int lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-      const int na = a == 0 ? g->nx : a == 1 ? g->ny : g->nz;
-      lo[a] = (int)floor((ob->aabb_min[a] - g->min[a]) / g->voxel_size) - 1;
-      hi[a] = (int)floor((ob->aabb_max[a] - g->min[a]) / g->voxel_size) + 1;
-      lo[a] = lo[a] < 0 ? 0 : lo[a];
-      hi[a] = hi[a] >= na ? na - 1 : hi[a];
-    }
-    for (int iz = lo[2]; iz <= hi[2]; iz++)
-      for (int iy = lo[1]; iy <= hi[1]; iy++)
-        for (int ix = lo[0]; ix <= hi[0]; ix++) {
-          const size_t i = ((size_t)iz * g->ny + iy) * g->nx + ix;
-          double c[3];
-          fg_voxel_grid_centre(g, ix, iy, iz, c);
-          if (solid_meets_ball(gt, k, c, g->voxel_size / 2, g->voxel_size))
-            owner[i] = (signed char)k;
-          else if (in_cavity(&ob->shape, c))
-            cavity[i] = (signed char)k;
-        }
-  }
 }
 
 enum { PLACE_ELSEWHERE, PLACE_OBJECT, PLACE_NEXT, PLACE_CAVITY };
@@ -143,7 +78,7 @@ static int best_place(const sg_gt *gt, const fg_voxel_grid *g, const signed char
   const size_t nx = (size_t)g->nx, ny = (size_t)g->ny;
   double c[3];
   fg_voxel_grid_centre(g, (int)(idx % nx), (int)(idx / nx % ny), (int)(idx / (nx * ny)), c);
-  return solid_meets_ball(gt, k, c, g->voxel_size, g->voxel_size) ? PLACE_NEXT
+  return sg_gt_solid_meets_ball(gt, k, c, g->voxel_size, g->voxel_size) ? PLACE_NEXT
                                                                    : PLACE_ELSEWHERE;
 }
 
@@ -197,7 +132,7 @@ static void check_layout(const char *scenegen, const char *seed) {
 
   signed char *owner = malloc(N), *cavity = malloc(N);
   ASSERT(owner && cavity);
-  ground_truth(&gt, &g, owner, cavity);
+  sg_gt_voxelise(&gt, &g, owner, cavity);
 
   float *neg = malloc((size_t)gt.n_classes * D * sizeof *neg);
   ASSERT(neg);
