@@ -8,11 +8,13 @@
 #include "core/fsutil.h"
 #include "core/log.h"
 #include "core/pose.h"
+#include "io/depth.h"
 #include "io/image.h"
 #include "io/npy.h"
 #include "io/transforms.h"
 
 #include <errno.h>
+#include <math.h>
 #include <limits.h>
 #include <stdlib.h>
 #include <string.h>
@@ -20,12 +22,21 @@
 /* The largest image or feature file an import reads. */
 #define IMPORT_MAX_FILE (512u << 20)
 
-/* What went wrong with one frame, as the HTTP reply will say it. */
+/* What went wrong with one frame, as the HTTP reply will say it. depth: the fault is the
+ * frame's depth map (an import skips such a frame and says why instead of failing). */
 typedef struct ingest_error {
   int status;
   const char *code;
+  int depth;
   char message[768];
 } ingest_error;
+
+/* An encoded depth map to ingest with a frame (io/depth.h), or none when bytes is NULL. */
+typedef struct depth_input {
+  const void *bytes;
+  size_t len;
+  double scale; /* metres per unit of an integer depth image */
+} depth_input;
 
 static int ingest_fail(ingest_error *e, int status, const char *code, const char *prefix) {
   e->status = status;
@@ -34,13 +45,34 @@ static int ingest_fail(ingest_error *e, int status, const char *code, const char
   return -1;
 }
 
-/* Turns one encoded image plus its camera, pose and optional features into a frame ready
- * to store. The camera may still lack what only the image's size gives. The image is decoded
- * by app's decoder, in a child process. */
+/* Decodes a frame's depth map: a .npy here, an image in a decoder child. */
+static int decode_depth(fg_app *app, const depth_input *in, fg_depth_map *out,
+                        ingest_error *err) {
+  fg_npy npy;
+  int rc;
+  if (in->len >= 6 && memcmp(in->bytes, "\x93NUMPY", 6) == 0) {
+    rc = fg_npy_parse(in->bytes, in->len, &npy);
+    if (rc == 0) rc = fg_depth_from_npy(&npy, out);
+  } else {
+    rc = fg_decoder_decode_depth(app->decoder, in->bytes, in->len, in->scale, out);
+    if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM)
+      return ingest_fail(err, 500, "internal_error", "cannot decode the depth map: ");
+  }
+  if (rc != 0) {
+    err->depth = 1;
+    return ingest_fail(err, 400, "invalid_depth", "depth: ");
+  }
+  return 0;
+}
+
+/* Turns one encoded image plus its camera, pose and optional features and depth into a frame
+ * ready to store. The camera may still lack what only the image's size gives. The image is
+ * decoded by app's decoder, in a child process. */
 static int ingest_one(fg_app *app, const void *image, size_t image_len,
                       fg_transforms_frame camera, const double T_world_cam[16],
-                      const fg_npy *features, const fg_scene_params *params, int max_side,
-                      const char *source, fg_frame *out, ingest_error *err) {
+                      const fg_npy *features, const depth_input *depth,
+                      const fg_scene_params *params, int max_side, const char *source,
+                      fg_frame *out, ingest_error *err) {
   if (!fg_image_sniff(image, image_len))
     return ingest_fail(err, 415, "unsupported_media_type",
                        "the image is not PNG, JPEG, OpenEXR or TIFF data");
@@ -60,8 +92,20 @@ static int ingest_one(fg_app *app, const void *image, size_t image_len,
     fg_image_release(&img);
     return ingest_fail(err, 400, "invalid_camera", "");
   }
+  fg_depth_map dm = {0};
+  if (depth && depth->bytes) {
+    if (decode_depth(app, depth, &dm, err) != 0 ||
+        (fg_depth_check_grid(dm.w, dm.h, img.w, img.h) != 0 &&
+         (err->depth = 1, ingest_fail(err, 400, "invalid_depth", "depth: ")))) {
+      fg_depth_release(&dm);
+      fg_image_release(&img);
+      return -1;
+    }
+  }
   fg_ingest_opts opts = {.background_rgb = {bg[0], bg[1], bg[2]}, .max_image_side = max_side};
-  rc = fg_frame_prepare_image(out, &img, &camera.cam, T_world_cam, features, &opts);
+  rc = fg_frame_prepare_image_depth(out, &img, &camera.cam, T_world_cam, features,
+                                    dm.m ? &dm : NULL, &opts);
+  fg_depth_release(&dm);
   fg_image_release(&img);
   if (rc != 0) return ingest_fail(err, rc == FG_ENOMEM ? 500 : 400,
                                   rc == FG_ENOMEM ? "internal_error" : "invalid_request", "");
@@ -73,8 +117,12 @@ static void reply_added(fg_resp *resp, int status, const fg_frame *f, int index)
   json_t *features = f->feat_d ? json_pack("{s:i,s:i,s:i}", "h", f->feat_h, "w", f->feat_w, "d",
                                            f->feat_d)
                                : json_null();
-  fg_resp_json(resp, status, json_pack("{s:i,s:{s:i,s:i},s:o}", "frame", index, "image", "w",
-                                       f->cam.w, "h", f->cam.h, "features", features));
+  json_t *depth = f->depth_w ? json_pack("{s:i,s:i,s:f}", "w", f->depth_w, "h", f->depth_h,
+                                         "valid_fraction", f->depth_valid)
+                             : json_null();
+  fg_resp_json(resp, status, json_pack("{s:i,s:{s:i,s:i},s:o,s:o}", "frame", index, "image", "w",
+                                       f->cam.w, "h", f->cam.h, "features", features, "depth",
+                                       depth));
 }
 
 static int add_failed(fg_resp *resp, int rc) {
@@ -114,18 +162,35 @@ static int parse_meta(json_t *meta, double T[16], fg_transforms_frame *camera, f
   return 0;
 }
 
+/* meta's optional depth_scale (metres per unit of an integer depth image). */
+static int parse_depth_scale(json_t *meta, const fg_part *depth_part, const char *source,
+                             double *scale, fg_resp *resp) {
+  json_t *v = json_object_get(meta, "depth_scale");
+  if (!v) return 0;
+  if (!depth_part)
+    return fg_resp_error(resp, 400, "invalid_depth", "frame '%s': meta has depth_scale but the "
+                         "upload has no 'depth' part", source), -1;
+  if (!json_is_number(v) || !(json_number_value(v) > 0.0) || !isfinite(json_number_value(v)))
+    return fg_resp_error(resp, 400, "invalid_depth", "frame '%s': depth_scale must be a number "
+                         "> 0 (metres per unit of the depth image: 0.001 for millimetres)",
+                         source), -1;
+  *scale = json_number_value(v);
+  return 0;
+}
+
 int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
   const fg_part *image = fg_req_part(req, "image");
   const fg_part *meta_part = fg_req_part(req, "meta");
   const fg_part *feat_part = fg_req_part(req, "features");
+  const fg_part *depth_part = fg_req_part(req, "depth");
   json_t *meta = NULL;
   for (int i = 0; i < req->n_parts; i++) {
     const char *n = req->parts[i].name;
-    if (strcmp(n, "image") && strcmp(n, "meta") && strcmp(n, "features")) {
+    if (strcmp(n, "image") && strcmp(n, "meta") && strcmp(n, "features") && strcmp(n, "depth")) {
       fg_resp_error(resp, 400, "invalid_request", "unexpected part '%s'; the parts are image, "
-                    "meta and, optionally, features", n);
+                    "meta and, optionally, features and depth", n);
       goto out;
     }
   }
@@ -157,14 +222,27 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
     }
     featp = &feats;
   }
+  const char *source = image->filename ? image->filename : "upload";
+  depth_input depth = {.scale = FG_DEPTH_DEFAULT_SCALE};
+  if (parse_depth_scale(meta, depth_part, source, &depth.scale, resp) != 0) goto out;
+  if (depth_part) {
+    if (depth_part->len == 0) {
+      fg_resp_error(resp, 400, "invalid_depth", "frame '%s': the 'depth' part is empty", source);
+      goto out;
+    }
+    depth.bytes = depth_part->data;
+    depth.len = depth_part->len;
+  }
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   fg_frame frame;
-  ingest_error ie;
-  if (ingest_one(req->app, image->data, image->len, camera, T, featp, &info.params,
-                 req->conf->max_image_side, image->filename ? image->filename : "upload", &frame,
-                 &ie) != 0) {
-    fg_resp_error(resp, ie.status, ie.code, "%s", ie.message);
+  ingest_error ie = {0};
+  if (ingest_one(req->app, image->data, image->len, camera, T, featp, &depth, &info.params,
+                 req->conf->max_image_side, source, &frame, &ie) != 0) {
+    if (ie.depth)
+      fg_resp_error(resp, ie.status, ie.code, "frame '%s': %s", source, ie.message);
+    else
+      fg_resp_error(resp, ie.status, ie.code, "%s", ie.message);
     goto out;
   }
   int index;
@@ -259,8 +337,9 @@ static int import_one(fg_app *app, const fg_conf *conf, const fg_transforms_fram
              tf->file_path);
     return -1;
   }
-  char *image = NULL, *feat_buf = NULL;
-  size_t image_len = 0, feat_len = 0;
+  char *image = NULL, *feat_buf = NULL, *depth_buf = NULL;
+  size_t image_len = 0, feat_len = 0, depth_len = 0;
+  depth_input depth = {.scale = tf->depth_scale};
   fg_npy feats, *featp = NULL;
   int rc = -1;
   if (fg_read_file(real, IMPORT_MAX_FILE, &image, &image_len) != 0) {
@@ -281,16 +360,32 @@ static int import_one(fg_app *app, const fg_conf *conf, const fg_transforms_fram
     }
     featp = &feats;
   }
+  if (tf->depth_path) {
+    if (!realpath(tf->depth_path, real) || !inside_import_dirs(conf, real)) {
+      err->status = 403;
+      err->code = "forbidden_path";
+      snprintf(err->message, sizeof err->message, "depth_file_path leads outside the import folders");
+      goto out;
+    }
+    if (fg_read_file(real, IMPORT_MAX_FILE, &depth_buf, &depth_len) != 0) {
+      err->depth = 1;
+      ingest_fail(err, 400, "invalid_depth", "depth: ");
+      goto out;
+    }
+    depth.bytes = depth_buf;
+    depth.len = depth_len;
+  }
   if (fg_pose_validate(tf->T_world_cam) != 0) {
     ingest_fail(err, 400, "invalid_pose", "transform_matrix: ");
     goto out;
   }
   const char *base = strrchr(tf->image_path, '/');
-  rc = ingest_one(app, image, image_len, *tf, tf->T_world_cam, featp, params,
+  rc = ingest_one(app, image, image_len, *tf, tf->T_world_cam, featp, &depth, params,
                   conf->max_image_side, base ? base + 1 : tf->image_path, out, err);
 out:
   free(image);
   free(feat_buf);
+  free(depth_buf);
   return rc;
 }
 
@@ -347,15 +442,14 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
     if (import_one(req->app, conf, &t.frames[i], &info.params, &frames[i], &errs[i]) != 0)
       failed = 1;
   }
-  if (failed) {
-    for (size_t i = 0; i < t.n_frames; i++)
-      if (errs[i].status) {
-        fg_resp_error(resp, errs[i].status, errs[i].code, "frame %zu (%s): %s; nothing was "
-                      "imported", i, t.frames[i].file_path, errs[i].message);
-        break;
-      }
-    goto out;
-  }
+  /* A frame whose depth map is unusable is skipped with the reason; any other failure fails
+   * the whole import. */
+  for (size_t i = 0; failed && i < t.n_frames; i++)
+    if (errs[i].status && !errs[i].depth) {
+      fg_resp_error(resp, errs[i].status, errs[i].code, "frame %zu (%s): %s; nothing was "
+                    "imported", i, t.frames[i].file_path, errs[i].message);
+      goto out;
+    }
   /* The store checks D again under its lock; checking here first lets the reply name the
    * frame. */
   int d = info.feature_dim;
@@ -371,35 +465,45 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
     }
     d = frames[i].feat_d;
   }
-  /* Pack the frames that have images to the front, in file order. */
-  size_t n = 0;
-  json_t *skipped = json_array();
+  /* Pack the frames to store to the front, in file order. */
+  size_t n = 0, n_skipped = 0, n_depth = 0;
+  json_t *skipped = json_array(), *skipped_frames = json_array();
   for (size_t i = 0; i < t.n_frames; i++) {
-    if (t.frames[i].image_path) {
+    if (t.frames[i].image_path && !errs[i].status) {
+      n_depth += frames[i].depth != NULL;
       if (n != i) {
         frames[n] = frames[i];
         memset(&frames[i], 0, sizeof frames[i]); /* moved: not freed twice */
       }
       n++;
     } else {
+      n_skipped++;
       json_array_append_new(skipped, json_string(t.frames[i].file_path));
+      json_array_append_new(skipped_frames,
+                            json_pack("{s:I,s:s,s:s}", "frame", (json_int_t)i, "file_path",
+                                      t.frames[i].file_path, "reason",
+                                      errs[i].status ? errs[i].message : "image missing"));
     }
   }
   int first = 0;
   int rc = n ? fg_scene_add_frames(s, frames, n, &first) : 0;
   if (rc != 0) {
     json_decref(skipped);
+    json_decref(skipped_frames);
     add_failed(resp, rc);
     goto out;
   }
   fg_metrics_add_frames_ingested((unsigned)n);
-  fg_info("scene %s: imported %zu frames from %s (%zu skipped: image missing)", info.name, n,
-          treal, t.n_missing);
+  fg_info("scene %s: imported %zu frames (%zu with depth) from %s; %zu skipped (%zu: image "
+          "missing), %zu without their missing depth file", info.name, n, n_depth, treal,
+          n_skipped, t.n_missing, t.n_depth_missing);
   json_t *ids = json_array();
   for (size_t i = 0; i < n; i++) json_array_append_new(ids, json_integer(first + (int)i));
-  fg_resp_json(resp, 200, json_pack("{s:I,s:I,s:o,s:o}", "imported", (json_int_t)n, "skipped",
-                                    (json_int_t)t.n_missing, "skipped_files", skipped, "frames",
-                                    ids));
+  fg_resp_json(resp, 200, json_pack("{s:I,s:I,s:o,s:o,s:I,s:I,s:o}", "imported", (json_int_t)n,
+                                    "skipped", (json_int_t)n_skipped, "skipped_files", skipped,
+                                    "skipped_frames", skipped_frames, "with_depth",
+                                    (json_int_t)n_depth, "depth_missing",
+                                    (json_int_t)t.n_depth_missing, "frames", ids));
 out:
   if (frames)
     for (size_t i = 0; i < t.n_frames; i++) fg_frame_clear(&frames[i]);

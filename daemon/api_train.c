@@ -50,17 +50,30 @@ static int json_seed(json_t *obj, uint64_t *out) {
                  "decimal digits up to 2^64-1");
 }
 
+/* A loss weight: a number from 0 to FG_TRAIN_MAX_LOSS_WEIGHT, kept in *out when absent. */
+static int json_loss_weight(json_t *obj, const char *key, double *out) {
+  double w;
+  const int rc = fg_json_number(obj, key, &w);
+  FG_TRY(rc);
+  if (rc && !(w >= 0.0 && w <= FG_TRAIN_MAX_LOSS_WEIGHT))
+    return fg_fail(FG_EINVAL, "\"%s\" must be a number from 0 to %g", key,
+                   (double)FG_TRAIN_MAX_LOSS_WEIGHT);
+  if (rc) *out = w;
+  return 0;
+}
+
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
 static int parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
-  static const char *const keys[] = {"steps", "seed", "max_seconds", "holdout_every"};
+  static const char *const keys[] = {"steps",         "seed",         "max_seconds",
+                                     "holdout_every", "depth_weight", "distortion_weight"};
   const char *key;
   json_t *val;
   json_object_foreach(body, key, val) {
     int known = 0;
     for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++) known |= strcmp(key, keys[i]) == 0;
     if (!known)
-      return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds "
-                     "and holdout_every", key);
+      return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds, "
+                     "holdout_every, depth_weight and distortion_weight", key);
   }
   memset(p, 0, sizeof *p);
   p->steps = conf->train_steps;
@@ -79,6 +92,10 @@ static int parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
   rc = json_whole(body, "holdout_every", 0, 1000000, &x);
   FG_TRY(rc);
   if (rc) p->holdout_every = (int)x;
+  p->depth_weight = conf->depth_weight;
+  p->distortion_weight = conf->distortion_weight;
+  FG_TRY(json_loss_weight(body, "depth_weight", &p->depth_weight));
+  FG_TRY(json_loss_weight(body, "distortion_weight", &p->distortion_weight));
   return 0;
 }
 

@@ -57,7 +57,7 @@ static const char *const section_names[SEC_COUNT] = {
 enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB };
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
-enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION };
+enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION, K_DEPTH_WEIGHT, K_DISTORTION_WEIGHT };
 enum { K_MODEL };
 /* Both Modbus sections take the first eight of these; K_BASE .. K_DONE_TIMEOUT_MS are
  * [robot] only, K_MOTION_TIMEOUT_MS [gripper.modbus] only (its ninth key, translated by
@@ -73,7 +73,8 @@ enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
-static const char *const train_keys[] = {"steps", "threads", "max_image_side", "half_precision",
+static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
+                                         "half_precision", "depth_weight", "distortion_weight",
                                          NULL};
 static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
@@ -468,6 +469,8 @@ fg_conf *fg_conf_defaults(void) {
   c->max_upload_bytes = (size_t)64 << 20;
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
   c->train_steps = 2000;
+  c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
+  c->distortion_weight = FG_TRAIN_DISTORTION_WEIGHT;
   c->train_threads = 0;
   c->max_image_side = 400;
   c->gripper_model = FG_GRIPPER_PANDA;
@@ -758,6 +761,14 @@ static int conf_handler(void *user, const char *section, const char *name, const
     if (k == K_STEPS) return parse_int(st, name, v, 1, 10000000, &c->train_steps);
     if (k == K_THREADS) return parse_int(st, name, v, 0, 1024, &c->train_threads);
     if (k == K_HALF_PRECISION) return parse_enum(st, name, v, bool_names, &c->half_precision);
+    if (k == K_DEPTH_WEIGHT || k == K_DISTORTION_WEIGHT) {
+      double *w = k == K_DEPTH_WEIGHT ? &c->depth_weight : &c->distortion_weight;
+      if (!parse_double(st, name, v, w)) return 0;
+      if (*w < 0.0 || *w > FG_TRAIN_MAX_LOSS_WEIGHT)
+        return fail_at(st, st->line, st->sec_text, name, "must be from 0 to %g, got '%s'",
+                       (double)FG_TRAIN_MAX_LOSS_WEIGHT, v);
+      return 1;
+    }
     return parse_int(st, name, v, 16, 16384, &c->max_image_side);
   case SEC_GRIPPER:
     if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;

@@ -11,6 +11,7 @@
 
 #include <stddef.h>
 
+#include "field/train.h"   /* the [train] loss weights' defaults and range */
 #include "grasp/gripper.h" /* fg_gripper_model: [gripper] model */
 
 #define FG_CONF_DEFAULT_PATH "/etc/fieldgrip/fieldgripd.conf"
@@ -69,6 +70,8 @@ typedef struct fg_conf {
   int train_threads;     /* 0 = all cores, else 1..1024 */
   int max_image_side;    /* 16..16384, default 400 */
   int half_precision;    /* 1: checkpoints keep hash tables in float16; default 0 */
+  double depth_weight;   /* [train] depth_weight, 0..FG_TRAIN_MAX_LOSS_WEIGHT */
+  double distortion_weight; /* [train] distortion_weight, same range */
   /* [gripper] */
   fg_gripper_model gripper_model;
   /* [robot], [gripper.modbus] */

@@ -142,6 +142,8 @@ static int setup_trainer(train_run *run) {
   opts.n_threads = run->n_threads;
   opts.seed = run->params.seed;
   opts.holdout_every = run->params.holdout_every;
+  opts.depth_weight = (float)run->params.depth_weight;
+  opts.distortion_weight = (float)run->params.distortion_weight;
   for (int k = 0; k < 3; k++) opts.background[k] = (float)scene_info.params.background[k];
   int rc = fg_trainer_new(&run->trainer, run->field, run->frames, run->n_frames, &opts);
   if (rc != 0) {

@@ -164,6 +164,8 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   json_object_set_new(o, "max_seconds",
                       j->params.max_seconds > 0 ? json_real(j->params.max_seconds) : json_null());
   json_object_set_new(o, "holdout_every", json_integer(j->params.holdout_every));
+  json_object_set_new(o, "depth_weight", json_real(j->params.depth_weight));
+  json_object_set_new(o, "distortion_weight", json_real(j->params.distortion_weight));
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
   json_object_set_new(o, "phase", j->phase[0] ? json_string(j->phase) : json_null());
@@ -228,6 +230,9 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   double ms = jnum(o, "max_seconds");
   j->params.max_seconds = isfinite(ms) ? ms : 0;
   j->params.holdout_every = (int)jint(o, "holdout_every");
+  const double dw = jnum(o, "depth_weight"), dd = jnum(o, "distortion_weight");
+  j->params.depth_weight = isfinite(dw) ? dw : 0.0; /* jobs recorded before these existed */
+  j->params.distortion_weight = isfinite(dd) ? dd : 0.0;
   j->n_frames = (int)jint(o, "frames");
   j->n_heldout = (int)jint(o, "heldout_frames");
   const char *phase = json_string_value(json_object_get(o, "phase"));

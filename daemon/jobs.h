@@ -65,6 +65,8 @@ typedef struct fg_job_params {
   double max_seconds; /* wall-clock limit, > 0; 0: none */
   int holdout_every;  /* 0: no frame held out; k: frames i with i % k == 0 (i counts the
                          scene's frames in number order from 0) are held out for PSNR */
+  double depth_weight;      /* weight of the depth loss (field/train.h) */
+  double distortion_weight; /* weight of the distortion loss */
 } fg_job_params;
 
 /* A consistent copy of a job. Times in Unix milliseconds, 0 when not yet. */

@@ -88,7 +88,8 @@ void fg_train_opts_default(fg_train_opts *o) {
   o->feature_weight = 1.0f;
   o->lr = 1e-2f;
   o->background[0] = o->background[1] = o->background[2] = 1.0f;
-  o->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
+  o->depth_weight = (float)FG_TRAIN_DEPTH_WEIGHT;
+  o->distortion_weight = (float)FG_TRAIN_DISTORTION_WEIGHT;
   o->depth_margin = 0.01f;
 }
 

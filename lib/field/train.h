@@ -49,7 +49,9 @@ typedef struct fg_train_opts {
   float distortion_weight;    /* weight of the distortion loss (0: off) */
 } fg_train_opts;
 
-#define FG_TRAIN_DEPTH_WEIGHT 0.1f
+#define FG_TRAIN_DEPTH_WEIGHT 0.1
+#define FG_TRAIN_DISTORTION_WEIGHT 0.0
+#define FG_TRAIN_MAX_LOSS_WEIGHT 1000.0 /* the largest weight the daemon accepts */
 
 void fg_train_opts_default(fg_train_opts *o);
 

@@ -87,7 +87,7 @@ int main(int argc, char **argv) {
   const char *scenegen = NULL, *variants = "none,distortion,depth,depth+distortion";
   int steps = 2000, views = 36, width = 240, height = 180, threads = 2, samples = 0;
   const char *seed = "0";
-  float depth_w = FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f;
+  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     if (!v) {

@@ -14,6 +14,11 @@ double t_now(void) {
 
 void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim,
                 int patch) {
+  t_scenegen_depth(scenegen, dir, views, w, h, dim, patch, NULL);
+}
+
+void t_scenegen_depth(const char *scenegen, const char *dir, int views, int w, int h, int dim,
+                      int patch, const char *depth) {
   char sv[16], sw[16], sh[16], sd[16], sp[16];
   snprintf(sv, sizeof sv, "%d", views);
   snprintf(sw, sizeof sw, "%d", w);
@@ -21,7 +26,10 @@ void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, 
   snprintf(sd, sizeof sd, "%d", dim);
   snprintf(sp, sizeof sp, "%d", patch);
   const char *argv[] = {scenegen, "--out", dir, "--views", sv, "--width", sw, "--height", sh,
-                        "--dim", sd, "--holdout", "0", patch > 0 ? "--patch" : NULL, sp, NULL};
+                        "--dim", sd, "--holdout", "0", NULL, NULL, NULL, NULL, NULL};
+  int n = 13;
+  if (patch > 0) argv[n++] = "--patch", argv[n++] = sp;
+  if (depth) argv[n++] = "--depth", argv[n++] = depth;
   pid_t pid = fork();
   if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));
   if (pid == 0) {

@@ -12,6 +12,10 @@
 void t_scenegen(const char *scenegen, const char *dir, int views, int w, int h, int dim,
                 int patch);
 
+/* The same with --depth depth ("png" or "npy") when depth is not NULL. */
+void t_scenegen_depth(const char *scenegen, const char *dir, int views, int w, int h, int dim,
+                      int patch, const char *depth);
+
 /* GET /v1/scenes/{name}, asserted 200; the caller owns the JSON (json_decref). */
 json_t *t_scene_json(const char *name);
 

@@ -75,6 +75,8 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_EQ(c->train_threads, 0);
   ASSERT_EQ(c->max_image_side, 400);
   ASSERT_EQ(c->half_precision, 0);
+  ASSERT_NEAR(c->depth_weight, FG_TRAIN_DEPTH_WEIGHT, 0);
+  ASSERT_NEAR(c->distortion_weight, FG_TRAIN_DISTORTION_WEIGHT, 0);
   ASSERT_EQ(c->gripper_model, FG_GRIPPER_PANDA);
 
   const fg_conf_modbus *r = &c->robot;
@@ -236,6 +238,8 @@ static void test_values(void) {
       "threads = 1024\n"
       "max_image_side = 16\n"
       "half_precision = true\n"
+      "depth_weight = 0.25\n"
+      "distortion_weight = 0.002\n"
       "[gripper]\n"
       "model = robotiq-2f140\n"
       "[robot]\n"
@@ -268,6 +272,8 @@ static void test_values(void) {
   ASSERT_EQ(c->train_threads, 1024);
   ASSERT_EQ(c->max_image_side, 16);
   ASSERT_EQ(c->half_precision, 1);
+  ASSERT_NEAR(c->depth_weight, 0.25, 0);
+  ASSERT_NEAR(c->distortion_weight, 0.002, 0);
   ASSERT_EQ(c->gripper_model, FG_GRIPPER_ROBOTIQ_2F140);
   ASSERT_EQ(c->robot.done_timeout_ms, 3600000);
   ASSERT_EQ(c->gripper_modbus.motion_timeout_ms, 1);
@@ -448,6 +454,8 @@ static void test_errors(void) {
   EXPECT_ERROR("[train]\nthreads = -1\n", 2, "[train] threads:", NULL);
   EXPECT_ERROR("[train]\nmax_image_side = 15\n", 2, "[train] max_image_side:", "16 to 16384");
   EXPECT_ERROR("[train]\nhalf_precision = yes\n", 2, "[train] half_precision:", "true");
+  EXPECT_ERROR("[train]\ndepth_weight = -1\n", 2, "[train] depth_weight:", "0 to 1000");
+  EXPECT_ERROR("[train]\ndistortion_weight = lots\n", 2, "[train] distortion_weight:", "number");
   EXPECT_ERROR("[http]\nmax_upload_mb = 0\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[http]\nmax_upload_mb = 4097\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[robot]\nport = 0\n", 2, "[robot] port:", "1 to 65535");
@@ -605,6 +613,7 @@ static void test_shipped(void) {
   ASSERT_EQ(c->robot.done_timeout_ms, d->robot.done_timeout_ms);
   ASSERT_EQ(c->gripper_modbus.motion_timeout_ms, d->gripper_modbus.motion_timeout_ms);
   ASSERT_EQ(c->gripper_model, d->gripper_model);
+  ASSERT(c->depth_weight == d->depth_weight && c->distortion_weight == d->distortion_weight);
   fg_conf_free(c);
   fg_conf_free(d);
   snprintf(path, sizeof path, "%s/config/demo.conf", src);
