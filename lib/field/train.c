@@ -317,7 +317,27 @@ static void pixel_feature(const fg_frame *fr, int u, int v, float *out) {
   }
 }
 
-/* Draws the step's R rays (the first R_f from frames with features). */
+/* The measured z-depth (m) of pixel (u, v) for the depth loss, or 0: none where the frame has
+ * no depth or the pixel none, and none at a depth edge, where a 4-neighbour's measurement
+ * differs by more than max(margin, 2% of z): one value there stands for two surfaces (a ray
+ * jittered inside the pixel may meet either, and real sensors put "flying pixels" there). */
+static float pixel_depth(const fg_frame *fr, int u, int v, float margin) {
+  if (!fr->depth) return 0.0f;
+  const int w = fr->cam.w, h = fr->cam.h;
+  const float *row = fr->depth + (size_t)v * (size_t)w;
+  const float z = row[u];
+  if (!(z > 0.0f)) return 0.0f;
+  const float tol = margin > 0.02f * z ? margin : 0.02f * z;
+  const float nb[4] = {u > 0 ? row[u - 1] : z, u + 1 < w ? row[u + 1] : z,
+                       v > 0 ? row[u - w] : z, v + 1 < h ? row[u + w] : z};
+  for (int k = 0; k < 4; k++)
+    if (!(fabsf(nb[k] - z) <= tol)) return 0.0f; /* also a neighbour without a value */
+  return z;
+}
+
+/* Draws the step's R rays (the first R_f from frames with features), each jittered within its
+ * pixel. A ray with depth takes its pixel's measurement: away from depth edges (pixel_depth)
+ * the jitter's error is at most half the step to a neighbour and averages out. */
 static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
   const uint64_t seed = t->opts.seed;
   const int64_t step = t->step;
@@ -332,13 +352,13 @@ static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
     const uint64_t hj = hash4(seed, step, (uint64_t)r, STREAM_JITTER);
     const int u = (int)below(hp, (uint32_t)fr->cam.w);
     const int v = (int)below(hp << 32, (uint32_t)fr->cam.h);
+    const float z = t->geometry && t->opts.depth_weight > 0.0f
+                        ? pixel_depth(fr, u, v, t->opts.depth_margin)
+                        : 0.0f;
     const double per_z = frame_ray(t->f, fr, (float)u + unit24(hj, 0),
                                    (float)v + unit24(hj, 24), t->o + 3 * r, t->d + 3 * r);
     pixel_rgb(fr, u, v, t->target + 3 * r);
-    if (t->geometry) /* 0 where the frame has no depth or the pixel none */
-      t->depth_z[r] = fr->depth ? (float)(fr->depth[(size_t)v * (size_t)fr->cam.w + (size_t)u] *
-                                          per_z / t->f->cfg.box_size)
-                                : 0.0f;
+    if (t->geometry) t->depth_z[r] = (float)(z * per_z / t->f->cfg.box_size); /* 0: none */
     if (r < R_f) pixel_feature(fr, u, v, t->ftarget + (size_t)r * (size_t)t->D);
   }
 }

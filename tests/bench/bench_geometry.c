@@ -7,7 +7,7 @@
  *
  * Usage: bench_geometry --scenegen PROGRAM [--steps N] [--views N] [--width W --height H]
  *                       [--threads N] [--samples N] [--variants LIST] [--seed N]
- *                       [--depth-weight W] [--distortion-weight W]
+ *                       [--depth-weight W] [--distortion-weight W] [--depth-margin M]
  * Defaults: 2000 steps, 36 views at 240x180 (every 10th held out), 2 threads, the trainer's
  * 2^17 samples per step, variants none,distortion,depth,depth+distortion, seed 0, the
  * trainer's default depth weight and distortion weight 0.01 where a variant uses them.
@@ -31,7 +31,7 @@ static const double ws_min[3] = {0.10, -0.45, 0.005}, ws_max[3] = {0.80, 0.45, 0
 
 static int run_variant(const char *variant, const char *dir, const sg_gt *gt,
                        const fg_frame *frames, size_t n, int steps, int threads, int samples,
-                       float depth_w, float dist_w) {
+                       float depth_w, float dist_w, float margin) {
   const int use_depth = strstr(variant, "depth") != NULL;
   const int use_dist = strstr(variant, "distortion") != NULL;
   fg_field_config cfg;
@@ -46,6 +46,7 @@ static int run_variant(const char *variant, const char *dir, const sg_gt *gt,
   if (samples) o.target_samples = samples;
   o.depth_weight = use_depth ? depth_w : 0.0f;
   o.distortion_weight = use_dist ? dist_w : 0.0f;
+  if (margin > 0.0f) o.depth_margin = margin;
   memcpy(o.background, gt->background_rgb, sizeof o.background);
   if (rc == 0) rc = fg_trainer_new(&t, f, frames, n, &o);
   fg_train_stats st = {0};
@@ -62,12 +63,12 @@ static int run_variant(const char *variant, const char *dir, const sg_gt *gt,
   if (rc == 0) rc = sg_geom_evaluate(gt, dir, f, frames, n, 10, threads, &ev);
   if (rc == 0)
     printf("bench=geometry variant=%s steps=%d views=%zu threads=%d samples_per_step=%d "
-           "depth_weight=%g distortion_weight=%g train_s=%.1f samples_per_s=%.0f "
+           "depth_weight=%g distortion_weight=%g depth_margin=%g train_s=%.1f samples_per_s=%.0f "
            "psnr_db=%.2f depth_object_median_mm=%.2f depth_object_p90_mm=%.2f "
            "depth_table_median_mm=%.2f object_px=%zu %s_cavity_free=%.3f %s_cavity_points=%zu "
            "%s_cavity_free=%.3f %s_cavity_points=%zu %s_iou=%.3f %s_iou=%.3f\n",
            variant, steps, n, threads, o.target_samples, (double)o.depth_weight,
-           (double)o.distortion_weight, train_s, samples_total / train_s, psnr,
+           (double)o.distortion_weight, (double)o.depth_margin, train_s, samples_total / train_s, psnr,
            ev.depth_object_median_mm, ev.depth_object_p90_mm, ev.depth_table_median_mm,
            ev.n_object_px, gt->objects[ev.container[0]].name, ev.cavity_free[0],
            gt->objects[ev.container[0]].name, ev.cavity_points[0],
@@ -87,7 +88,7 @@ int main(int argc, char **argv) {
   const char *scenegen = NULL, *variants = "none,distortion,depth,depth+distortion";
   int steps = 2000, views = 36, width = 240, height = 180, threads = 2, samples = 0;
   const char *seed = "0";
-  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f;
+  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f, margin = 0.0f;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     if (!v) {
@@ -106,6 +107,7 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--seed")) seed = v;
     else if (!strcmp(a, "--depth-weight")) depth_w = (float)atof(v);
     else if (!strcmp(a, "--distortion-weight")) dist_w = (float)atof(v);
+    else if (!strcmp(a, "--depth-margin")) margin = (float)atof(v);
     else {
       fprintf(stderr, "bench_geometry: unknown option %s\n", a);
       return 2;
@@ -139,7 +141,7 @@ int main(int argc, char **argv) {
   snprintf(list, sizeof list, "%s", variants);
   for (char *save = NULL, *v = strtok_r(list, ",", &save); rc == 0 && v;
        v = strtok_r(NULL, ",", &save))
-    rc = run_variant(v, dir, &gt, frames, n, steps, threads, samples, depth_w, dist_w);
+    rc = run_variant(v, dir, &gt, frames, n, steps, threads, samples, depth_w, dist_w, margin);
   if (rc) fprintf(stderr, "bench_geometry: %s\n", fg_error_detail());
   fg_dataset_free(frames, n);
   if (gt.objects) sg_gt_free(&gt);

@@ -5,15 +5,17 @@
  *                    [--seconds S] [--steps N] [--eval-at S1,S2,...] [--samples N]
  *                    [--workspace x0 y0 z0 x1 y1 z1] [--field-scale F] [--no-features]
  *                    [--background R G B] [--seed N] [--render-out PNG]
- *                    [--learned-background]
+ *                    [--learned-background] [--depth-weight W] [--distortion-weight W]
  * Defaults: 2 threads, 400 px, holdout 10, 300 s, no step limit, eval at 60,120,300 s,
  * workspace -1.5 -1.5 -1.5 1.5 1.5 1.5 (the NeRF synthetic scenes' box), field scale 1,
- * white background. Held-out PSNR is measured over every pixel of the held-out frames at each
+ * white background, the trainer's loss weights (the depth loss acts only on frames whose data
+ * set has depth maps). Held-out PSNR is measured over every pixel of the held-out frames at each
  * eval time; evaluation time is excluded from the training clock.
  * Output, key=value lines:
  *   bench=train_eval seconds=60.0 steps=... psnr=... samples_per_s=...
  *   bench=train frames=... heldout=... steps=... seconds=... samples_per_s=... rays_per_step=...
- *   samples_per_step=... psnr=... feature_dim=... peak_rss_mb=...
+ *   samples_per_step=... psnr=... feature_dim=... depth_weight=... distortion_weight=...
+ *   peak_rss_mb=...
  *   bench=train_render width=... height=... seconds=...   (held-out frame 0, timed; with
  *   --render-out it is written beside its image) */
 #include <math.h>
@@ -60,6 +62,9 @@ int main(int argc, char **argv) {
     else if (!strcmp(a, "--field-scale") && more) scale = atof(argv[++i]);
     else if (!strcmp(a, "--no-features")) features = 0;
     else if (!strcmp(a, "--learned-background")) learn_bg = 1;
+    else if (!strcmp(a, "--depth-weight") && more) opts.depth_weight = (float)atof(argv[++i]);
+    else if (!strcmp(a, "--distortion-weight") && more)
+      opts.distortion_weight = (float)atof(argv[++i]);
     else if (!strcmp(a, "--render-out") && more) render_out = argv[++i];
     else if (!strcmp(a, "--eval-at") && more) {
       n_eval = 0;
@@ -139,9 +144,10 @@ int main(int argc, char **argv) {
   if (fg_trainer_n_heldout(t)) fg_trainer_eval(t, 1, &psnr);
   printf("bench=train frames=%zu heldout=%zu threads=%d steps=%lld seconds=%.2f "
          "samples_per_s=%.0f rays_per_step=%.0f samples_per_step=%.0f psnr=%.3f "
-         "feature_dim=%d peak_rss_mb=%.1f\n",
+         "feature_dim=%d depth_weight=%g distortion_weight=%g peak_rss_mb=%.1f\n",
          n, fg_trainer_n_heldout(t), threads, steps, train_s, samples / train_s, rays / steps,
-         samples / steps, psnr, D, peak_rss_mb());
+         samples / steps, psnr, D, (double)opts.depth_weight, (double)opts.distortion_weight,
+         peak_rss_mb());
   double render_s = NAN;
   int render_w = 0, render_h = 0;
   if (holdout > 0) {
