@@ -317,27 +317,36 @@ static void pixel_feature(const fg_frame *fr, int u, int v, float *out) {
   }
 }
 
-/* The measured z-depth (m) of pixel (u, v) for the depth loss, or 0: none where the frame has
- * no depth or the pixel none, and none at a depth edge, where a 4-neighbour's measurement
- * differs by more than max(margin, 2% of z): one value there stands for two surfaces (a ray
- * jittered inside the pixel may meet either, and real sensors put "flying pixels" there). */
-static float pixel_depth(const fg_frame *fr, int u, int v, float margin) {
+/* The measured z-depth (m) at pixel position (px, py) (pixel units, corner origin) for the
+ * depth loss, or 0 for none: bilinear between the four pixel centres around it, so that a
+ * jittered ray on a slanted surface gets the depth its own position has (nearest would be
+ * off by up to half the step to a neighbour, more than the margin at grazing angles). None
+ * where the frame has no depth, one of the four has none, or they differ by more than
+ * margin: at a depth edge one value stands for two surfaces (a ray may meet either, and real
+ * sensors put "flying pixels" there). */
+static float pixel_depth(const fg_frame *fr, float px, float py, float margin) {
   if (!fr->depth) return 0.0f;
   const int w = fr->cam.w, h = fr->cam.h;
-  const float *row = fr->depth + (size_t)v * (size_t)w;
-  const float z = row[u];
-  if (!(z > 0.0f)) return 0.0f;
-  const float tol = margin > 0.02f * z ? margin : 0.02f * z;
-  const float nb[4] = {u > 0 ? row[u - 1] : z, u + 1 < w ? row[u + 1] : z,
-                       v > 0 ? row[u - w] : z, v + 1 < h ? row[u + w] : z};
-  for (int k = 0; k < 4; k++)
-    if (!(fabsf(nb[k] - z) <= tol)) return 0.0f; /* also a neighbour without a value */
-  return z;
+  float x = px - 0.5f, y = py - 0.5f;
+  x = x < 0.0f ? 0.0f : x > (float)(w - 1) ? (float)(w - 1) : x;
+  y = y < 0.0f ? 0.0f : y > (float)(h - 1) ? (float)(h - 1) : y;
+  const int x0 = (int)x, y0 = (int)y, x1 = x0 + 1 < w ? x0 + 1 : x0, y1 = y0 + 1 < h ? y0 + 1 : y0;
+  const float fx = x - (float)x0, fy = y - (float)y0;
+  const float *d = fr->depth;
+  const float z00 = d[(size_t)y0 * (size_t)w + (size_t)x0], z01 = d[(size_t)y0 * (size_t)w + (size_t)x1];
+  const float z10 = d[(size_t)y1 * (size_t)w + (size_t)x0], z11 = d[(size_t)y1 * (size_t)w + (size_t)x1];
+  float lo = z00, hi = z00;
+  const float c[3] = {z01, z10, z11};
+  for (int k = 0; k < 3; k++) {
+    lo = c[k] < lo ? c[k] : lo;
+    hi = c[k] > hi ? c[k] : hi;
+  }
+  if (!(lo > 0.0f) || !(hi - lo <= margin)) return 0.0f;
+  return (z00 * (1.0f - fx) + z01 * fx) * (1.0f - fy) + (z10 * (1.0f - fx) + z11 * fx) * fy;
 }
 
 /* Draws the step's R rays (the first R_f from frames with features), each jittered within its
- * pixel. A ray with depth takes its pixel's measurement: away from depth edges (pixel_depth)
- * the jitter's error is at most half the step to a neighbour and averages out. */
+ * pixel, with the depth measured at its position (pixel_depth). */
 static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
   const uint64_t seed = t->opts.seed;
   const int64_t step = t->step;
@@ -352,11 +361,11 @@ static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
     const uint64_t hj = hash4(seed, step, (uint64_t)r, STREAM_JITTER);
     const int u = (int)below(hp, (uint32_t)fr->cam.w);
     const int v = (int)below(hp << 32, (uint32_t)fr->cam.h);
+    const float px = (float)u + unit24(hj, 0), py = (float)v + unit24(hj, 24);
     const float z = t->geometry && t->opts.depth_weight > 0.0f
-                        ? pixel_depth(fr, u, v, t->opts.depth_margin)
+                        ? pixel_depth(fr, px, py, t->opts.depth_margin)
                         : 0.0f;
-    const double per_z = frame_ray(t->f, fr, (float)u + unit24(hj, 0),
-                                   (float)v + unit24(hj, 24), t->o + 3 * r, t->d + 3 * r);
+    const double per_z = frame_ray(t->f, fr, px, py, t->o + 3 * r, t->d + 3 * r);
     pixel_rgb(fr, u, v, t->target + 3 * r);
     if (t->geometry) t->depth_z[r] = (float)(z * per_z / t->f->cfg.box_size); /* 0: none */
     if (r < R_f) pixel_feature(fr, u, v, t->ftarget + (size_t)r * (size_t)t->D);

@@ -2,8 +2,9 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy] [clip] [heatmap] [robot] [grasp]
-#   (no names: all of them; train takes about 6 minutes, throughput about 3; grasp several,
+#                           [busy] [clip] [heatmap] [robot] [grasp] [geometry]
+#                           [depth_throughput] [fox]
+#   (no names: all of them but fox; train takes about 6 minutes, throughput about 3; grasp several,
 #   most of them in the PyTorch peer)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
@@ -63,6 +64,22 @@
 #           candidates after fewer steps) change the run; pass is only meaningful at the
 #           defaults. ratio_per_evaluation compares the seconds per cost evaluation, since
 #           the peer, without collision checks, may optimise more poses than ours
+#   geometry  issue 13: a scenegen tabletop with 16-bit PNG depth maps (36 views at 240x180,
+#           every 10th held out), trained in-process (bench_geometry, BENCH_GEOMETRY_STEPS
+#           steps, default 2000, the trainer's 2^17 samples per step, 2 threads) four ways
+#           side by side: no geometry loss, distortion loss only, depth loss only, both.
+#           Each: held-out PSNR, median and p90 depth error on held-out object pixels (mm),
+#           the share of points 6 mm inside the mug's and the bowl's cavity that are free
+#           (alpha < 0.1 at 1 cm), the containers' heatmap IoU with the cavity counted,
+#           samples/s. Targets (the depth variant): PSNR >= 30 dB, depth median <= 2 mm,
+#           cavities >= 95 % free, IoU >= 0.6
+#   depth_throughput  training samples/s on a depth tabletop with the depth loss on and off,
+#           60 s each (target: on >= 90 % of off)
+#   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
+#           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
+#           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
+#           distortion loss (BENCH_FOX_DISTORTION, default 0.002): held-out PSNR (target
+#           >= 23 dB)
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -72,13 +89,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,71p' "$0" >&2
+  sed -n '2,88p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -507,6 +524,56 @@ bench_grasp() {
   echo "bench=grasp_vs_peer threads=2 dim=$dim seconds=$(field p50_s "$ours") peer_seconds=$(field seconds "$peer") ratio=$ratio ratio_per_evaluation=$ratio_eval evaluations=$(field evaluations "$ours") peer_evaluations=$(field evaluations "$peer") best_score_mug=$(field top_score_mug "$ours") peer_best_score_mug=$(field best_score_mug "$peer") best_score_box=$(field top_score_box "$ours") peer_best_score_box=$(field best_score_box "$peer") peer_cost_check_max_abs=$(field cost_check_max_abs "$peer") target_ratio=report_only pass=$pass"
 }
 
+bench_geometry() {
+  local steps=${BENCH_GEOMETRY_STEPS:-2000} out line v pass=yes
+  out=$("$build/tests/bench/bench_geometry" --scenegen "$build/tests/scenegen/fieldgrip-scenegen" \
+    --steps "$steps" --threads 2) || { echo "bench=geometry error=bench_geometry_failed pass=no"; failed=1; return; }
+  printf '%s\n' "$out" | grep -v '^bench=geometry variant=depth '
+  line=$(printf '%s\n' "$out" | grep '^bench=geometry variant=depth ')
+  v=$(awk -v p="$(field psnr_db "$line")" -v d="$(field depth_object_median_mm "$line")" \
+    -v m="$(field mug_cavity_free "$line")" -v b="$(field bowl_cavity_free "$line")" \
+    -v mi="$(field mug_iou "$line")" -v bi="$(field bowl_iou "$line")" \
+    'BEGIN { print (p >= 30 && d <= 2 && m >= 0.95 && b >= 0.95 && mi >= 0.6 && bi >= 0.6) ? "yes" : "no" }')
+  [ "$v" = yes ] || { pass=no; failed=1; }
+  echo "$line target_min_psnr_db=30 target_max_depth_median_mm=2 target_min_cavity_free=0.95 target_min_iou=0.6 pass=$pass"
+}
+
+bench_depth_throughput() {
+  local set=$tmp/tabletop_depth off on ratio pass
+  "$build/tests/scenegen/fieldgrip-scenegen" --out "$set" --holdout 0 --depth png >/dev/null
+  off=$("$build/tests/bench/bench_train" --data "$set/transforms.json" --threads 2 --holdout 0 \
+    --workspace 0.10 -0.45 0.005 0.80 0.45 0.35 --field-scale 2 --seconds 60 --depth-weight 0 |
+    grep '^bench=train ')
+  on=$("$build/tests/bench/bench_train" --data "$set/transforms.json" --threads 2 --holdout 0 \
+    --workspace 0.10 -0.45 0.005 0.80 0.45 0.35 --field-scale 2 --seconds 60 |
+    grep '^bench=train ')
+  rm -rf "$set"
+  ratio=$(awk -v a="$(field samples_per_s "$on")" -v b="$(field samples_per_s "$off")" \
+    'BEGIN { printf "%.3f", a / b }')
+  pass=$(awk -v r="$ratio" 'BEGIN { print (r >= 0.9) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  echo "bench=depth_throughput samples_per_s_without=$(field samples_per_s "$off") samples_per_s_with=$(field samples_per_s "$on") ratio=$ratio target_min_ratio=0.9 pass=$pass"
+}
+
+bench_fox() {
+  local fox=${FG_FOX_DIR:-} v out line psnr pass
+  if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
+    echo "bench=fox error=no_data_set hint=set_FG_FOX_DIR_to_instant-ngp's_data/nerf/fox pass=no"
+    failed=1; return
+  fi
+  for v in 0 "${BENCH_FOX_DISTORTION:-0.002}"; do
+    out=$("$build/tests/bench/bench_train" --data "$fox/transforms.json" --threads 2 \
+      --max-side 400 --holdout 10 --steps "${BENCH_FOX_STEPS:-3000}" --seconds 100000 \
+      --eval-at 100000 --workspace -1.5 -1.5 -1.5 1.5 1.5 1.5 --field-scale 4 \
+      --learned-background --no-features --distortion-weight "$v")
+    line=$(printf '%s\n' "$out" | grep '^bench=train ')
+    psnr=$(field psnr "$line")
+    pass=$(awk -v p="$psnr" 'BEGIN { print (p >= 23) ? "yes" : "no" }')
+    [ "$pass" = yes ] || failed=1
+    echo "bench=fox $(printf '%s' "$line" | sed 's/^bench=train //') target_min_psnr=23 pass=$pass"
+  done
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -519,7 +586,10 @@ for b in "${benches[@]}"; do
     heatmap) bench_heatmap ;;
     robot) bench_robot ;;
     grasp) bench_grasp ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp)" >&2; exit 2 ;;
+    geometry) bench_geometry ;;
+    depth_throughput) bench_depth_throughput ;;
+    fox) bench_fox ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
