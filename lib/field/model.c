@@ -389,7 +389,7 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
                             b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
       if (rc < 0) goto out;
       eval_density(f, &b, S, n_threads);
-      eval_colour(f, &b, n_wave, S, n_threads);
+      if (rgb) eval_colour(f, &b, n_wave, S, n_threads); /* depth, opacity, normals: no colour */
       if (feat) eval_hidden(f, &b, S, n_threads);
 #pragma omp parallel for schedule(static) num_threads(n_threads > 0 ? n_threads : omp_get_max_threads())
       for (int i = 0; i < n_wave; i++) {
@@ -402,7 +402,8 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
             break;
           }
           const float alpha = 1.0f - expf(-b.sigma[j] * b.dt[j]), w = s->T * alpha;
-          for (int c = 0; c < 3; c++) s->rgb[c] += w * b.rgb[3 * (size_t)j + c];
+          if (rgb)
+            for (int c = 0; c < 3; c++) s->rgb[c] += w * b.rgb[3 * (size_t)j + c];
           s->depth += w * (s->t0 + b.t[j]);
           if (ha)
             for (int k = 0; k < H; k++) ha[k] += w * b.h[(size_t)j * H + k];

@@ -130,7 +130,8 @@ int fg_field_features(const fg_field *f, const float *x_world, int64_t B, float 
  * background when bg is NULL (FG_EINVAL for a field without one). Outputs, each NULL when not
  * wanted: rgb (R,3) sRGB in [0,1], depth (R) expected distance along the ray in metres
  * (sum_i w_i t_i, not normalised by opacity), opacity (R), feat (R,D) (FG_EINVAL when
- * requested from a field without features). */
+ * requested from a field without features). Without rgb the colour network is not run: a
+ * depth or normal render costs about three quarters of a colour render. */
 int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *rays_d, int64_t R,
                          const float bg[3], float *rgb, float *depth, float *opacity,
                          float *feat, int n_threads);
