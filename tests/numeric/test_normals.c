@@ -6,12 +6,16 @@
  *   - fg_field_render_normals gives unit normals, exactly +z on the plane, -grad sigma at the
  *     expected termination point on the sphere (radial up to the hash grid's interpolation),
  *     and (0, 0, 0) for rays that see nothing;
- *   - fg_field_colour gives the colour network's output (zero weights: sigmoid(0) = 0.5). */
+ *   - fg_voxel_alpha and fg_mesh_marching_cubes put the sphere's mesh where alpha = 1 - exp(-
+ *     sigma voxel_size) crosses the threshold, closed, with outward normals;
+ *   - fg_field_colour and fg_mesh_colour give the colour network's output (zero weights:
+ *     sigmoid(0) = 0.5, so 128 in 8 bits). */
 #include "field/model.h"
 
 #include <stdint.h>
 
 #include "core/error.h"
+#include "query/geometry.h"
 #include "test.h"
 
 #define LEVEL 4     /* the finest dense level of the default density grid (57 cells a side) */
@@ -190,10 +194,61 @@ static void test_sphere_normals(void) {
   fg_field_free(f);
 }
 
+/* The field sampled on a voxel grid and meshed: the iso-surface lies where
+ * 1 - exp(-sigma vs) = threshold, i.e. at radius R - ln(-ln(1 - threshold) / vs) / a. */
+static void test_sphere_mesh(void) {
+  fg_field *f = shape_field(SPHERE);
+  const double lo[3] = {0.2, 0.2, 0.15}, hi[3] = {0.8, 0.8, 0.75}, vs = 0.02;
+  fg_voxel_grid g;
+  ASSERT_OK(fg_voxel_grid_init(&g, lo, hi, vs));
+  float *alpha = malloc(fg_voxel_grid_count(&g) * sizeof *alpha);
+  ASSERT_OK(fg_voxel_alpha(f, &g, alpha, 2));
+  const float thr = 0.1f;
+  const double r_iso = R - log(-log(1.0 - thr) / vs) / SLOPE;
+  fg_mesh m;
+  ASSERT_OK(fg_mesh_marching_cubes(&g, alpha, thr, &m));
+  ASSERT(m.n_faces > 1000);
+  double worst = 0.0;
+  for (size_t v = 0; v < m.n_vertices; v++) {
+    const float *p = m.p_world + 3 * v;
+    const double r = sqrt((p[0] - C[0]) * (p[0] - C[0]) + (p[1] - C[1]) * (p[1] - C[1]) +
+                          (p[2] - C[2]) * (p[2] - C[2]));
+    if (fabs(r - r_iso) > worst) worst = fabs(r - r_iso);
+  }
+  printf("sphere mesh: %zu vertices, %zu faces, worst radial error %.3f voxel\n", m.n_vertices,
+         m.n_faces, worst / vs);
+  ASSERT(worst < 0.5 * vs);
+  for (size_t t = 0; t < m.n_faces; t++) { /* outward */
+    const float *a = m.p_world + 3 * m.faces[3 * t], *b = m.p_world + 3 * m.faces[3 * t + 1],
+                *c = m.p_world + 3 * m.faces[3 * t + 2];
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    const double w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    const double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                         u[0] * w[1] - u[1] * w[0]};
+    double out = 0.0;
+    for (int k = 0; k < 3; k++) out += n[k] * (a[k] - C[k]);
+    ASSERT(out > 0.0);
+  }
+  ASSERT_OK(fg_mesh_colour(&m, f, (float)(0.5 * vs), 2));
+  ASSERT(m.rgb != NULL);
+  for (size_t i = 0; i < 3 * m.n_vertices; i++) ASSERT_EQ(m.rgb[i], 128);
+  fg_mesh_release(&m);
+  /* Points of the same grid: the voxels inside r_iso. */
+  ASSERT_OK(fg_mesh_points(&g, alpha, thr, &m));
+  ASSERT_NEAR((double)m.n_vertices * vs * vs * vs / (4.0 / 3.0 * M_PI * pow(r_iso, 3)), 1.0,
+              0.05);
+  ASSERT_OK(fg_mesh_colour(&m, f, 0.01f, 2));
+  for (size_t i = 0; i < 3 * m.n_vertices; i++) ASSERT_EQ(m.rgb[i], 128);
+  fg_mesh_release(&m);
+  free(alpha);
+  fg_field_free(f);
+}
+
 int main(void) {
   test_gradient();
   test_plane_normals();
   test_sphere_normals();
+  test_sphere_mesh();
   printf("normals: ok\n");
   return 0;
 }
