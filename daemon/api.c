@@ -31,6 +31,8 @@ const fg_route fg_api_routes[] = {
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/heatmap", "/v1/scenes/{s}/heatmap", fg_api_scene_heatmap,
    FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/scenes/{}/geometry", "/v1/scenes/{s}/geometry", fg_api_scene_geometry,
+   FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/jobs", "/v1/jobs", fg_api_jobs_list, 0},

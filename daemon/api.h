@@ -30,6 +30,7 @@ int fg_api_job_cancel(fg_req *req, fg_resp *resp);
 int fg_api_job_events(fg_req *req, fg_resp *resp);
 int fg_api_scene_render(fg_req *req, fg_resp *resp);
 int fg_api_scene_heatmap(fg_req *req, fg_resp *resp);
+int fg_api_scene_geometry(fg_req *req, fg_resp *resp);
 int fg_api_embed_text(fg_req *req, fg_resp *resp);
 int fg_api_embed_image(fg_req *req, fg_resp *resp);
 int fg_api_robot_command(fg_req *req, fg_resp *resp);

@@ -1,5 +1,6 @@
-/* POST /v1/scenes/{s}/render: an image of the scene's trained field from a camera, as PNG.
- * Runs on the offload pool; the PNG is encoded by a fieldgrip-decode child (decoder.h). */
+/* POST /v1/scenes/{s}/render: an image of the scene's trained field from a camera, as PNG:
+ * colour, depth, surface normals or a query's heatmap. Runs on the offload pool; the PNG is
+ * encoded by a fieldgrip-decode child (decoder.h). */
 #include "api.h"
 #include "decoder.h"
 #include "json.h"
@@ -23,6 +24,8 @@
 #define HEATMAP_CHUNK 4096
 /* Pixels less opaque than this show the field's colour without a score. */
 #define HEATMAP_MIN_OPACITY 0.5f
+/* Pixels less opaque than this have no depth (0) and no normal (black). */
+#define SURFACE_MIN_OPACITY 0.5f
 
 static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",
                                           "k1", "k2", "k3", "p1", "p2", "camera_angle_x",
@@ -74,6 +77,7 @@ typedef struct render_req {
   double T_world_cam[16]; /* OpenGL convention */
   fg_camera cam;          /* PINHOLE, w and h set */
   int depth;              /* output depth, else rgb */
+  int normal;             /* output normal, else rgb */
   int heatmap;            /* output heatmap: the body also holds a query (query.h) */
 } render_req;
 
@@ -99,13 +103,15 @@ static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
     return fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail()), -1;
   }
   if (strcmp(output, "rgb") != 0 && strcmp(output, "depth") != 0 &&
-      strcmp(output, "heatmap") != 0) {
+      strcmp(output, "normal") != 0 && strcmp(output, "heatmap") != 0) {
     json_decref(merged);
     return fg_resp_error(resp, 400, "invalid_request", "\"output\" must be \"rgb\" (8-bit sRGB "
-                         "PNG), \"depth\" (16-bit PNG of z-depth in millimetres) or \"heatmap\" "
-                         "(with a query), got \"%s\"", output), -1;
+                         "PNG), \"depth\" (16-bit PNG of z-depth in millimetres), \"normal\" "
+                         "(8-bit PNG of world-frame surface normals, RGB = 127.5 (n + 1)) or "
+                         "\"heatmap\" (with a query), got \"%.40s\"", output), -1;
   }
   r->depth = strcmp(output, "depth") == 0;
+  r->normal = strcmp(output, "normal") == 0;
   r->heatmap = strcmp(output, "heatmap") == 0;
   if (!r->heatmap && fg_query_present(body)) {
     json_decref(merged);
@@ -174,10 +180,13 @@ static void camera_rays(const render_req *r, int64_t start, int64_t m, float *o,
   }
 }
 
-/* Renders the image into out: uint8 RGB [h][w][3], or uint16 z-depth in millimetres [h][w]
- * (0 where the opacity is below 0.5, saturating at 65535). */
-static int render_image(const fg_field *f, const render_req *r, const float bg[3], int n_threads,
-                        void *out) {
+/* Renders the image into out: uint8 RGB [h][w][3], uint16 z-depth in millimetres [h][w] (0
+ * where the opacity is below SURFACE_MIN_OPACITY, saturating at 65535), or uint8 RGB
+ * normals [h][w][3], round(127.5 (n + 1)) of the unit world-frame normal n
+ * (fg_field_render_normals with central differences at +-step_m), black (0, 0, 0) where the
+ * opacity is below SURFACE_MIN_OPACITY or the density has no gradient. */
+static int render_image(const fg_field *f, const render_req *r, const float bg[3], float step_m,
+                        int n_threads, void *out) {
   const fg_camera *c = &r->cam;
   int64_t n = (int64_t)c->w * c->h;
   int64_t chunk = n < RENDER_CHUNK ? n : RENDER_CHUNK;
@@ -189,14 +198,26 @@ static int render_image(const fg_field *f, const render_req *r, const float bg[3
   for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
     int64_t m = n - start < chunk ? n - start : chunk;
     camera_rays(r, start, m, o, d, cos_axis);
-    rc = fg_field_render_rays(f, o, d, m, bg, r->depth ? NULL : rgb, r->depth ? depth : NULL,
-                              r->depth ? alpha : NULL, NULL, n_threads);
+    if (r->normal) /* rgb holds the normals */
+      rc = fg_field_render_normals(f, o, d, m, step_m, rgb, alpha, n_threads);
+    else
+      rc = fg_field_render_rays(f, o, d, m, bg, r->depth ? NULL : rgb, r->depth ? depth : NULL,
+                                r->depth ? alpha : NULL, NULL, n_threads);
     if (rc != 0) break;
     for (int64_t i = 0; i < m; i++) {
       int64_t p = start + i;
-      if (r->depth) {
+      if (r->normal) {
+        const float *nv = rgb + 3 * i;
+        const int none = !(alpha[i] >= SURFACE_MIN_OPACITY) ||
+                         (nv[0] == 0.0f && nv[1] == 0.0f && nv[2] == 0.0f);
+        for (int k = 0; k < 3; k++) {
+          float x = 127.5f * (nv[k] + 1.0f);
+          x = x > 0 ? (x < 255.0f ? x : 255.0f) : 0; /* NaN goes to 0 */
+          ((uint8_t *)out)[3 * p + k] = none ? 0 : (uint8_t)lroundf(x);
+        }
+      } else if (r->depth) {
         uint16_t mm = 0;
-        if (alpha[i] >= 0.5f) {
+        if (alpha[i] >= SURFACE_MIN_OPACITY) {
           double z_m = (double)depth[i] / (double)alpha[i] * (double)cos_axis[i];
           double v = z_m * 1000.0;
           mm = !(v > 0) ? 0 : v >= 65535.0 ? 65535 : (uint16_t)lround(v);
@@ -275,8 +296,11 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   float bg[3] = {(float)info.params.background[0], (float)info.params.background[1],
                  (float)info.params.background[2]};
   int threads = fg_conf_threads(req->conf);
+  /* Normals read the density half a voxel of the scene's grid to either side: the surface the
+   * voxels show, not the hash grid's millimetre-scale roughness. */
+  const float step_m = (float)(0.5 * info.params.voxel_size);
   int rc = r.heatmap ? render_heatmap(field, &r, &q, bg, threads, pixels)
-                     : render_image(field, &r, bg, threads, pixels);
+                     : render_image(field, &r, bg, step_m, threads, pixels);
   if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "render failed: %s", fg_error_detail());
     goto out;

@@ -129,6 +129,28 @@ const char *fg_req_query(const fg_req *req, const char *name) {
                                        NULL) == MHD_YES ? "" : NULL;
 }
 
+typedef struct unknown_arg {
+  const char *const *known;
+  size_t n;
+  const char *first; /* the first unknown name met */
+} unknown_arg;
+
+static enum MHD_Result find_unknown(void *cls, enum MHD_ValueKind kind, const char *key,
+                                    const char *value) {
+  unknown_arg *u = cls;
+  for (size_t i = 0; i < u->n; i++)
+    if (strcmp(key, u->known[i]) == 0) return MHD_YES;
+  u->first = key;
+  return MHD_NO; /* stop at the first */
+}
+
+const char *fg_req_query_unknown(const fg_req *req, const char *const *known, size_t n) {
+  unknown_arg u = {known, n, NULL};
+  MHD_get_connection_values((struct MHD_Connection *)req->mhd_conn, MHD_GET_ARGUMENT_KIND,
+                            find_unknown, &u);
+  return u.first;
+}
+
 const fg_part *fg_req_part(const fg_req *req, const char *name) {
   for (int i = 0; i < req->n_parts; i++)
     if (strcmp(req->parts[i].name, name) == 0) return &req->parts[i];
@@ -333,10 +355,14 @@ static enum MHD_Result send_response(conn_ctx *c) {
   if (r->content_type) MHD_add_response_header(mr, MHD_HTTP_HEADER_CONTENT_TYPE, r->content_type);
   if (r->allow[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_ALLOW, r->allow);
   if (r->location[0]) MHD_add_response_header(mr, MHD_HTTP_HEADER_LOCATION, r->location);
-  char *colon = r->header[0] ? strstr(r->header, ": ") : NULL;
-  if (colon) {
-    *colon = 0;
-    MHD_add_response_header(mr, r->header, colon + 2);
+  for (char *line = r->header; line && *line;) { /* "Name: value" lines */
+    char *end = strstr(line, "\r\n"), *colon = strstr(line, ": ");
+    if (end) *end = 0;
+    if (colon) {
+      *colon = 0;
+      MHD_add_response_header(mr, line, colon + 2);
+    }
+    line = end ? end + 2 : NULL;
   }
   if (r->status == 401)
     MHD_add_response_header(mr, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"fieldgrip\"");

@@ -69,7 +69,8 @@ typedef struct fg_resp {
   const char *content_type; /* static string */
   char allow[64];           /* for 405 */
   char location[160];       /* Location header, when not empty (202, 201) */
-  char header[128];         /* one more header as "Name: value", when not empty */
+  char header[256];         /* more headers as "Name: value" lines joined by "\r\n", when
+                             * not empty */
   const fg_stream_ops *stream_ops; /* a streamed body instead of body (fg_resp_stream) */
   void *stream_ctx;                /* owned: given to stream_ops->free */
 } fg_resp;
@@ -96,6 +97,11 @@ const char *fg_req_header(const fg_req *req, const char *name);
 /* Looks up a query-string argument ("?output=pooled"); NULL if absent, "" when given without
  * a value. */
 const char *fg_req_query(const fg_req *req, const char *name);
+
+/* The first query-string argument whose name is none of the n names known, or NULL when
+ * all are known (for handlers that refuse unknown parameters). The string lives as long as
+ * the request. */
+const char *fg_req_query_unknown(const fg_req *req, const char *const *known, size_t n);
 
 /* Finds a multipart part by name; NULL if absent. */
 const fg_part *fg_req_part(const fg_req *req, const char *name);

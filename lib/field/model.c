@@ -262,17 +262,24 @@ static int check_points(const fg_field *f, const float *x, int64_t B, const floa
   return 0;
 }
 
+/* Density sigma (n) in 1/m at n world points x (n,3), through scratch b of at least n
+ * samples. */
+static void density_world(const fg_field *f, infer_buf *b, const float *x_world, int n,
+                          float *sigma, int nt) {
+  const float to_m = (float)(1.0 / f->cfg.box_size);
+  fg_field_to_cube(f, x_world, n, b->x);
+  eval_density(f, b, n, nt);
+  for (int i = 0; i < n; i++) sigma[i] = b->sigma[i] * to_m;
+}
+
 int fg_field_density(const fg_field *f, const float *x_world, int64_t B, float *sigma,
                      int n_threads) {
   FG_TRY(check_points(f, x_world, B, sigma));
   infer_buf b;
   FG_TRY(infer_buf_new(&b, f, B < POINT_CHUNK ? B : POINT_CHUNK, 1));
-  const float to_m = (float)(1.0 / f->cfg.box_size);
   for (int64_t i0 = 0; i0 < B; i0 += POINT_CHUNK) {
     const int n = (int)(B - i0 < POINT_CHUNK ? B - i0 : POINT_CHUNK);
-    fg_field_to_cube(f, x_world + 3 * i0, n, b.x);
-    eval_density(f, &b, n, n_threads);
-    for (int i = 0; i < n; i++) sigma[i0 + i] = b.sigma[i] * to_m;
+    density_world(f, &b, x_world + 3 * i0, n, sigma + i0, n_threads);
   }
   free(b.mem);
   return 0;
@@ -389,7 +396,7 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
                             b.off, b.cnt, b.x, b.dt, b.t, &S, n_threads);
       if (rc < 0) goto out;
       eval_density(f, &b, S, n_threads);
-      eval_colour(f, &b, n_wave, S, n_threads);
+      if (rgb) eval_colour(f, &b, n_wave, S, n_threads); /* depth, opacity, normals: no colour */
       if (feat) eval_hidden(f, &b, S, n_threads);
 #pragma omp parallel for schedule(static) num_threads(n_threads > 0 ? n_threads : omp_get_max_threads())
       for (int i = 0; i < n_wave; i++) {
@@ -402,7 +409,8 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
             break;
           }
           const float alpha = 1.0f - expf(-b.sigma[j] * b.dt[j]), w = s->T * alpha;
-          for (int c = 0; c < 3; c++) s->rgb[c] += w * b.rgb[3 * (size_t)j + c];
+          if (rgb)
+            for (int c = 0; c < 3; c++) s->rgb[c] += w * b.rgb[3 * (size_t)j + c];
           s->depth += w * (s->t0 + b.t[j]);
           if (ha)
             for (int k = 0; k < H; k++) ha[k] += w * b.h[(size_t)j * H + k];
@@ -477,5 +485,116 @@ int fg_field_render_camera(const fg_field *f, const double T_world_cam[16],
   const int rc = fg_field_render_rays(f, o, d, R, bg, rgb, depth, opacity, feat, n_threads);
   free(d);
   free(o);
+  return rc;
+}
+
+/* ---- surfaces: gradients, normals, colours -------------------------------------------- */
+
+/* Points per fg_field_density_gradient chunk (six samples each, ~20 MB of scratch), rays per
+ * fg_field_render_normals chunk, points per fg_field_colour chunk (~15 MB). */
+#define GRAD_CHUNK 2048
+#define NORMAL_CHUNK 65536
+#define COLOUR_CHUNK 8192
+
+int fg_field_density_gradient(const fg_field *f, const float *x_world, int64_t B,
+                              float step_m, float *grad, int n_threads) {
+  FG_TRY(check_points(f, x_world, B, grad));
+  if (!(step_m > 0.0f) || !isfinite(step_m))
+    return fg_fail(FG_EINVAL, "density gradient: the step must be a positive length in "
+                   "metres, got %g", (double)step_m);
+  if (B == 0) return 0;
+  const int chunk = (int)(B < GRAD_CHUNK ? B : GRAD_CHUNK);
+  infer_buf b;
+  FG_TRY(infer_buf_new(&b, f, 6 * (int64_t)chunk, 1));
+  float *pts = malloc((size_t)chunk * 6 * 3 * sizeof *pts); /* (6 chunk, 3): +x -x +y -y +z -z */
+  float *sig = malloc((size_t)chunk * 6 * sizeof *sig);     /* (6 chunk) */
+  if (!pts || !sig) {
+    free(pts), free(sig), free(b.mem);
+    return fg_fail(FG_ENOMEM, "density gradient: out of memory");
+  }
+  const double inv_2h = 0.5 / (double)step_m;
+  for (int64_t i0 = 0; i0 < B; i0 += chunk) {
+    const int n = (int)(B - i0 < chunk ? B - i0 : chunk);
+    for (int i = 0; i < n; i++)
+      for (int s = 0; s < 6; s++) {
+        float *q = pts + 3 * (6 * (size_t)i + (size_t)s);
+        memcpy(q, x_world + 3 * (i0 + i), 3 * sizeof *q);
+        q[s / 2] += s % 2 ? -step_m : step_m;
+      }
+    density_world(f, &b, pts, 6 * n, sig, n_threads);
+    for (int i = 0; i < n; i++)
+      for (int k = 0; k < 3; k++)
+        grad[3 * (i0 + i) + k] =
+            (float)(((double)sig[6 * i + 2 * k] - (double)sig[6 * i + 2 * k + 1]) * inv_2h);
+  }
+  free(pts);
+  free(sig);
+  free(b.mem);
+  return 0;
+}
+
+int fg_field_colour(const fg_field *f, const float *x_world, const float *dirs, int64_t B,
+                    float *rgb, int n_threads) {
+  FG_TRY(check_points(f, x_world, B, rgb));
+  if (B > 0 && !dirs) return fg_fail(FG_EINVAL, "field colour: NULL directions");
+  if (B == 0) return 0;
+  const int chunk = (int)(B < COLOUR_CHUNK ? B : COLOUR_CHUNK);
+  infer_buf b;
+  FG_TRY(infer_buf_new(&b, f, chunk, chunk));
+  for (int64_t i0 = 0; i0 < B; i0 += chunk) {
+    const int n = (int)(B - i0 < chunk ? B - i0 : chunk);
+    /* n rays of one sample each: the colour network sees each point with its own direction. */
+    for (int i = 0; i < n; i++) b.off[i] = i, b.cnt[i] = 1;
+    fg_field_to_cube(f, x_world + 3 * i0, n, b.x);
+    fg_sh4_encode(dirs + 3 * i0, n, b.sh);
+    eval_density(f, &b, n, n_threads);
+    eval_colour(f, &b, n, n, n_threads);
+    memcpy(rgb + 3 * i0, b.rgb, (size_t)n * 3 * sizeof *rgb);
+  }
+  free(b.mem);
+  return 0;
+}
+
+int fg_field_render_normals(const fg_field *f, const float *rays_o, const float *rays_d,
+                            int64_t R, float step_m, float *normals, float *opacity,
+                            int n_threads) {
+  if (!f || R < 0 || (R > 0 && (!rays_o || !rays_d || !normals)))
+    return fg_fail(FG_EINVAL, "render normals: NULL field or ray arrays, or negative count");
+  if (!(step_m > 0.0f) || !isfinite(step_m))
+    return fg_fail(FG_EINVAL, "render normals: the step must be a positive length in metres, "
+                   "got %g", (double)step_m);
+  if (R == 0) return 0;
+  static const float black[3] = {0.0f, 0.0f, 0.0f}; /* no colour is rendered */
+  const int chunk = (int)(R < NORMAL_CHUNK ? R : NORMAL_CHUNK);
+  float *depth = malloc((size_t)chunk * sizeof *depth), *op = malloc((size_t)chunk * sizeof *op);
+  float *p = malloc((size_t)chunk * 3 * sizeof *p), *g = malloc((size_t)chunk * 3 * sizeof *g);
+  int *hit = malloc((size_t)chunk * sizeof *hit); /* rays of the chunk with some opacity */
+  int rc = depth && op && p && g && hit ? 0 : fg_fail(FG_ENOMEM, "render normals: out of memory");
+  for (int64_t r0 = 0; rc == 0 && r0 < R; r0 += chunk) {
+    const int m = (int)(R - r0 < chunk ? R - r0 : chunk);
+    rc = fg_field_render_rays(f, rays_o + 3 * r0, rays_d + 3 * r0, m, black, NULL, depth, op,
+                              NULL, n_threads);
+    if (rc != 0) break;
+    int n_hit = 0;
+    for (int i = 0; i < m; i++) {
+      float *n = normals + 3 * (r0 + i);
+      n[0] = n[1] = n[2] = 0.0f;
+      if (!(op[i] > 0.0f) || !isfinite(depth[i])) continue;
+      const float t = depth[i] / op[i]; /* expected termination distance, metres */
+      for (int k = 0; k < 3; k++)
+        p[3 * n_hit + k] = rays_o[3 * (r0 + i) + k] + t * rays_d[3 * (r0 + i) + k];
+      hit[n_hit++] = i;
+    }
+    rc = fg_field_density_gradient(f, p, n_hit, step_m, g, n_threads);
+    for (int q = 0; rc == 0 && q < n_hit; q++) {
+      const double gx = g[3 * q], gy = g[3 * q + 1], gz = g[3 * q + 2];
+      const double len = sqrt(gx * gx + gy * gy + gz * gz);
+      if (!(len > 0.0) || !isfinite(len)) continue;
+      float *n = normals + 3 * (r0 + hit[q]);
+      n[0] = (float)(-gx / len), n[1] = (float)(-gy / len), n[2] = (float)(-gz / len);
+    }
+    if (rc == 0 && opacity) memcpy(opacity + r0, op, (size_t)m * sizeof *op);
+  }
+  free(depth), free(op), free(p), free(g), free(hit);
   return rc;
 }

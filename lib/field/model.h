@@ -124,16 +124,43 @@ int fg_field_density(const fg_field *f, const float *x_world, int64_t B, float *
 int fg_field_features(const fg_field *f, const float *x_world, int64_t B, float *sigma,
                       float *hidden, float *feat, int n_threads);
 
+/* Central differences of the density at B world points x (B,3): grad (B,3) receives
+ * (sigma(x + h e_k) - sigma(x - h e_k)) / (2 h) per world axis k, in 1/m^2, with h = step_m
+ * metres (> 0 and finite, else FG_EINVAL). A step of half a voxel of the scene's grid reads
+ * the surface the voxels show rather than the hash grid's finest cells (about a millimetre),
+ * where a trained density is rough. Costs six density evaluations a point. */
+int fg_field_density_gradient(const fg_field *f, const float *x_world, int64_t B,
+                              float step_m, float *grad, int n_threads);
+
+/* The colour (sRGB in [0,1]) the colour network gives a sample at each of B world points
+ * x (B,3) seen by a ray travelling along the unit direction dirs (B,3), world frame: rgb (B,3).
+ * What a render composites, one sample at a time, for colouring meshes and points. */
+int fg_field_colour(const fg_field *f, const float *x_world, const float *dirs, int64_t B,
+                    float *rgb, int n_threads);
+
 /* Renders R rays given in world coordinates (origins (R,3), unit directions (R,3)), with
  * samples placed at the centres of the marching lattice (no jitter) and early termination
  * at transmittance 1e-4. Rays see bg (3) where the field is empty, or the learned
  * background when bg is NULL (FG_EINVAL for a field without one). Outputs, each NULL when not
  * wanted: rgb (R,3) sRGB in [0,1], depth (R) expected distance along the ray in metres
  * (sum_i w_i t_i, not normalised by opacity), opacity (R), feat (R,D) (FG_EINVAL when
- * requested from a field without features). */
+ * requested from a field without features). Without rgb the colour network is not run: a
+ * depth or normal render costs about three quarters of a colour render. */
 int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *rays_d, int64_t R,
                          const float bg[3], float *rgb, float *depth, float *opacity,
                          float *feat, int n_threads);
+
+/* Surface normals of R rays (origins (R,3), unit directions (R,3), world frame): each ray is
+ * rendered as by fg_field_render_rays, its expected termination point taken as
+ * p = o + d * depth / opacity, and its normal is n = -grad sigma / |grad sigma| at p
+ * (fg_field_density_gradient with step_m): unit length, world frame, pointing from dense to
+ * empty space. normals (R,3) receives n, or (0, 0, 0) where the ray's opacity is 0 or the
+ * gradient vanishes or is not finite; opacity (R) receives each ray's opacity when not NULL,
+ * so that callers can leave out rays that hit nothing solid. Errors as fg_field_render_rays
+ * and FG_EINVAL for a bad step_m. */
+int fg_field_render_normals(const fg_field *f, const float *rays_o, const float *rays_d,
+                            int64_t R, float step_m, float *normals, float *opacity,
+                            int n_threads);
 
 /* Renders a whole image of a pinhole camera (cam->w x cam->h, OpenGL convention, pose
  * T_world_cam camera-to-world in metres) through fg_field_render_rays, ray (u, v) through the

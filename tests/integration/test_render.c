@@ -1,10 +1,11 @@
-/* POST /v1/scenes/{s}/render: 409 before training; after it, an 8-bit RGB PNG and a 16-bit
- * grey depth PNG of the asked size (intrinsics inside "camera" or at the top level, OpenGL or
- * OpenCV convention); the same bytes for the same request; bad cameras and outputs refused
- * with JSON errors; renders keep using the old field while a new training runs, and a
- * cancelled training leaves the field as it was; the same bytes after a restart; a truncated
- * checkpoint leaves the daemon healthy and the scene untrained (409, checkpoint_error); and
- * the daemon never loads OpenImageIO (PNG encoding happens in fieldgrip-decode).
+/* POST /v1/scenes/{s}/render: 409 before training; after it, an 8-bit RGB PNG, a 16-bit grey
+ * depth PNG and an 8-bit RGB normal PNG of the asked size (intrinsics inside "camera" or at the
+ * top level, OpenGL or OpenCV convention); the same bytes for the same request; bad cameras and
+ * outputs refused with JSON errors; renders keep using the old field while a new training runs,
+ * and a cancelled training leaves the field as it was; the same bytes after a restart; a
+ * truncated checkpoint leaves the daemon healthy and the scene untrained (409,
+ * checkpoint_error); and the daemon never loads OpenImageIO (PNG encoding happens in
+ * fieldgrip-decode).
  *
  * argv[1]: fieldgripd, argv[2]: fieldgrip-scenegen. */
 #include <sys/stat.h>
@@ -59,6 +60,20 @@ static void test_formats(void) {
   ASSERT_EQ(h, 48);
   ASSERT_EQ(bits, 16);
   ASSERT_EQ(type, 0); /* grey */
+  h_resp_free(r);
+
+  /* Surface normals: 8-bit RGB too (their values are checked on a longer-trained field in
+   * test_geometry). */
+  r = render_camera("sg", g_camera, "\"output\": \"normal\"");
+  t_png_header(r, &w, &h, &bits, &type);
+  ASSERT_EQ(w, 64);
+  ASSERT_EQ(h, 48);
+  ASSERT_EQ(bits, 8);
+  ASSERT_EQ(type, 2); /* RGB */
+  h_resp *again = render_camera("sg", g_camera, "\"output\": \"normal\"");
+  ASSERT_EQ(again->len, r->len);
+  ASSERT(memcmp(again->body, r->body, r->len) == 0);
+  h_resp_free(again);
   h_resp_free(r);
 
   /* Intrinsics at the top level, as in a transforms.json frame; the OpenCV convention; a
@@ -138,6 +153,19 @@ static void test_errors(void) {
       "\"h\": 48}, \"colour\": \"red\"}", good);
   BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"output\": \"normals\"}", good);
+  /* The message of an unknown output lists the choices. */
+  b = h_fmt("{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, \"h\": 48}, "
+            "\"output\": \"albedo\"}", good);
+  h_resp *out = t_render("sg", b);
+  ASSERT_HTTP_ERROR(out, 400, "invalid_request");
+  for (int i = 0; i < 4; i++) {
+    static const char *const choices[] = {"\"rgb\"", "\"depth\"", "\"normal\"", "\"heatmap\""};
+    ASSERT_STRCONTAINS(JSTR(out->json, "error.message"), choices[i]);
+  }
+  h_resp_free(out);
+  free(b);
+  BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
+      "\"h\": 48}, \"output\": \"normal\", \"embedding\": [1, 0, 0, 0, 0, 0, 0, 2]}", good);
   BAD(400, "invalid_request", "{\"camera\": {\"transform_matrix\": %s, \"fl_x\": 50, \"w\": 64, "
       "\"h\": 48}, \"convention\": \"directx\"}", good);
   /* heatmap: the query is checked (D = 8 here, no [clip]); test_heatmap renders them */
