@@ -49,7 +49,11 @@ typedef struct fg_train_opts {
   float distortion_weight;    /* weight of the distortion loss (0: off) */
 } fg_train_opts;
 
-#define FG_TRAIN_DEPTH_WEIGHT 0.1
+/* The depth weight, measured on scenegen tabletops with depth (tests/bench/bench_geometry, 1500
+ * steps): at 0.1 the mug's narrow cavity stayed half closed, at 1 colour and the heatmap's
+ * IoU suffered (held-out PSNR 30.6 against 31.7 dB, mug IoU 0.50 against 0.59); 0.3 keeps
+ * both cavities >= 99 % free with the best colour and depth. */
+#define FG_TRAIN_DEPTH_WEIGHT 0.3
 #define FG_TRAIN_DISTORTION_WEIGHT 0.0
 #define FG_TRAIN_MAX_LOSS_WEIGHT 1000.0 /* the largest weight the daemon accepts */
 

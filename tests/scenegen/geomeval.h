@@ -34,8 +34,9 @@ typedef struct sg_geom_eval {
 } sg_geom_eval;
 
 /* Evaluates field f trained on frames[0..n) of the data set in dir (fieldgrip-scenegen with
- * --holdout 0 and --depth: frame i is view i, with its depth map) on the views i with
- * i % holdout_every == 0. 0, or a negative FG_E* code with a detail. */
+ * --holdout 0, usually with --depth: frame i is view i) on the views i with
+ * i % holdout_every == 0; without depth maps the depth numbers are NaN over 0 pixels. 0, or a
+ * negative FG_E* code with a detail. */
 int sg_geom_evaluate(const sg_gt *gt, const char *dir, const fg_field *f,
                      const fg_frame *frames, size_t n, int holdout_every, int n_threads,
                      sg_geom_eval *out);
