@@ -94,9 +94,12 @@ static int ingest_one(fg_app *app, const void *image, size_t image_len,
   }
   fg_depth_map dm = {0};
   if (depth && depth->bytes) {
-    if (decode_depth(app, depth, &dm, err) != 0 ||
-        (fg_depth_check_grid(dm.w, dm.h, img.w, img.h) != 0 &&
-         (err->depth = 1, ingest_fail(err, 400, "invalid_depth", "depth: ")))) {
+    rc = decode_depth(app, depth, &dm, err);
+    if (rc == 0 && fg_depth_check_grid(dm.w, dm.h, img.w, img.h) != 0) {
+      err->depth = 1;
+      rc = ingest_fail(err, 400, "invalid_depth", "depth: ");
+    }
+    if (rc != 0) {
       fg_depth_release(&dm);
       fg_image_release(&img);
       return -1;

@@ -470,7 +470,7 @@ fg_conf *fg_conf_defaults(void) {
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
   c->train_steps = 2000;
   c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
-  c->distortion_weight = FG_CONF_DISTORTION_WEIGHT;
+  c->distortion_weight = FG_TRAIN_DISTORTION_WEIGHT;
   c->train_threads = 0;
   c->max_image_side = 400;
   c->gripper_model = FG_GRIPPER_PANDA;

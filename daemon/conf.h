@@ -14,12 +14,6 @@
 #include "field/train.h"   /* the [train] loss weights' defaults and range */
 #include "grasp/gripper.h" /* fg_gripper_model: [gripper] model */
 
-/* The daemon's distortion weight. Measured (bench_geometry, scenegen tabletop without depth,
- * 1500 steps): held-out PSNR 26.9 -> 31.2 dB, object depth error p90 661 -> 137 mm (the
- * floaters gone); lego at 1200 steps 28.60 -> 28.65 dB at the same speed. The library's
- * fg_train_opts_default keeps it off so that the quality tests' budgets stay as measured. */
-#define FG_CONF_DISTORTION_WEIGHT 0.01
-
 #define FG_CONF_DEFAULT_PATH "/etc/fieldgrip/fieldgripd.conf"
 #define FG_CONF_DEFAULT_STATE_DIR "/var/lib/fieldgrip"
 #define FG_CONF_DEFAULT_LISTEN "127.0.0.1:7070"
@@ -77,7 +71,7 @@ typedef struct fg_conf {
   int max_image_side;    /* 16..16384, default 400 */
   int half_precision;    /* 1: checkpoints keep hash tables in float16; default 0 */
   double depth_weight;   /* [train] depth_weight, 0..FG_TRAIN_MAX_LOSS_WEIGHT */
-  double distortion_weight; /* [train] distortion_weight, same range, FG_CONF_DISTORTION_WEIGHT */
+  double distortion_weight; /* [train] distortion_weight, same range */
   /* [gripper] */
   fg_gripper_model gripper_model;
   /* [robot], [gripper.modbus] */

@@ -9,8 +9,8 @@
  *                       [--threads N] [--samples N] [--variants LIST] [--seed N]
  *                       [--depth-weight W] [--distortion-weight W] [--depth-margin M]
  * Defaults: 2000 steps, 36 views at 240x180 (every 10th held out), 2 threads, the trainer's
- * 2^17 samples per step, variants none,distortion,depth,depth+distortion, seed 0, the
- * trainer's default depth weight and distortion weight 0.01 where a variant uses them.
+ * 2^17 samples per step, variants none,distortion,depth,depth+distortion, seed 0, depth
+ * weight FG_TRAIN_DEPTH_WEIGHT_MEASURED and distortion weight 0.01 where a variant uses them.
  * Output: one line per variant, e.g.
  *   bench=geometry variant=depth steps=2000 psnr_db=... depth_object_median_mm=... */
 #include <math.h>
@@ -76,8 +76,10 @@ static int run_variant(const char *variant, const char *dir, const sg_gt *gt,
            gt->objects[ev.container[1]].name, ev.cavity_points[1],
            gt->objects[ev.container[0]].name, ev.iou[0], gt->objects[ev.container[1]].name,
            ev.iou[1]);
-  else
-    fprintf(stderr, "bench_geometry: %s: %s\n", variant, fg_error_detail());
+  for (int k = 0; rc == 0 && k < ev.n_objects; k++)
+    printf("bench=geometry_solid variant=%s object=%s solid_recall=%.3f\n", variant,
+           gt->objects[k].name, ev.solid_recall[k]);
+  if (rc) fprintf(stderr, "bench_geometry: %s: %s\n", variant, fg_error_detail());
   fflush(stdout);
   fg_trainer_free(t);
   fg_field_free(f);
@@ -88,7 +90,7 @@ int main(int argc, char **argv) {
   const char *scenegen = NULL, *variants = "none,distortion,depth,depth+distortion";
   int steps = 2000, views = 36, width = 240, height = 180, threads = 2, samples = 0;
   const char *seed = "0";
-  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f, margin = 0.0f;
+  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT_MEASURED, dist_w = 0.01f, margin = 0.0f;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     if (!v) {

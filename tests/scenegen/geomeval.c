@@ -128,6 +128,17 @@ static int container_iou(const sg_gt *gt, const fg_field *f, int nt, sg_geom_eva
   float *neg = malloc((size_t)gt->n_classes * (size_t)D * sizeof *neg);
   int rc = owner && cavity && neg ? 0 : fg_fail(FG_ENOMEM, "no memory");
   if (rc == 0) sg_gt_voxelise(gt, &g, owner, cavity);
+  const float *alpha = fg_voxel_features_alpha(vf);
+  out->n_objects = gt->n_objects < SG_GEOM_MAX_OBJECTS ? gt->n_objects : SG_GEOM_MAX_OBJECTS;
+  for (int k = 0; rc == 0 && k < out->n_objects; k++) {
+    size_t total = 0, seen = 0;
+    for (size_t i = 0; i < N; i++)
+      if (owner[i] == k) {
+        total++;
+        seen += alpha[i] >= FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
+      }
+    out->solid_recall[k] = total ? (double)seen / (double)total : NAN;
+  }
   for (int c = 0; rc == 0 && c < out->n_containers; c++) {
     const int k = out->container[c], cls = gt->objects[k].class_id;
     int nn = 0;

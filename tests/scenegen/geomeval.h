@@ -9,7 +9,9 @@
  *    query's occupancy threshold (free space to a grasp search);
  *  - container IoU (issue 5's measure, with the cavity counted): the occupied voxels (alpha
  *    >= 0.1 at 1 cm) scoring >= 0.5 for the object's class embedding with every other class
- *    as negatives, against the object's voxels (gtvox.h); only when the field has features. */
+ *    as negatives, against the object's voxels (gtvox.h); only when the field has features;
+ *  - solid recall: per object, the share of its voxels that are occupied at all (alpha >= 0.1
+ *    at the voxel centre), what heatmaps and grasp collision checks can see of it. */
 #ifndef SG_GEOMEVAL_H
 #define SG_GEOMEVAL_H
 
@@ -21,6 +23,7 @@
 
 #define SG_GEOM_CLEARANCE 0.006   /* metres inside a cavity */
 #define SG_GEOM_VOXEL 0.01        /* the scene's voxel size */
+#define SG_GEOM_MAX_OBJECTS 8
 
 typedef struct sg_geom_eval {
   size_t n_object_px, n_table_px;     /* evaluated pixels */
@@ -31,6 +34,9 @@ typedef struct sg_geom_eval {
   size_t cavity_points[2];
   double cavity_free[2];              /* share of points with alpha < 0.1 */
   double iou[2];                      /* with the cavity counted; NaN without features */
+  int n_objects;
+  double solid_recall[SG_GEOM_MAX_OBJECTS]; /* per object: share of its voxels (gtvox.h) that
+                                               are occupied (alpha >= 0.1 at voxel centres) */
 } sg_geom_eval;
 
 /* Evaluates field f trained on frames[0..n) of the data set in dir (fieldgrip-scenegen with

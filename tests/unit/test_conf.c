@@ -76,7 +76,7 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_EQ(c->max_image_side, 400);
   ASSERT_EQ(c->half_precision, 0);
   ASSERT_NEAR(c->depth_weight, FG_TRAIN_DEPTH_WEIGHT, 0);
-  ASSERT_NEAR(c->distortion_weight, FG_CONF_DISTORTION_WEIGHT, 0);
+  ASSERT_NEAR(c->distortion_weight, FG_TRAIN_DISTORTION_WEIGHT, 0);
   ASSERT_EQ(c->gripper_model, FG_GRIPPER_PANDA);
 
   const fg_conf_modbus *r = &c->robot;
