@@ -30,7 +30,7 @@
 #define DIM 8
 #define PATCH 8
 
-/* Under AddressSanitizer a training step is ten times slower: the test then trains a few
+/* Under AddressSanitizer a training step is ten times slower: the test then trains
  * 80 steps, enough for some solid, and checks the replies' form but not where the surfaces
  * are. */
 #if defined(__SANITIZE_ADDRESS__)
