@@ -6,9 +6,11 @@
 #include "metrics.h"
 #include "query.h"
 #include "robot.h"
+#include "voxcache.h"
 
 #include "config.h"
 #include "core/error.h"
+#include "core/log.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -105,6 +107,23 @@ fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp
                   "POST /v1/scenes/%s/train, and wait until the job is done", info->name,
                   info->name);
   return NULL;
+}
+
+int fg_api_scene_voxels(fg_field_ref *ref, const fg_voxel_grid *g, const char *name,
+                        int n_threads, fg_voxels **out, fg_resp *resp) {
+  double built_s = 0;
+  if (fg_voxcache_get(fg_field_ref_voxcache(ref), fg_field_ref_field(ref), g, n_threads, out,
+                      &built_s) != 0)
+    return fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of "
+                         "scene '%s': %s", name, fg_error_detail()), -1;
+  if (built_s > 0) {
+    const fg_voxel_features *vf = fg_voxels_features(*out);
+    fg_metrics_add_voxel_build(built_s);
+    fg_info("scene %s: voxel features built in %.2f s: %zu voxels at %g m, %zu occupied, %.1f MB",
+            name, built_s, fg_voxel_grid_count(g), g->voxel_size, fg_voxel_features_n_kept(vf),
+            (double)fg_voxel_features_bytes(vf) / 1048576.0);
+  }
+  return 0;
 }
 
 int fg_api_query_fits(const fg_field *f, const fg_query *q, const char *name, fg_resp *resp) {

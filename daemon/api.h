@@ -79,6 +79,14 @@ fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
  * load, when it did not). info is the scene's description. */
 fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp);
 
+/* The voxel features of ref's field on grid g from the field's voxel cache (voxcache.h),
+ * built on first use: a build is counted in the metrics and logged for scene `name`. 0 and
+ * *out (fg_voxels_release), or -1 after answering 500. */
+struct fg_voxels;
+struct fg_voxel_grid;
+int fg_api_scene_voxels(fg_field_ref *ref, const struct fg_voxel_grid *g, const char *name,
+                        int n_threads, struct fg_voxels **out, fg_resp *resp);
+
 /* 0 when query q (query.h) can score field f of scene `name`; else answers 409 no_features (a
  * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was
  * committed since q was checked) and returns -1. */

@@ -115,18 +115,7 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
   const float *alpha;
   const int cached = field->cfg.feature_dim > 0 && r.voxel_size == info.params.voxel_size;
   if (cached) {
-    double built_s = 0;
-    rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, &built_s);
-    if (rc != 0) {
-      fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of scene "
-                    "'%s': %s", info.name, fg_error_detail());
-      goto out;
-    }
-    if (built_s > 0) {
-      fg_metrics_add_voxel_build(built_s);
-      fg_info("scene %s: voxel features built in %.2f s for its geometry: %zu voxels at %g m",
-              info.name, built_s, fg_voxel_grid_count(&grid), grid.voxel_size);
-    }
+    if (fg_api_scene_voxels(ref, &grid, info.name, threads, &vox, resp) != 0) goto out;
     alpha = fg_voxel_features_alpha(fg_voxels_features(vox));
   } else {
     own_alpha = malloc(fg_voxel_grid_count(&grid) * sizeof *own_alpha);

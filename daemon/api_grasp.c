@@ -259,14 +259,7 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
     ret[0].task = NULL; /* the reference moves to task */
   }
   const int threads = fg_conf_threads(req->conf);
-  double built_s = 0;
-  rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, &built_s);
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of scene '%s': "
-                  "%s", info.name, fg_error_detail());
-    goto out;
-  }
-  if (built_s > 0) fg_metrics_add_voxel_build(built_s);
+  if (fg_api_scene_voxels(ref, &grid, info.name, threads, &vox, resp) != 0) goto out;
   /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
   fg_field_ref_release(ref);
   ref = NULL;

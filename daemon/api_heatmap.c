@@ -251,20 +251,7 @@ int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
   if (fg_api_query_fits(field, &q, info.name, resp) != 0) goto out;
 
   int threads = fg_conf_threads(req->conf);
-  double built_s = 0;
-  rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, &built_s);
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of scene '%s': "
-                  "%s", info.name, fg_error_detail());
-    goto out;
-  }
-  if (built_s > 0) {
-    const fg_voxel_features *vf = fg_voxels_features(vox);
-    fg_metrics_add_voxel_build(built_s);
-    fg_info("scene %s: voxel features built in %.2f s: %zu voxels at %g m, %zu occupied, %.1f MB",
-            info.name, built_s, fg_voxel_grid_count(&grid), grid.voxel_size,
-            fg_voxel_features_n_kept(vf), (double)fg_voxel_features_bytes(vf) / 1048576.0);
-  }
+  if (fg_api_scene_voxels(ref, &grid, info.name, threads, &vox, resp) != 0) goto out;
   /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
   fg_field_ref_release(ref);
   ref = NULL;
