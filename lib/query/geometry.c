@@ -395,31 +395,13 @@ int fg_mesh_colour(fg_mesh *m, const fg_field *f, float inset_m, int n_threads) 
 
 /* ---------------------------------------------------------------- field sampling and PLY */
 
-/* Voxels per field evaluation: 3 floats each of points plus the field's own scratch. */
-#define ALPHA_CHUNK 65536
-
 int fg_voxel_alpha(const fg_field *f, const fg_voxel_grid *g, float *alpha, int n_threads) {
   if (!f || !g || !alpha) return fg_fail(FG_EINVAL, "voxel alpha: NULL argument");
   fg_voxel_grid chk;
   FG_TRY(fg_voxel_grid_init(&chk, g->min, g->max, g->voxel_size));
   if (chk.nx != g->nx || chk.ny != g->ny || chk.nz != g->nz)
     return fg_fail(FG_EINVAL, "voxel alpha: the grid's sizes do not match its workspace");
-  const size_t N = fg_voxel_grid_count(g);
-  float *x = malloc((size_t)ALPHA_CHUNK * 3 * sizeof *x);
-  float *sigma = malloc((size_t)ALPHA_CHUNK * sizeof *sigma);
-  int rc = x && sigma ? 0 : fg_fail(FG_ENOMEM, "voxel alpha: out of memory");
-  for (size_t i0 = 0; rc == 0 && i0 < N; i0 += ALPHA_CHUNK) {
-    const size_t n = N - i0 < ALPHA_CHUNK ? N - i0 : ALPHA_CHUNK;
-    fg_query_grid_centres_range(g, i0, n, x);
-    rc = fg_field_density(f, x, (int64_t)n, sigma, n_threads);
-    for (size_t k = 0; rc == 0 && k < n; k++) {
-      float a = (float)(1.0 - exp(-(double)sigma[k] * g->voxel_size)); /* as voxfeat.c */
-      alpha[i0 + k] = a >= 0.0f ? a : 0.0f;
-    }
-  }
-  free(x);
-  free(sigma);
-  return rc;
+  return fg_query_voxel_sample(f, g, 0, fg_voxel_grid_count(g), alpha, n_threads);
 }
 
 int fg_mesh_encode_ply(const fg_mesh *m, const char *comment, uint8_t **out, size_t *out_len) {

@@ -8,9 +8,11 @@
  * Dense arrays are [nz][ny][nx] (x fastest), flat index (iz * ny + iy) * nx + ix. At most
  * FG_QUERY_MAX_VOXELS voxels (256^3); larger grids are FG_ERANGE.
  *
- * Voxel features (F3RM). The trained field is sampled once at every voxel centre: density
- * sigma (1/m), alpha = 1 - exp(-sigma * voxel_size), and the 64-d hidden vector h of the
- * feature branch. The feature head has no bias, f = W_out h, so
+ * Voxel features (F3RM). The trained field is sampled once per voxel: its opacity alpha =
+ * 1 - exp(-mean sigma * voxel_size), the density sigma (1/m) averaged over 4^3 sub-samples
+ * (a surface thinner than a voxel still counts; 0 where the field's occupancy grid is empty,
+ * where the renderer never looks), and the 64-d hidden vector h of the feature branch at the
+ * voxel's centre. The feature head has no bias, f = W_out h, so
  *   cos(f, q) = (W_out^T q) . h / |W_out h|
  * and the cache keeps, for every voxel with alpha >= FG_QUERY_ALPHA_FLOOR, h in float16 and
  * 1 / |W_out h| (computed from the float16 h, so the fast path is the exact cosine of the
@@ -184,7 +186,7 @@ int fg_voxel_features_score(const fg_voxel_features *vf, const fg_query *q,
                             float alpha_threshold, float *scores, int n_threads);
 
 /* Scalar reference of the same grid of scores, straight from the field: full D-dim features
- * W_out h at every voxel centre (no float16), alpha from sigma, fg_query_score_ref. For
+ * W_out h at every voxel centre (no float16), alpha as the cache's, fg_query_score_ref. For
  * tests; slow. Same errors as fg_voxel_features_score plus those of the field. */
 int fg_heatmap_score_grid_ref(const struct fg_field *f, const fg_voxel_grid *g,
                               const fg_query *q, float alpha_threshold, float *scores,

@@ -187,18 +187,22 @@ int fg_voxel_features_build(fg_voxel_features **out, const fg_field *f, const fg
   if (!vf || !x || !sigma || !hid || !hg) goto nomem;
   vf->trained_steps = f->trained_steps;
 
-  const double vs = g->voxel_size;
   size_t nk = 0;
   for (size_t i0 = 0; i0 < N; i0 += BUILD_CHUNK) {
     const size_t n = N - i0 < BUILD_CHUNK ? N - i0 : BUILD_CHUNK;
-    fg_query_grid_centres_range(g, i0, n, x);
-    rc = fg_field_features(f, x, (int64_t)n, sigma, hid, NULL, n_threads);
+    rc = fg_query_voxel_sample(f, g, i0, n, vf->alpha + i0, n_threads);
     if (rc < 0) goto error;
-    for (size_t k = 0; k < n; k++) {
-      float a = (float)(1.0 - exp(-(double)sigma[k] * vs));
-      if (!(a >= 0.0f)) a = 0.0f; /* a NaN or negative density is empty space */
-      vf->alpha[i0 + k] = a;
-    }
+    /* features only where they are kept, at the voxel centres; then each row moves to its
+     * voxel's place in hid (rows only move down, so from the last one) */
+    size_t m = 0;
+    for (size_t k = 0; k < n; k++)
+      if (vf->alpha[i0 + k] >= FG_QUERY_ALPHA_FLOOR)
+        fg_query_grid_centres_range(g, i0 + k, 1, x + 3 * m++);
+    if (m) rc = fg_field_features(f, x, (int64_t)m, sigma, hid, NULL, n_threads);
+    if (rc < 0) goto error;
+    for (size_t k = n; m > 0 && k-- > 0;)
+      if (vf->alpha[i0 + k] >= FG_QUERY_ALPHA_FLOOR && --m != k)
+        memcpy(hid + k * H, hid + m * H, H * sizeof *hid);
     keep_chunk(vf, G, i0, n, hid, hg, &nk);
   }
   finish_kept(vf, nk);
@@ -353,25 +357,27 @@ int fg_heatmap_score_grid_ref(const fg_field *f, const fg_voxel_grid *g, const f
   float *x = malloc(chunk * 3 * sizeof *x);
   float *sigma = malloc(chunk * sizeof *sigma);
   float *feat = malloc(chunk * (size_t)D * sizeof *feat);
+  float *alpha = malloc(chunk * sizeof *alpha);
   int rc = 0;
-  if (!x || !sigma || !feat) {
+  if (!x || !sigma || !feat || !alpha) {
     rc = fg_fail(FG_ENOMEM, "heatmap reference: out of memory");
     goto done;
   }
   for (size_t i0 = 0; i0 < N; i0 += chunk) {
     const size_t n = N - i0 < chunk ? N - i0 : chunk;
     fg_query_grid_centres_range(g, i0, n, x);
-    rc = fg_field_features(f, x, (int64_t)n, sigma, NULL, feat, n_threads);
+    rc = fg_query_voxel_sample(f, g, i0, n, alpha, n_threads);
+    if (rc == 0) rc = fg_field_features(f, x, (int64_t)n, sigma, NULL, feat, n_threads);
     if (rc < 0) goto done;
-    for (size_t k = 0; k < n; k++) {
-      float a = (float)(1.0 - exp(-(double)sigma[k] * g->voxel_size)); /* as the cache */
-      scores[i0 + k] = a >= alpha_threshold ? (float)fg_query_score_ref(q, feat + k * D) : NAN;
-    }
+    for (size_t k = 0; k < n; k++)
+      scores[i0 + k] =
+          alpha[k] >= alpha_threshold ? (float)fg_query_score_ref(q, feat + k * D) : NAN;
   }
 done:
   free(x);
   free(sigma);
   free(feat);
+  free(alpha);
   return rc;
 }
 
