@@ -90,7 +90,7 @@ void fg_train_opts_default(fg_train_opts *o) {
   o->background[0] = o->background[1] = o->background[2] = 1.0f;
   o->depth_weight = (float)FG_TRAIN_DEPTH_WEIGHT;
   o->distortion_weight = (float)FG_TRAIN_DISTORTION_WEIGHT;
-  o->depth_margin = 0.01f;
+  o->depth_margin = (float)FG_TRAIN_DEPTH_MARGIN;
 }
 
 static int check_opts(const fg_train_opts *o) {

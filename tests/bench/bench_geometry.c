@@ -10,7 +10,7 @@
  *                       [--depth-weight W] [--distortion-weight W] [--depth-margin M]
  * Defaults: 2000 steps, 36 views at 240x180 (every 10th held out), 2 threads, the trainer's
  * 2^17 samples per step, variants none,distortion,depth,depth+distortion, seed 0, depth
- * weight FG_TRAIN_DEPTH_WEIGHT_MEASURED and distortion weight 0.01 where a variant uses them.
+ * weight FG_TRAIN_DEPTH_WEIGHT and distortion weight 0.01 where a variant uses them.
  * Output: one line per variant, e.g.
  *   bench=geometry variant=depth steps=2000 psnr_db=... depth_object_median_mm=... */
 #include <math.h>
@@ -90,7 +90,7 @@ int main(int argc, char **argv) {
   const char *scenegen = NULL, *variants = "none,distortion,depth,depth+distortion";
   int steps = 2000, views = 36, width = 240, height = 180, threads = 2, samples = 0;
   const char *seed = "0";
-  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT_MEASURED, dist_w = 0.01f, margin = 0.0f;
+  float depth_w = (float)FG_TRAIN_DEPTH_WEIGHT, dist_w = 0.01f, margin = 0.0f;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     if (!v) {

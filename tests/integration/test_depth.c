@@ -204,7 +204,7 @@ static void test_import_and_train(const char *scenegen, const char *imports) {
   /* the configuration's default when a request names none */
   job = t_train("t", "{\"steps\": 5}");
   j = t_wait_job(job, "done", 600);
-  ASSERT_NEAR(JNUM(j, "depth_weight"), 0.0, 0);
+  ASSERT_NEAR(JNUM(j, "depth_weight"), 0.3, 1e-12);
   ASSERT_NEAR(JNUM(j, "distortion_weight"), 0.0, 0);
   json_decref(j);
   free(job);
