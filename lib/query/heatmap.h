@@ -166,16 +166,16 @@ void fg_voxel_features_raw(const fg_voxel_features *vf, const uint32_t **kept,
                            const uint16_t **h16, const float **W);
 
 /* Writes the cache to path atomically (temp file, fsync, rename; fsutil.h) so that a daemon
- * can keep it beside the field: "FGVOXF01", version, D, grid, trained_steps, the kept count,
+ * can keep it beside the field: "FGVOXF01", version (2), D, grid, trained_steps, the kept count,
  * then alpha, the kept indices, float16 h, 1/|W h| and W_out in host (little-endian) order,
  * ending in a CRC-32 of everything before. vf stays with the caller. FG_EIO, FG_ENOMEM. */
 int fg_voxel_features_save(const fg_voxel_features *vf, const char *path);
 
 /* Reads a cache written by fg_voxel_features_save into *out, which the caller owns
  * (fg_voxel_features_free); *out is NULL on failure. FG_ENOENT, FG_EIO, FG_ERANGE (over 8 GB),
- * FG_EFORMAT with a detail (bad magic, header, length, checksum or indices), FG_ENOMEM. The
- * caller compares fg_voxel_features_trained_steps() and the grid with its field to decide
- * whether the file is current. */
+ * FG_EFORMAT with a detail (bad magic, header (a version other than 2 included), length,
+ * checksum or indices), FG_ENOMEM. The caller compares fg_voxel_features_trained_steps()
+ * and the grid with its field to decide whether the file is current. */
 int fg_voxel_features_load(const char *path, fg_voxel_features **out);
 
 /* Scores every voxel through the 64-d fast path into scores (nz, ny, nx), the caller's

@@ -385,6 +385,9 @@ done:
 
 #define VOXF_MAGIC "FGVOXF01"
 #define VOXF_HEADER 104 /* bytes before the arrays */
+/* 2: alpha from the mean density over sub-samples (voxsample.c); 1 held the centre's alpha,
+ * which a reader of today must not take for the same thing. */
+#define VOXF_VERSION 2
 
 /* zlib's CRC-32 of n bytes, fed in pieces that fit its uInt. */
 static unsigned long fg_query_crc32(const void *data, size_t n) {
@@ -410,7 +413,7 @@ int fg_voxel_features_save(const fg_voxel_features *vf, const char *path) {
   uint8_t *buf = calloc(1, len);
   if (!buf) return fg_fail(FG_ENOMEM, "voxel features save: out of memory (%zu bytes)", len);
   uint8_t *p = buf;
-  const uint32_t version = 1, dim = (uint32_t)vf->dim;
+  const uint32_t version = VOXF_VERSION, dim = (uint32_t)vf->dim;
   const int32_t n3[3] = {vf->grid.nx, vf->grid.ny, vf->grid.nz};
   const uint64_t nk = vf->n_kept;
   memcpy(p, VOXF_MAGIC, 8);
@@ -467,7 +470,7 @@ int fg_voxel_features_load(const char *path, fg_voxel_features **out) {
   memcpy(&steps, p + 88, 8);
   memcpy(&nk, p + 96, 8);
   fg_voxel_grid g;
-  if (version != 1 || dim < 1 || dim > FG_FIELD_MAX_FEATURE_DIM ||
+  if (version != VOXF_VERSION || dim < 1 || dim > FG_FIELD_MAX_FEATURE_DIM ||
       fg_voxel_grid_init(&g, mn, mx, vs) < 0 || g.nx != n3[0] || g.ny != n3[1] ||
       g.nz != n3[2] || nk > fg_voxel_grid_count(&g)) {
     rc = fg_fail(FG_EFORMAT, "voxel feature cache %s: bad header (version, D or grid)", path);

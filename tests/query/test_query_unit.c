@@ -402,6 +402,11 @@ static void test_cache(void) {
     ASSERT(back == NULL);
     ASSERT_OK(fg_write_file_atomic(path, file, blen - 1));
     ASSERT_ERR(fg_voxel_features_load(path, &back), FG_EFORMAT, "bytes");
+    file[blen / 2] ^= 0x10; /* intact again, but version 1: its alpha meant something else */
+    const uint32_t v1 = 1;
+    memcpy(file + 8, &v1, 4);
+    ASSERT_OK(fg_write_file_atomic(path, file, blen));
+    ASSERT_ERR(fg_voxel_features_load(path, &back), FG_EFORMAT, "version");
     memcpy(file, "NOTVOXEL", 8);
     ASSERT_OK(fg_write_file_atomic(path, file, blen));
     ASSERT_ERR(fg_voxel_features_load(path, &back), FG_EFORMAT, "magic");
