@@ -5,13 +5,13 @@
  *    least 0.5 (z = the expected distance over the opacity, times the ray's cosine to the
  *    optical axis); median and 90th percentile of |error|;
  *  - cavities: for the mug and the bowl, the share of points at least 6 mm inside the cavity
- *    (gtvox.h, 4 mm lattice) whose voxel alpha 1 - exp(-sigma voxel_size) is below 0.1, the
- *    query's occupancy threshold (free space to a grasp search);
+ *    (gtvox.h, 4 mm lattice) whose own density sigma gives 1 - exp(-sigma voxel_size) below
+ *    0.1, the query's occupancy threshold (free space to a grasp search);
  *  - container IoU (issue 5's measure, with the cavity counted): the occupied voxels (alpha
  *    >= 0.1 at 1 cm) scoring >= 0.5 for the object's class embedding with every other class
  *    as negatives, against the object's voxels (gtvox.h); only when the field has features;
- *  - solid recall: per object, the share of its voxels that are occupied at all (alpha >= 0.1
- *    at the voxel centre), what heatmaps and grasp collision checks can see of it. */
+ *  - solid recall: per object, the share of its voxels that are occupied at all (the voxel
+ *    cache's alpha >= 0.1), what heatmaps and grasp collision checks can see of it. */
 #ifndef SG_GEOMEVAL_H
 #define SG_GEOMEVAL_H
 
@@ -36,7 +36,7 @@ typedef struct sg_geom_eval {
   double iou[2];                      /* with the cavity counted; NaN without features */
   int n_objects;
   double solid_recall[SG_GEOM_MAX_OBJECTS]; /* per object: share of its voxels (gtvox.h) that
-                                               are occupied (alpha >= 0.1 at voxel centres) */
+                                               are occupied (the cache's alpha >= 0.1) */
 } sg_geom_eval;
 
 /* Evaluates field f trained on frames[0..n) of the data set in dir (fieldgrip-scenegen with
