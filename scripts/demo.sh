@@ -1,0 +1,377 @@
+#!/usr/bin/env bash
+# The README's first command ends here: fieldgrip's whole loop on this machine, with no CLIP
+# weights and no hardware, driven through the HTTP API exactly as a robot stack drives it.
+#
+#   1. builds (meson, in build/) unless that is done already;
+#   2. renders two tabletop scans with fieldgrip-scenegen (RGB-D views with per-patch
+#      features; the objects are moved between them) and starts fieldgrip-sim, which plays
+#      the robot controller and the Robotiq gripper on 127.0.0.1:1502;
+#   3. starts fieldgripd with config/demo.conf and, printing every curl command it runs:
+#      uploads the first scan's frames, trains, records two demos (how to pick up the box
+#      and the ball), uploads and trains the second scan, asks "where is the mug?" (heatmap
+#      PLY and PNG), asks for a grasp of the box by query, executes it and prints the
+#      gripper's report;
+#   4. keeps the daemon and the simulator running for you to explore; Ctrl-C stops both.
+#
+# With [clip] in the configuration the questions are texts ("a mug") and the daemon computes
+# the frames' CLIP features itself; without it they are the scan's class embeddings (the
+# vectors its features were made of), which is what a feature extractor without a text
+# encoder leaves you with.
+#
+# Options: --exit (stop both processes after the loop and exit 0 if it ran through: the
+# tests run it so), --steps N (training steps per scan, default 300), --config FILE
+# (default config/demo.conf; the daemon's address is its [http] listen, the simulator's its
+# [robot] host and port), --out DIR (default demo-out: scans, heatmaps, logs), --build DIR
+# (take the programs from that meson build folder as they are, instead of building build/).
+# Needs curl and jq. Exit status: 0 when the loop ran through, 1 on any failed step (the
+# message says which; the daemon's log is in OUT/fieldgripd.log).
+set -euo pipefail
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+
+steps=300
+config=config/demo.conf
+out=demo-out
+build=
+stay=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --exit) stay=0 ;;
+    --steps) steps=${2:?--steps needs a number}; shift ;;
+    --config) config=${2:?--config needs a file}; shift ;;
+    --out) out=${2:?--out needs a folder}; shift ;;
+    --build) build=${2:?--build needs a folder}; shift ;;
+    -h|--help) sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+for tool in curl jq; do
+  command -v "$tool" >/dev/null || { echo "demo: needs $tool (apt-get install $tool)" >&2; exit 1; }
+done
+
+bold=; dim=; reset=
+if [ -t 1 ]; then bold=$'\e[1m'; dim=$'\e[2m'; reset=$'\e[0m'; fi
+
+say() { printf '\n%s== %s%s\n' "$bold" "$*" "$reset"; }
+die() { printf 'demo: %s\n' "$*" >&2; exit 1; }
+
+# ---------------------------------------------------------------- build
+
+if [ -z "$build" ]; then
+  build=build
+  if [ ! -f build/build.ninja ]; then
+    say "Configuring the build (meson setup build)"
+    meson setup build >/dev/null
+  fi
+  say "Building (meson compile -C build)"
+  meson compile -C build >/dev/null || die "the build failed: run 'meson compile -C build' to see why"
+fi
+
+daemon=$build/daemon/fieldgripd
+scenegen=$build/tests/scenegen/fieldgrip-scenegen
+sim=$build/tests/sim/fieldgrip-sim
+for prog in "$daemon" "$scenegen" "$sim"; do
+  [ -x "$prog" ] || die "no $prog: build first (meson compile -C $build)"
+done
+
+# ---------------------------------------------------------------- the configuration
+
+# The daemon's address and the simulator's port, read from the configuration file's
+# [http] listen and [robot] port (the demo configuration: 127.0.0.1:7070 and 1502).
+ini_get() { # FILE SECTION KEY
+  awk -v sec="[$2]" -v key="$3" '
+    /^[ \t]*\[/ { insec = ($0 ~ "^[ \t]*" "\\" sec) }
+    insec && $0 ~ "^[ \t]*" key "[ \t]*=" { sub(/^[^=]*=[ \t]*/, ""); sub(/[ \t]*(;.*)?$/, ""); print; exit }
+  ' "$1"
+}
+[ -f "$config" ] || die "no configuration file $config"
+listen=$(ini_get "$config" http listen)
+listen=${listen:-127.0.0.1:7070}
+sim_port=$(ini_get "$config" robot port)
+sim_host=$(ini_get "$config" robot host)
+[ -n "$sim_port" ] && [ -n "$sim_host" ] || die "$config has no [robot] host and port for the simulator"
+token=$(ini_get "$config" http token)
+api="http://$listen"
+
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+
+# ---------------------------------------------------------------- processes
+
+pids=()
+cleanup() {
+  local pid
+  for pid in "${pids[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
+}
+trap cleanup EXIT
+trap 'exit 130' INT TERM
+
+port_busy() { (exec 3<>"/dev/tcp/$1/$2") 2>/dev/null; }
+
+# ---------------------------------------------------------------- curl, shown
+
+# Every request goes through api_curl, which prints the command (as you would type it) and
+# leaves the body in $reply (or, with `-o FILE` as its third and fourth arguments, in FILE)
+# and the status in $status.
+auth=()
+[ -z "$token" ] || auth=(-H "Authorization: Bearer $token")
+
+quote() { # prints its arguments as a shell would need them typed
+  local a out=
+  for a in "$@"; do
+    if [[ "$a" =~ ^[A-Za-z0-9_./:@=,+-]+$ ]]; then out+=" $a"; else out+=" '${a//\'/\'\\\'\'}'"; fi
+  done
+  printf '%s' "${out# }"
+}
+
+show=1
+api_curl() { # METHOD PATH [curl arguments...]
+  local method=$1 path=$2
+  shift 2
+  if [ "$show" -eq 1 ]; then
+    local shown=(curl -s -X "$method" "$api$path" "$@")
+    [ -z "$token" ] || shown=(curl -s -H "Authorization: Bearer \$TOKEN" -X "$method" "$api$path" "$@")
+    printf '%s$ %s%s\n' "$dim" "$(quote "${shown[@]}")" "$reset"
+  fi
+  local tmp file=
+  tmp=$(mktemp)
+  if [ "${1:-}" = -o ]; then file=$2; shift 2; fi
+  status=$(curl -s -o "$tmp" -w '%{http_code}' "${auth[@]}" -X "$method" "$api$path" "$@") || status=000
+  if [ -n "$file" ] && [ "$status" = 200 ]; then
+    mv "$tmp" "$file"
+    reply=
+  else
+    reply=$(cat "$tmp")
+    rm -f "$tmp"
+  fi
+}
+
+api_json() { # METHOD PATH BODY [-o FILE]: a JSON request
+  api_curl "$1" "$2" "${@:4}" -H 'Content-Type: application/json' -d "$3"
+}
+
+expect() { # STATUS...: the last request answered one of them, else stop with its error
+  local s
+  for s in "$@"; do [ "$status" = "$s" ] && return 0; done
+  die "the daemon answered $status: $reply"
+}
+
+# ---------------------------------------------------------------- scans
+
+say "Rendering two tabletop scans (fieldgrip-scenegen)"
+# One feature space (--embedding-seed) for both, as frames of one feature extractor share it;
+# the objects stand elsewhere in the second (seed 0) than in the first (seed 1).
+for layout in 1 0; do
+  args=(--out "$out/scan$layout" --seed "$layout" --embedding-seed 7 --views 30 --width 160
+        --height 120 --dim 32 --patch 4 --holdout 0 --depth png)
+  echo "${dim}\$ $(quote "$scenegen" "${args[@]}")${reset}"
+  "$scenegen" "${args[@]}" >/dev/null
+done
+
+# the grasp of object NAME in scan LAYOUT, as its gt.json gives it
+object_grasp() { jq -c --arg n "$2" '.objects[] | select(.name == $n) | .grasp' "$out/scan$1/gt.json"; }
+
+# ---------------------------------------------------------------- simulator and daemon
+
+box_mm=$(object_grasp 0 box | jq '.width * 1000 | round')
+say "Starting the robot and gripper simulator on $sim_host:$sim_port"
+port_busy "$sim_host" "$sim_port" && die "$sim_host:$sim_port is taken: is a simulator or robot already there?"
+sim_args=(--listen "$sim_host:$sim_port" --object-width-mm "$box_mm")
+echo "${dim}\$ $(quote "$sim" "${sim_args[@]}") &${reset}   (the fingers stop on a ${box_mm} mm box when they close)"
+"$sim" "${sim_args[@]}" >"$out/sim.log" 2>&1 &
+pids+=($!)
+
+say "Starting fieldgripd on $api"
+port_busy "${listen%:*}" "${listen##*:}" && die "$listen is taken: is fieldgripd already running? Stop it first."
+echo "${dim}\$ $(quote "$daemon" --config "$config") &${reset}   (log: $out/fieldgripd.log)"
+"$daemon" --config "$config" >"$out/fieldgripd.log" 2>&1 &
+daemon_pid=$!
+pids+=("$daemon_pid")
+for _ in $(seq 600); do
+  curl -sf "$api/v1/health" >/dev/null 2>&1 && break
+  kill -0 "$daemon_pid" 2>/dev/null || die "fieldgripd exited: $(tail -n 5 "$out/fieldgripd.log")"
+  sleep 0.1
+done
+api_curl GET /v1/health
+expect 200
+echo "$reply"
+
+# CLIP configured? Then questions are texts and the daemon computes the features.
+show=0
+api_json POST /v1/embed/text '{"text": "a mug"}'
+show=1
+clip=0
+[ "$status" = 200 ] && clip=1
+if [ "$clip" -eq 1 ]; then
+  echo "[clip] is configured: questions are texts, features are CLIP's"
+else
+  echo "no [clip] in $config: questions are the scan's class embeddings"
+fi
+
+# ---------------------------------------------------------------- scenes
+
+workspace='{"min": [0.10, -0.45, 0.005], "max": [0.80, 0.45, 0.35]}'
+upload_scan() { # SCENE LAYOUT
+  local scene=$1 dir="$out/scan$2" n i meta f first=1
+  say "Scene $scene: a fresh scene, then the scan's $(jq '.frames | length' "$dir/transforms.json") RGB-D frames"
+  show=0
+  api_curl DELETE "/v1/scenes/$scene"
+  show=1
+  api_json POST /v1/scenes "{\"name\": \"$scene\", \"workspace\": $workspace, \"voxel_size\": 0.01}"
+  expect 201
+  n=$(jq '.frames | length' "$dir/transforms.json")
+  for ((i = 0; i < n; i++)); do
+    meta=$(jq -c --argjson i "$i" '{transform_matrix: .frames[$i].transform_matrix,
+             camera: {fl_x, fl_y, cx, cy, w, h}, depth_scale: .depth_unit_scale_factor}' \
+             "$dir/transforms.json")
+    f=$(jq -r --argjson i "$i" '.frames[$i] | [.file_path, .features_path, .depth_file_path] | @tsv' \
+          "$dir/transforms.json")
+    IFS=$'\t' read -r image features depth <<<"$f"
+    local form=(-F "image=@$dir/$image" -F "depth=@$dir/$depth" -F "meta=$meta")
+    [ "$clip" -eq 1 ] || form+=(-F "features=@$dir/$features")
+    api_curl POST "/v1/scenes/$scene/frames" "${form[@]}"
+    expect 201 200
+    if [ "$first" -eq 1 ]; then
+      echo "$reply"
+      echo "(and so on for frames 1 to $((n - 1)), without printing them)"
+      first=0
+      show=0
+    fi
+  done
+  show=1
+}
+
+train() { # SCENE
+  local scene=$1 job line data state step
+  say "Training $scene's feature field ($steps steps)"
+  api_json POST "/v1/scenes/$scene/train" "{\"steps\": $steps, \"seed\": 0}"
+  expect 202
+  job=$(jq -r .job <<<"$reply")
+  echo "$reply"
+  # The job's progress as Server-Sent Events, drawn as a bar
+  echo "${dim}\$ $(quote curl -sN "$api/v1/jobs/$job/events")${reset}"
+  state=
+  local shown_tenth=-1 bar_format='  [%-40s] %5d/%d steps  %s\n'
+  [ -z "$bold" ] || bar_format='\r  [%-40s] %5d/%d steps  %s  '
+  while IFS= read -r line; do
+    line=${line%$'\r'}
+    [[ "$line" == data:* ]] || continue
+    data=${line#data: }
+    read -r state step < <(jq -r '"\(.state) \(.step // 0)"' <<<"$data")
+    # a bar redrawn in place on a terminal, else a line per tenth of the steps
+    local tenth=$((step * 10 / steps))
+    if [ -n "$bold" ] || [ "$tenth" != "$shown_tenth" ]; then
+      shown_tenth=$tenth
+      printf "$bar_format" "$(printf '%*s' $((tenth * 4)) '' | tr ' ' '#')" "$step" "$steps" \
+        "$(jq -r '"loss \(.loss // "-" | tostring | .[0:6])  \(.elapsed_s // 0 | floor) s"' <<<"$data")"
+    fi
+    case "$state" in done|failed|cancelled) break ;; esac
+  done < <(curl -sN "${auth[@]}" "$api/v1/jobs/$job/events")
+  [ -z "$bold" ] || echo
+  [ "$state" = done ] || die "training of $scene ended '$state': $(jq -r '.error // .' <<<"$data")"
+  echo "$data" | jq -c '{state, step, psnr, samples_per_s, elapsed_s}'
+}
+
+upload_scan tabletop-demos 1
+train tabletop-demos
+
+# ---------------------------------------------------------------- demos
+
+# A demo is the gripper's pose where it holds the object (here gt.json's grasp of it, as a
+# person would show it by jogging the robot there), the scene it is in, and the width the
+# gripper opens to before it closes: all of the 2F-85's 85 mm, since a briefly trained
+# field's surfaces stand a little proud of the objects' and a tighter opening collides.
+demo() { # TASK OBJECT
+  local body
+  body=$(object_grasp 1 "$2" | jq -c --arg s tabletop-demos '{scene: $s,
+           pose: {position: .position, quaternion: .quaternion}, width: 0.085}')
+  api_json POST "/v1/tasks/$1/demos" "$body"
+  expect 201 200
+  jq -c '{demo: {id: .demo.id, scene: .demo.scene}, task: {name: .task.name, kind: .task.kind, n_demos: .task.n_demos}}' <<<"$reply"
+}
+say "Recording demos on tabletop-demos: how to pick up a box, and a ball"
+for task in box ball; do
+  show=0; api_curl DELETE "/v1/tasks/$task"; show=1
+done
+demo box box
+demo ball ball
+
+# ---------------------------------------------------------------- the questions
+
+upload_scan tabletop 0
+
+# A question as JSON members: a text with CLIP, else the class's embedding (rounded to 4
+# decimals to keep the commands short) with the other classes as negatives
+question() { # CLASS
+  if [ "$clip" -eq 1 ]; then
+    printf '"text": "a %s"' "$1"
+  else
+    jq -r --arg c "$1" '"\"embedding\": \(.classes[] | select(.name == $c) | .embedding
+        | map(. * 10000 | round / 10000) | tojson), \"negative_embeddings\": \([.classes[]
+        | select(.name != $c) | .embedding | map(. * 10000 | round / 10000)] | tojson)"' \
+      "$out/scan0/gt.json"
+  fi
+}
+
+train tabletop
+
+say "Where is the mug? (a heatmap over the workspace's voxels)"
+mug=$(question mug)
+api_json POST /v1/scenes/tabletop/heatmap "{$mug, \"format\": \"ply\", \"min_score\": 0.5}" \
+  -o "$out/mug-heatmap.ply"
+expect 200
+echo "voxels scoring 0.5 or more, coloured by score (binary PLY): $out/mug-heatmap.ply"
+api_json POST /v1/scenes/tabletop/heatmap "{$mug, \"max_points\": 1}"
+expect 200
+jq -c '{occupied, best}' <<<"$reply"
+inside=$(jq -n --argjson p "$(jq -c .best.position <<<"$reply")" \
+              --argjson b "$(jq -c '.objects[] | select(.name == "mug") | .aabb' "$out/scan0/gt.json")" \
+         '[range(3) as $i | $p[$i] >= $b.min[$i] - 0.01 and $p[$i] <= $b.max[$i] + 0.01] | all')
+[ "$inside" = true ] || die "the best voxel is not on the mug (its box in gt.json: $(jq -c '.objects[] | select(.name == "mug") | .aabb' "$out/scan0/gt.json"))"
+echo "the best voxel is on the mug (within its box in the scan's ground truth)"
+
+# The same question in a view from above the table
+cam='{"transform_matrix": [[1,0,0,0.45],[0,1,0,0],[0,0,1,0.9],[0,0,0,1]], "fl_x": 300, "fl_y": 300, "cx": 160, "cy": 120, "w": 320, "h": 240}'
+api_json POST /v1/scenes/tabletop/render "{\"camera\": $cam, \"output\": \"heatmap\", $mug}" \
+  -o "$out/mug-heatmap.png"
+expect 200
+echo "the view from above with the score's colours over it (PNG): $out/mug-heatmap.png"
+
+# ---------------------------------------------------------------- the grasp
+
+say "Pick up the box: a grasp by query (the task whose demos look most like it)"
+api_json POST /v1/scenes/tabletop/grasps "{$(question box), \"top_k\": 1, \"seed\": 0}"
+expect 200
+jq -c '{task, retrieval, grasp: .grasps[0] | {id, score, width, position: .pose.position, quaternion: .pose.quaternion}}' <<<"$reply"
+grasp=$(jq -r '.grasps[0].id // empty' <<<"$reply")
+[ -n "$grasp" ] || die "no grasp found: $(jq -r '.reason // .' <<<"$reply")"
+[ "$(jq -r .task <<<"$reply")" = box ] || die "the question retrieved task $(jq -r .task <<<"$reply"), not box"
+off_mm=$(jq -n --argjson a "$(jq -c '.grasps[0].pose.position' <<<"$reply")" \
+              --argjson b "$(object_grasp 0 box | jq -c .position)" \
+         '[range(3) as $i | ($a[$i] - $b[$i]) | . * .] | add | sqrt * 1000 | . * 10 | round / 10')
+echo "its TCP is $off_mm mm from the box's grasp in the scan's ground truth"
+
+say "Executing it: a pick through the robot controller and the gripper (the simulator)"
+api_curl POST "/v1/scenes/tabletop/grasps/$grasp/execute" -H 'Content-Type: application/json' \
+  -H "Idempotency-Key: demo-$grasp" -d '{"dry_run": false}'
+expect 200
+jq -c '{id, command, state, stage, seq, width, force}' <<<"$reply"
+[ "$(jq -r .state <<<"$reply")" = done ] || die "the pick ended $(jq -r .state <<<"$reply"): $reply"
+
+say "The gripper's report"
+api_curl GET /v1/gripper
+expect 200
+jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
+[ "$(jq -r .object_detected <<<"$reply")" = true ] || die "the gripper holds nothing: $reply"
+
+say "Done: the loop ran through"
+echo "scans, heatmaps and logs: $out"
+if [ "$stay" -eq 0 ]; then
+  exit 0
+fi
+echo "fieldgripd keeps running on $api (see README.md, \"Trying the API\"); Ctrl-C stops it and the simulator."
+wait "$daemon_pid"

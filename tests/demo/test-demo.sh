@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# The README's first command, end to end: scripts/demo.sh --exit on a throwaway state folder
+# and free loopback ports, with the programs of this build. The script itself stops at the
+# first step that goes wrong (a non-2xx answer, a best heatmap voxel off the mug, a query
+# that retrieves another task than the box's, no grasp, a pick that does not end done, a
+# gripper that holds nothing); here we check that it ran through, that it printed every
+# step's curl command and the files it names, and that it left no process behind.
+# argv: demo.sh, build folder.
+set -euo pipefail
+
+demo=$1
+build=$2
+tmp=$(mktemp -d)
+out_log=$tmp/out.log
+trap 'rm -rf "$tmp"' EXIT
+
+fail() { echo "FAIL: $*" >&2; echo "--- demo output:" >&2; cat "$out_log" >&2; echo "--- daemon log (tail):" >&2; tail -n 40 "$tmp/out/fieldgripd.log" >&2 || true; exit 1; }
+
+# Two ports below the kernel's ephemeral range (which the other tests' port-0 listeners and
+# all outgoing connections draw from), nothing listening on either.
+free_port() {
+  local p
+  while :; do
+    p=$((20000 + RANDOM % 12000))
+    (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null || { echo "$p"; return; }
+  done
+}
+http_port=$(free_port)
+modbus_port=$(free_port)
+while [ "$modbus_port" = "$http_port" ]; do modbus_port=$(free_port); done
+
+cat >"$tmp/demo.conf" <<CONF
+[http]
+listen = 127.0.0.1:$http_port
+[state]
+dir = $tmp/state
+[train]
+threads = 2
+[gripper]
+model = robotiq-2f85
+[robot]
+transport = tcp
+host = 127.0.0.1
+port = $modbus_port
+[gripper.modbus]
+transport = tcp
+host = 127.0.0.1
+port = $modbus_port
+CONF
+
+rc=0
+bash "$demo" --exit --build "$build" --config "$tmp/demo.conf" --out "$tmp/out" >"$out_log" 2>&1 || rc=$?
+[ "$rc" -eq 0 ] || fail "demo.sh exited $rc"
+
+grep -q '^== Done: the loop ran through' "$out_log" || fail "no final line"
+grep -q '"object_detected":true' "$out_log" || fail "no gripper report with an object"
+grep -q '"task":"box"' "$out_log" || fail "the grasp's task is not printed"
+# every request it made is shown as a command to copy, with the daemon's address
+for path in /v1/health /v1/scenes /v1/scenes/tabletop-demos/frames /v1/scenes/tabletop/train \
+            /v1/tasks/box/demos /v1/scenes/tabletop/heatmap /v1/scenes/tabletop/render \
+            /v1/scenes/tabletop/grasps /v1/gripper; do
+  grep -Eq "^\\\$ curl .*http://127.0.0.1:$http_port$path( |'|\$)" "$out_log" ||
+    fail "no curl command for $path"
+done
+grep -q "^\$ curl -sN http://127.0.0.1:$http_port/v1/jobs/j[0-9a-f-]*/events" "$out_log" ||
+  fail "no event stream command"
+grep -Eq '^  \[#{40}\] +300/300 steps' "$out_log" || fail "no full progress bar"
+
+ply=$tmp/out/mug-heatmap.ply
+png=$tmp/out/mug-heatmap.png
+grep -qF "$ply" "$out_log" && grep -qF "$png" "$out_log" || fail "the heatmap files' paths are not printed"
+[ "$(head -c 3 "$ply")" = ply ] || fail "$ply is not a PLY file"
+grep -aq '^element vertex [1-9]' "$ply" || fail "$ply has no vertices"
+[ "$(head -c 8 "$png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || fail "$png is not a PNG"
+
+# both processes were stopped: nothing listens on either port any more
+for p in "$http_port" "$modbus_port"; do
+  if (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then fail "something still listens on $p"; fi
+done
+echo "ok: the demo ran through in $SECONDS s"
