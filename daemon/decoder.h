@@ -79,6 +79,32 @@ void fg_decoder_set_busy_limit(fg_decoder *dec, int seconds);
  * ended any, it also returns the process's free heap memory to the system (malloc_trim). */
 void fg_decoder_reap_idle(fg_decoder *dec);
 
+/* How requests to the pool ended: the child answered with the result (ok) or with an error
+ * about the data (refused), the child died on the request (crashed), the reaper killed it
+ * for overrunning the busy limit (timeout), or the pool could not run it at all (error: no
+ * program, no child could be started or talked to, out of memory). */
+typedef enum {
+  FG_DECODER_OK = 0,
+  FG_DECODER_REFUSED,
+  FG_DECODER_CRASHED,
+  FG_DECODER_TIMEOUT,
+  FG_DECODER_ERROR,
+  FG_DECODER_RESULTS
+} fg_decoder_result;
+
+/* The pool's counters since fg_decoder_new, for /metrics. */
+typedef struct fg_decoder_stats {
+  int idle, busy;                        /* children alive now, by state */
+  uint64_t started;                      /* children started (a crashed one is replaced by a
+                                            start too) */
+  uint64_t died_idle;                    /* children found dead before a request reached
+                                            them (killed from outside, OOM) */
+  uint64_t requests[FG_DECODER_RESULTS]; /* decodes, depth decodes and encodes, by result */
+} fg_decoder_stats;
+
+/* Fills *out; a NULL pool gives zeros. Thread-safe. */
+void fg_decoder_get_stats(fg_decoder *dec, fg_decoder_stats *out);
+
 /* Test hook: writes the pids of up to max live children (idle or busy) to pids and returns
  * how many there are. */
 size_t fg_decoder_child_pids(fg_decoder *dec, pid_t *pids, size_t max);
