@@ -552,6 +552,14 @@ static int run_job_counted(fg_decoder *d, job_io *io, size_t len, const char *wh
     if (how == EXCHANGE_OK) {
       checkin(d, c);
       *result = rc == 0 ? FG_DECODER_OK : FG_DECODER_REFUSED;
+      /* The child's memory is capped (FG_DECODER_MAX_ADDRESS_BYTES): running out there is
+       * the image's doing (too large, or a decompression bomb), not the daemon's. */
+      if (rc == FG_ENOMEM) {
+        char detail[512];
+        snprintf(detail, sizeof detail, "%s", fg_error_detail());
+        return fg_fail(FG_ERANGE, "the image decoder ran out of memory on this %s (it may use "
+                       "%llu GiB): %s", what, FG_DECODER_MAX_ADDRESS_BYTES >> 30, detail);
+      }
       return rc;
     }
     pid_t pid = c->pid;
@@ -574,6 +582,12 @@ static int run_job_counted(fg_decoder *d, job_io *io, size_t len, const char *wh
       pthread_mutex_unlock(&d->lock);
       *result = FG_DECODER_ERROR;
       continue;
+    }
+    if (WIFSIGNALED(status) && WTERMSIG(status) == SIGXCPU) {
+      *result = FG_DECODER_TIMEOUT;
+      return fg_fail(FG_EFORMAT, "the image decoder used more than %d s of CPU time on this "
+                     "%s and was stopped; the data is corrupt or hostile",
+                     FG_DECODER_CPU_SECONDS, what);
     }
     if (rc == FG_ENOMEM || how == EXCHANGE_VERSION) *result = FG_DECODER_ERROR;
     if (rc == FG_ENOMEM) return rc;

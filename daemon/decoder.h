@@ -23,6 +23,18 @@ typedef struct fg_decoder fg_decoder;
  * longer is stuck on hostile data. */
 #define FG_DECODER_BUSY_SECONDS 60
 
+/* The limits every child sets on itself before it reads a request (decode_main.c), so that
+ * a hostile image costs a bounded amount of the machine even if it takes over a codec:
+ * address space FG_DECODER_MAX_ADDRESS_BYTES (room for the largest image FG_IMAGE_MAX_PIXELS
+ * allows, as the encoded request and its float pixels, and the libraries' threads), CPU
+ * time FG_DECODER_CPU_SECONDS per request (SIGXCPU ends the child; all threads count), no
+ * core files, FG_DECODER_MAX_FDS open files, no file growth (RLIMIT_FSIZE 0, unless stderr
+ * is a regular file: then the child's messages must still reach it), and no_new_privs, so
+ * nothing it could exec gains privileges. */
+#define FG_DECODER_MAX_ADDRESS_BYTES (8ull << 30)
+#define FG_DECODER_CPU_SECONDS 120
+#define FG_DECODER_MAX_FDS 64
+
 /* Creates a pool of at most max_procs (>= 1) children running program, started on demand and
  * ended after idle_seconds (>= 1) without work. program is copied; NULL means the default
  * places, tried in order at every start: fieldgrip-decode beside the running executable

@@ -237,9 +237,10 @@ static void render_decoder(sbuf *sb, const fg_decoder_stats *d) {
                 "# TYPE fieldgrip_decoder_starts_total counter\n"
                 "fieldgrip_decoder_starts_total %llu\n", (unsigned long long)d->started);
   sb_printf(sb, "# HELP fieldgrip_decoder_requests_total Images decoded or encoded in the "
-                "decoder children, by result: ok; refused (not a valid image); crashed (the "
-                "child died on it); timeout (killed for taking too long); error (no child "
-                "could run it).\n# TYPE fieldgrip_decoder_requests_total counter\n");
+                "decoder children, by result: ok; refused (not a valid image, or too large "
+                "for a child's memory); crashed (the child died on it); timeout (ended for "
+                "taking too long, in wall or CPU time); error (no child could run it).\n"
+                "# TYPE fieldgrip_decoder_requests_total counter\n");
   for (int i = 0; i < FG_DECODER_RESULTS; i++)
     sb_printf(sb, "fieldgrip_decoder_requests_total{result=\"%s\"} %llu\n", results[i],
               (unsigned long long)d->requests[i]);
