@@ -156,6 +156,7 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;
   g.clip_loaded = m != NULL;
   fg_clip_model_release(m);
+  fg_decoder_get_stats(req->app->decoder, &g.decoder);
   size_t len;
   char *text = fg_metrics_render(&g, &len);
   if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");

@@ -13,7 +13,6 @@
  * by the first demo or search of a field and shared by every later one. */
 #include "api.h"
 #include "grasp_log.h"
-#include "idem.h"
 #include "json.h"
 #include "metrics.h"
 #include "query.h"
@@ -22,6 +21,7 @@
 #include "voxcache.h"
 
 #include "core/clock.h"
+#include "core/digest.h"
 #include "core/error.h"
 #include "core/log.h"
 #include "core/pose.h"
@@ -306,8 +306,13 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   /* Ids: the field's identity, the request (its keys sorted) and the rank. */
   const uint64_t version = fg_grasp_log_field_version(vf);
   canon = json_dumps(body, JSON_COMPACT | JSON_SORT_KEYS);
-  uint64_t rh = canon ? fg_idem_hash(canon, strlen(canon)) : 0;
-  rh ^= fg_idem_hash(info.name, strlen(info.name)) * 31;
+  uint64_t rh = 0;
+  if (canon) {
+    const fg_span parts[] = {{info.name, strlen(info.name) + 1}, {canon, strlen(canon)}};
+    uint8_t d[FG_SHA256_BYTES];
+    fg_sha256(parts, 2, d);
+    memcpy(&rh, d, sizeof rh);
+  }
   entries = calloc((size_t)(res.n ? res.n : 1), sizeof *entries);
   json_t *grasps = json_array();
   if (!entries || !grasps || !canon) {

@@ -198,11 +198,10 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
   if (!fg_idem_key_valid(*key))
     return fg_resp_error(resp, 400, "invalid_request", "Idempotency-Key must be 1 to %d "
                          "printable ASCII characters", FG_IDEM_KEY_MAX), -1;
-  uint64_t h = fg_idem_hash(req->path, strlen(req->path));
-  h ^= fg_idem_hash(req->body, req->body_len) * 31;
   int status = 0;
   char *body = NULL;
-  int rc = fg_idem_begin(req->app->idem, *key, h, &status, &body);
+  int rc = fg_idem_begin(req->app->idem, *key, req->path, req->body, req->body_len, &status,
+                         &body);
   switch (rc) {
   case FG_IDEM_NEW: return 0;
   case FG_IDEM_RUNNING:

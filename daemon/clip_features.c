@@ -29,8 +29,10 @@ size_t fg_clip_features_needed(const fg_frame *frames, size_t n) {
   return k;
 }
 
-/* "NNNNNN.FINGERPRINT.npy": 1 with the number and fingerprint, else 0. */
-static int parse_cache_name(const char *name, int *index, char fp[17]) {
+/* "NNNNNN.FINGERPRINT.npy": 1 with the number and fingerprint, else 0. Files of the
+ * 16-digit checksum fingerprints of earlier versions parse too, and so are swept as another
+ * model's. */
+static int parse_cache_name(const char *name, int *index, char fp[FG_SHA256_HEX + 1]) {
   const char *dot = strchr(name, '.');
   size_t len = strlen(name);
   if (!dot || dot == name || len < 4 || strcmp(name + len - 4, ".npy") != 0) return 0;
@@ -40,7 +42,7 @@ static int parse_cache_name(const char *name, int *index, char fp[17]) {
     v = v * 10 + (*p - '0');
   }
   size_t fl = (size_t)(name + len - 4 - (dot + 1));
-  if (fl == 0 || fl > 16) return 0;
+  if (fl == 0 || fl > FG_SHA256_HEX) return 0;
   memcpy(fp, dot + 1, fl);
   fp[fl] = '\0';
   *index = (int)v;
@@ -64,7 +66,7 @@ static void sweep(const char *dir, const char *fingerprint, const int *indices, 
   while ((e = readdir(d)) != NULL) {
     if (e->d_name[0] == '.') continue;
     int index;
-    char fp[17];
+    char fp[FG_SHA256_HEX + 1];
     int keep = !strstr(e->d_name, ".tmp.") && parse_cache_name(e->d_name, &index, fp) &&
                strcmp(fp, fingerprint) == 0 && has_index(indices, n, index);
     if (keep) continue;
@@ -198,7 +200,7 @@ int fg_clip_features_attach(fg_clip_model *m, const char *scene_dir, fg_frame *f
       rc = fg_fail(FG_ECANCELED, "stopped while computing CLIP features");
       break;
     }
-    char name[64];
+    char name[32 + FG_SHA256_HEX];
     snprintf(name, sizeof name, "%06d.%s.npy", indices[i], info->fingerprint);
     char *path = fg_path_join(dir, name);
     if (!path) {

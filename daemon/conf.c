@@ -18,6 +18,7 @@
  * Parsing stops at the first error: the reader returns end-of-file to inih once one has been
  * recorded, so the message is always about the earliest bad line. */
 #include "conf.h"
+#include "secret.h"
 
 #include "core/error.h"
 
@@ -54,7 +55,7 @@ static const char *const section_names[SEC_COUNT] = {
     [SEC_GRIPPER_MODBUS] = "gripper.modbus",
 };
 
-enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB };
+enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB, K_TOKEN_FILE };
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
 enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION, K_DEPTH_WEIGHT, K_DISTORTION_WEIGHT };
@@ -70,7 +71,7 @@ enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
 #define MAX_KEYS 13
 
-static const char *const http_keys[] = {"listen", "token", "max_upload_mb", NULL};
+static const char *const http_keys[] = {"listen", "token", "max_upload_mb", "token_file", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
@@ -319,6 +320,35 @@ static int set_path(conf_parse *st, const char *key, char **dst, const char *v) 
 static void free_dirs(char **dirs, size_t n) {
   for (size_t i = 0; i < n; i++) free(dirs[i]);
   free(dirs);
+}
+
+/* token_file: a path, relative to the file's folder like the others, or one that starts with
+ * ${CREDENTIALS_DIRECTORY}, the folder where systemd puts what LoadCredential= gives the
+ * service (systemd/fieldgripd.service). Empty: none, as for token. The file itself is read
+ * in check_final, once it is known whether token is set as well. */
+#define CREDENTIALS_VAR "${CREDENTIALS_DIRECTORY}"
+static int set_token_file(conf_parse *st, const char *key, const char *v) {
+  const size_t nv = strlen(CREDENTIALS_VAR);
+  if (!v[0]) {
+    free(st->conf->token_file);
+    st->conf->token_file = NULL;
+    return 1;
+  }
+  if (strncmp(v, CREDENTIALS_VAR, nv) != 0) return set_path(st, key, &st->conf->token_file, v);
+  const char *dir = getenv("CREDENTIALS_DIRECTORY");
+  if (!dir || dir[0] != '/')
+    return fail_at(st, st->line, st->sec_text, key, "%s is not set: systemd sets it for a "
+                   "service with LoadCredential= (see systemd/fieldgripd.service); started "
+                   "otherwise, name the token file itself", CREDENTIALS_VAR);
+  if (v[nv] != '/' || !v[nv + 1])
+    return fail_at(st, st->line, st->sec_text, key, "expected %s/NAME, got '%s'",
+                   CREDENTIALS_VAR, v);
+  char *p = malloc(strlen(dir) + strlen(v + nv) + 1);
+  if (!p) return fail_nomem(st);
+  sprintf(p, "%s%s", dir, v + nv);
+  free(st->conf->token_file);
+  st->conf->token_file = p;
+  return 1;
 }
 
 /* import_dirs: colon-separated folders. Empty entries ("a::b", a trailing colon) are skipped
@@ -744,10 +774,11 @@ static int conf_handler(void *user, const char *section, const char *name, const
       return set_string(st, &c->listen, v);
     }
     if (k == K_TOKEN) {
-      free(c->token);
+      fg_secret_free(c->token);
       c->token = NULL;
       return v[0] ? set_string(st, &c->token, v) : 1;
     }
+    if (k == K_TOKEN_FILE) return set_token_file(st, name, v);
     if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
     c->max_upload_bytes = (size_t)x << 20;
     return 1;
@@ -824,8 +855,28 @@ static void check_scene(conf_parse *st, const fg_conf_scene *s, const scene_meta
             s->voxel_size, smallest);
 }
 
+/* The token from token_file; both keys at once would leave one of them ignored. */
+static void check_token_file(conf_parse *st) {
+  fg_conf *c = st->conf;
+  const int line = st->key_line[SEC_HTTP][K_TOKEN_FILE];
+  if (!c->token_file) return;
+  if (c->token && c->token[0]) {
+    fail_at(st, line, "http", "token_file", "token is set too (line %d); keep one of them, "
+            "token_file for a token that others may not read", st->key_line[SEC_HTTP][K_TOKEN]);
+    return;
+  }
+  char *secret;
+  if (fg_secret_read(c->token_file, &secret) != 0) {
+    fail_at(st, line, "http", "token_file", "%s", fg_error_detail());
+    return;
+  }
+  fg_secret_free(c->token);
+  c->token = secret;
+}
+
 static void check_final(conf_parse *st) {
   fg_conf *c = st->conf;
+  check_token_file(st);
   if (st->sec_line[SEC_CLIP]) {
     c->clip_weights_line = st->key_line[SEC_CLIP][K_WEIGHTS];
     c->clip_vocab_line = st->key_line[SEC_CLIP][K_VOCAB];
@@ -933,7 +984,8 @@ void fg_conf_free(fg_conf *conf) {
   if (!conf) return;
   free(conf->path);
   free(conf->listen);
-  free(conf->token);
+  fg_secret_free(conf->token);
+  free(conf->token_file);
   free(conf->state_dir);
   free_dirs(conf->import_dirs, conf->n_import_dirs);
   free(conf->clip_weights);

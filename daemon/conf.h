@@ -53,7 +53,8 @@ typedef struct fg_conf {
   char *path;            /* the file read, or NULL for built-in defaults */
   /* [http] */
   char *listen;          /* "host:port", "[v6]:port" */
-  char *token;           /* NULL or "" = no authentication */
+  char *token;           /* NULL or "" = no authentication; from token or token_file */
+  char *token_file;      /* [http] token_file, resolved (absolute), or NULL */
   size_t max_upload_bytes; /* from max_upload_mb (1..4096) */
   /* [state] */
   char *state_dir;

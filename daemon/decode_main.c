@@ -2,11 +2,16 @@
  * fieldgripd in a process of its own, so that the daemon never links OpenImageIO and a codec
  * crashing on a hostile image takes down only this child.
  * Reads requests on stdin and writes replies on stdout in the format decoder.h describes,
- * one at a time, until EOF on stdin. Not meant to be run by hand.
+ * one at a time, until EOF on stdin. Not meant to be run by hand. Before the first request it
+ * confines itself (sandbox(); the limits are listed in decoder.h).
  *
- * Test hooks: when the environment has FG_DECODE_CRASH_ON=<text>, a request whose image
- * starts with those bytes makes the program abort(), standing in for a codec crash; with
- * FG_DECODE_HANG_ON=<text> it sleeps instead, standing in for a codec stuck in a loop. */
+ * Test hooks, compiled only into the test build fieldgrip-decode-test (FG_DECODE_TEST_HOOKS),
+ * never into the installed program: when the environment has FG_DECODE_CRASH_ON=<text>, a
+ * request whose image starts with those bytes makes the program abort(), standing in for a
+ * codec crash; with FG_DECODE_HANG_ON=<text> it sleeps instead, standing in for a codec stuck
+ * in a loop; with FG_DECODE_SPIN_ON=<text> it spins on the CPU. FG_DECODE_TEST_CPU_S and
+ * FG_DECODE_TEST_AS_HEADROOM_MB lower the CPU limit per request and the address space limit
+ * (to the address space in use at start plus that headroom) so tests can reach them. */
 #include "decoder.h"
 
 #include "config.h"
@@ -21,6 +26,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 /* Sends one reply: header, message, and when rc is 0 the data (already in wire order: float
@@ -65,6 +72,7 @@ static int encode_request(int fd, uint8_t *payload, uint64_t length) {
   return sent;
 }
 
+#ifdef FG_DECODE_TEST_HOOKS
 static int starts_with_env(const char *var, const void *bytes, size_t len) {
   const char *magic = getenv(var);
   return magic && *magic && len >= strlen(magic) && memcmp(bytes, magic, strlen(magic)) == 0;
@@ -75,6 +83,92 @@ static void crash_if_asked(const void *bytes, size_t len) {
   if (starts_with_env("FG_DECODE_CRASH_ON", bytes, len)) abort();
   if (starts_with_env("FG_DECODE_HANG_ON", bytes, len))
     for (;;) pause();
+  if (starts_with_env("FG_DECODE_SPIN_ON", bytes, len))
+    for (volatile unsigned long i = 0;; i++) {
+    }
+}
+
+/* A test's override of a limit, or fallback. */
+static long long env_or(const char *var, long long fallback) {
+  const char *v = getenv(var);
+  return v && *v ? strtoll(v, NULL, 10) : fallback;
+}
+#else
+static void crash_if_asked(const void *bytes, size_t len) {
+  (void)bytes;
+  (void)len;
+}
+#endif
+
+/* CPU seconds one request may use, over all threads. */
+static long long cpu_seconds_per_request(void) {
+#ifdef FG_DECODE_TEST_HOOKS
+  return env_or("FG_DECODE_TEST_CPU_S", FG_DECODER_CPU_SECONDS);
+#else
+  return FG_DECODER_CPU_SECONDS;
+#endif
+}
+
+/* The address space the process may use. */
+static rlim_t address_space_limit(void) {
+#ifdef FG_DECODE_TEST_HOOKS
+  long long headroom_mb = env_or("FG_DECODE_TEST_AS_HEADROOM_MB", 0);
+  unsigned long long pages = 0;
+  FILE *f = headroom_mb > 0 ? fopen("/proc/self/statm", "re") : NULL;
+  if (f) {
+    if (fscanf(f, "%llu", &pages) != 1) pages = 0;
+    fclose(f);
+    if (pages)
+      return (rlim_t)(pages * (unsigned long long)sysconf(_SC_PAGESIZE) +
+                      ((unsigned long long)headroom_mb << 20));
+  }
+#endif
+  return (rlim_t)FG_DECODER_MAX_ADDRESS_BYTES;
+}
+
+/* Sets one limit, soft and hard; a failure is reported and the program goes on (a limit the
+ * kernel refuses is one less guard, not a reason to refuse images). */
+static void limit(int resource, rlim_t value, const char *name) {
+  struct rlimit rl = {value, value};
+  if (setrlimit(resource, &rl) != 0)
+    fprintf(stderr, "fieldgrip-decode: cannot set %s: %s\n", name, strerror(errno));
+}
+
+/* Confines the process before it reads untrusted data; see decoder.h for why each limit.
+ * The CPU limit is set per request (cpu_budget). No seccomp filter: OpenImageIO and OpenCV
+ * start threads, map plugins and read files on their own terms, and the systemd unit's
+ * SystemCallFilter= already applies to this child as to the daemon. */
+static void sandbox(void) {
+  if (prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0)
+    fprintf(stderr, "fieldgrip-decode: cannot set no_new_privs: %s\n", strerror(errno));
+  limit(RLIMIT_CORE, 0, "RLIMIT_CORE");
+  limit(RLIMIT_NOFILE, FG_DECODER_MAX_FDS, "RLIMIT_NOFILE");
+#if !defined(__SANITIZE_ADDRESS__)
+  /* (AddressSanitizer reserves terabytes of shadow memory: a sanitizer build goes without) */
+  limit(RLIMIT_AS, address_space_limit(), "RLIMIT_AS");
+#else
+  (void)address_space_limit;
+#endif
+  /* No file may grow: the child writes only to pipes. A regular file as stderr (a daemon
+   * whose output is redirected to a log file) would lose the child's messages, so then the
+   * limit stays off. */
+  struct stat st;
+  if (fstat(2, &st) != 0 || !S_ISREG(st.st_mode)) {
+    signal(SIGXFSZ, SIG_IGN); /* a write fails with EFBIG instead of killing */
+    limit(RLIMIT_FSIZE, 0, "RLIMIT_FSIZE");
+  }
+}
+
+/* Allows the next request cpu_seconds_per_request() of CPU on top of what was used: the
+ * soft limit raises SIGXCPU, which ends the child (the daemon reports the image as
+ * hostile). The hard limit stays unlimited so that the budget can move on. */
+static void cpu_budget(void) {
+  struct rusage ru;
+  if (getrusage(RUSAGE_SELF, &ru) != 0) return;
+  rlim_t used = (rlim_t)(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec + 1);
+  struct rlimit rl = {used + (rlim_t)cpu_seconds_per_request(), RLIM_INFINITY};
+  if (setrlimit(RLIMIT_CPU, &rl) != 0)
+    fprintf(stderr, "fieldgrip-decode: cannot set RLIMIT_CPU: %s\n", strerror(errno));
 }
 
 /* Decodes the payload of a decode request (the encoded image) and replies. */
@@ -129,6 +223,7 @@ int main(int argc, char **argv) {
     fprintf(stderr, "fieldgrip-decode: cannot set up stdout: %s\n", strerror(errno));
     return 1;
   }
+  sandbox();
 
   for (;;) {
     uint8_t hdr[FG_DECODER_REQUEST_SIZE];
@@ -139,6 +234,7 @@ int main(int argc, char **argv) {
               got < 0 ? strerror(errno) : "the request header was cut short");
       return 1;
     }
+    cpu_budget();
     fg_decoder_request req;
     if (fg_decoder_request_unpack(hdr, &req) != 0) {
       send_error(out, FG_EINVAL, fg_error_detail());

@@ -61,6 +61,7 @@ struct fg_decoder {
   spawn_ticket *tickets;    /* queue for the spawner */
   int stopping;
   pthread_t spawner;
+  uint64_t started, died_idle, requests[FG_DECODER_RESULTS]; /* under lock */
 };
 
 #define DEFAULT_INSTALLED FG_LIBEXECDIR "/fieldgrip/fieldgrip-decode"
@@ -203,6 +204,7 @@ static void *spawner_main(void *arg) {
     if (c) {
       c->next = d->children;
       d->children = c;
+      d->started++;
     }
     t->done = 1;
     pthread_cond_broadcast(&d->changed);
@@ -517,9 +519,28 @@ static int exchange(child *c, job_io *io, int *rc, char *why, size_t why_len) {
   return EXCHANGE_OK;
 }
 
+/* Counts one request's end and passes its return code on. */
+static int count_result(fg_decoder *d, fg_decoder_result result, int rc) {
+  pthread_mutex_lock(&d->lock);
+  d->requests[result]++;
+  pthread_mutex_unlock(&d->lock);
+  return rc;
+}
+
+static int run_job_counted(fg_decoder *d, job_io *io, size_t len, const char *what,
+                           fg_decoder_result *result);
+
 /* Runs one request on a child of the pool, replacing children found dead; what names the
  * work in messages ("image", "image to encode", "depth image"). */
 static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
+  fg_decoder_result result = FG_DECODER_ERROR;
+  int rc = run_job_counted(d, io, len, what, &result);
+  return count_result(d, result, rc);
+}
+
+/* run_job's work; *result says how it ended. */
+static int run_job_counted(fg_decoder *d, job_io *io, size_t len, const char *what,
+                           fg_decoder_result *result) {
   /* A child found dead before it saw the request is replaced; twice is plenty (each try
    * after the first runs on a child started for it). */
   for (int attempt = 0; attempt < 3; attempt++) {
@@ -530,6 +551,15 @@ static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
     int how = exchange(c, io, &rc, why, sizeof why);
     if (how == EXCHANGE_OK) {
       checkin(d, c);
+      *result = rc == 0 ? FG_DECODER_OK : FG_DECODER_REFUSED;
+      /* The child's memory is capped (FG_DECODER_MAX_ADDRESS_BYTES): running out there is
+       * the image's doing (too large, or a decompression bomb), not the daemon's. */
+      if (rc == FG_ENOMEM) {
+        char detail[512];
+        snprintf(detail, sizeof detail, "%s", fg_error_detail());
+        return fg_fail(FG_ERANGE, "the image decoder ran out of memory on this %s (it may use "
+                       "%llu GiB): %s", what, FG_DECODER_MAX_ADDRESS_BYTES >> 30, detail);
+      }
       return rc;
     }
     pid_t pid = c->pid;
@@ -538,6 +568,7 @@ static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
     pthread_mutex_unlock(&d->lock);
     int status = 0;
     discard(d, c, &status);
+    *result = overran ? FG_DECODER_TIMEOUT : FG_DECODER_CRASHED;
     if (overran)
       return fg_fail(FG_EFORMAT, "the image decoder took longer than %d s on this %s and was "
                      "stopped; the data is corrupt or hostile", d->busy_seconds, what);
@@ -546,8 +577,19 @@ static int run_job(fg_decoder *d, job_io *io, size_t len, const char *what) {
     if (how == EXCHANGE_DEAD_BEFORE) {
       fg_warn("image decoder pid %d had died while idle (%s); starting another", (int)pid,
               ended);
+      pthread_mutex_lock(&d->lock);
+      d->died_idle++;
+      pthread_mutex_unlock(&d->lock);
+      *result = FG_DECODER_ERROR;
       continue;
     }
+    if (WIFSIGNALED(status) && WTERMSIG(status) == SIGXCPU) {
+      *result = FG_DECODER_TIMEOUT;
+      return fg_fail(FG_EFORMAT, "the image decoder used more than %d s of CPU time on this "
+                     "%s and was stopped; the data is corrupt or hostile",
+                     FG_DECODER_CPU_SECONDS, what);
+    }
+    if (rc == FG_ENOMEM || how == EXCHANGE_VERSION) *result = FG_DECODER_ERROR;
     if (rc == FG_ENOMEM) return rc;
     if (how == EXCHANGE_VERSION)
       return fg_fail(FG_EIO, "the image decoder does not speak this daemon's protocol (%s); "
@@ -664,6 +706,20 @@ void fg_decoder_reap_idle(fg_decoder *d) {
 void fg_decoder_set_busy_limit(fg_decoder *d, int seconds) {
   pthread_mutex_lock(&d->lock);
   d->busy_seconds = seconds >= 1 ? seconds : 1;
+  pthread_mutex_unlock(&d->lock);
+}
+
+void fg_decoder_get_stats(fg_decoder *d, fg_decoder_stats *out) {
+  memset(out, 0, sizeof *out);
+  if (!d) return;
+  pthread_mutex_lock(&d->lock);
+  for (child *c = d->children; c; c = c->next) {
+    if (c->busy) out->busy++;
+    else out->idle++;
+  }
+  out->started = d->started;
+  out->died_idle = d->died_idle;
+  memcpy(out->requests, d->requests, sizeof out->requests);
   pthread_mutex_unlock(&d->lock);
 }
 

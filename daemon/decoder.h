@@ -23,6 +23,18 @@ typedef struct fg_decoder fg_decoder;
  * longer is stuck on hostile data. */
 #define FG_DECODER_BUSY_SECONDS 60
 
+/* The limits every child sets on itself before it reads a request (decode_main.c), so that
+ * a hostile image costs a bounded amount of the machine even if it takes over a codec:
+ * address space FG_DECODER_MAX_ADDRESS_BYTES (room for the largest image FG_IMAGE_MAX_PIXELS
+ * allows, as the encoded request and its float pixels, and the libraries' threads), CPU
+ * time FG_DECODER_CPU_SECONDS per request (SIGXCPU ends the child; all threads count), no
+ * core files, FG_DECODER_MAX_FDS open files, no file growth (RLIMIT_FSIZE 0, unless stderr
+ * is a regular file: then the child's messages must still reach it), and no_new_privs, so
+ * nothing it could exec gains privileges. */
+#define FG_DECODER_MAX_ADDRESS_BYTES (8ull << 30)
+#define FG_DECODER_CPU_SECONDS 120
+#define FG_DECODER_MAX_FDS 64
+
 /* Creates a pool of at most max_procs (>= 1) children running program, started on demand and
  * ended after idle_seconds (>= 1) without work. program is copied; NULL means the default
  * places, tried in order at every start: fieldgrip-decode beside the running executable
@@ -78,6 +90,32 @@ void fg_decoder_set_busy_limit(fg_decoder *dec, int seconds);
  * Waits for them to exit (they do at once on EOF), so it may take a few milliseconds. When it
  * ended any, it also returns the process's free heap memory to the system (malloc_trim). */
 void fg_decoder_reap_idle(fg_decoder *dec);
+
+/* How requests to the pool ended: the child answered with the result (ok) or with an error
+ * about the data (refused), the child died on the request (crashed), the reaper killed it
+ * for overrunning the busy limit (timeout), or the pool could not run it at all (error: no
+ * program, no child could be started or talked to, out of memory). */
+typedef enum {
+  FG_DECODER_OK = 0,
+  FG_DECODER_REFUSED,
+  FG_DECODER_CRASHED,
+  FG_DECODER_TIMEOUT,
+  FG_DECODER_ERROR,
+  FG_DECODER_RESULTS
+} fg_decoder_result;
+
+/* The pool's counters since fg_decoder_new, for /metrics. */
+typedef struct fg_decoder_stats {
+  int idle, busy;                        /* children alive now, by state */
+  uint64_t started;                      /* children started (a crashed one is replaced by a
+                                            start too) */
+  uint64_t died_idle;                    /* children found dead before a request reached
+                                            them (killed from outside, OOM) */
+  uint64_t requests[FG_DECODER_RESULTS]; /* decodes, depth decodes and encodes, by result */
+} fg_decoder_stats;
+
+/* Fills *out; a NULL pool gives zeros. Thread-safe. */
+void fg_decoder_get_stats(fg_decoder *dec, fg_decoder_stats *out);
 
 /* Test hook: writes the pids of up to max live children (idle or busy) to pids and returns
  * how many there are. */

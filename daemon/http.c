@@ -507,7 +507,7 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
     c->resp.allow[0] = 0;
     return respond_now(c, 401, "unauthorized",
                        "this server needs \"Authorization: Bearer <token>\" with the token of its "
-                       "configuration file ([http] token)");
+                       "configuration ([http] token or the file [http] token_file names)");
   }
   if (!c->route) {
     if (path_known) {

@@ -1,5 +1,6 @@
 #include "idem.h"
 
+#include <ctype.h>
 #include <inttypes.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -9,15 +10,20 @@
 
 #include <jansson.h>
 
+#include "core/digest.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 
 #define MAX_AGE_S (24 * 3600)
 #define FILE_MAX (64u << 20)
+/* 2: requests known by "sha256"; 1 (still read): by "hash", a 64-bit FNV-1a in hex */
+#define FILE_VERSION 2
 
 typedef struct entry {
   char key[FG_IDEM_KEY_MAX + 1];
-  uint64_t hash;
+  uint8_t sha256[FG_SHA256_BYTES]; /* of the path, a NUL and the body */
+  int legacy;                      /* a version 1 key: legacy_hash instead of sha256 */
+  uint64_t legacy_hash;
   int status;   /* 0 while running */
   char *body;   /* NULL while running */
   int64_t created;
@@ -30,7 +36,15 @@ struct fg_idem {
   size_t n;
 };
 
-uint64_t fg_idem_hash(const void *data, size_t len) {
+/* The identity of a request: SHA-256 of its path, a NUL (no path holds one) and its body. */
+static void request_digest(const char *path, const void *body, size_t len,
+                           uint8_t out[FG_SHA256_BYTES]) {
+  const fg_span parts[] = {{path, strlen(path) + 1}, {body, len}};
+  fg_sha256(parts, 2, out);
+}
+
+/* FNV-1a 64, only to compare a request with a key taken by a version 1 daemon. */
+static uint64_t legacy_fnv(const void *data, size_t len) {
   const unsigned char *p = data;
   uint64_t h = 1469598103934665603ULL;
   for (size_t i = 0; i < len; i++) {
@@ -38,6 +52,26 @@ uint64_t fg_idem_hash(const void *data, size_t len) {
     h *= 1099511628211ULL;
   }
   return h;
+}
+
+/* Whether e was taken by the request to path with body [len]. */
+static int entry_matches(const entry *e, const uint8_t digest[FG_SHA256_BYTES],
+                         const char *path, const void *body, size_t len) {
+  if (!e->legacy) return memcmp(e->sha256, digest, FG_SHA256_BYTES) == 0;
+  return e->legacy_hash == (legacy_fnv(path, strlen(path)) ^ legacy_fnv(body, len) * 31);
+}
+
+/* Parses 64 hex digits into a digest. 1 on success. */
+static int digest_parse(const char *hex, uint8_t out[FG_SHA256_BYTES]) {
+  if (strlen(hex) != FG_SHA256_HEX) return 0;
+  for (int i = 0; i < FG_SHA256_BYTES; i++) {
+    unsigned v;
+    if (!isxdigit((unsigned char)hex[2 * i]) || !isxdigit((unsigned char)hex[2 * i + 1]) ||
+        sscanf(hex + 2 * i, "%2x", &v) != 1)
+      return 0;
+    out[i] = (uint8_t)v;
+  }
+  return 1;
 }
 
 int fg_idem_key_valid(const char *key) {
@@ -59,13 +93,15 @@ static int save_locked(fg_idem *s) {
   if (!arr) return FG_ENOMEM;
   for (size_t i = 0; i < s->n; i++) {
     const entry *e = &s->e[i];
-    char hash[17];
-    snprintf(hash, sizeof hash, "%016" PRIx64, e->hash);
-    json_array_append_new(arr, json_pack("{s:s, s:s, s:i, s:s?, s:I}", "key", e->key, "hash",
-                                         hash, "status", e->status, "body", e->body, "created",
+    char hex[FG_SHA256_HEX + 1];
+    if (e->legacy) snprintf(hex, sizeof hex, "%016" PRIx64, e->legacy_hash);
+    else fg_sha256_to_hex(e->sha256, hex);
+    json_array_append_new(arr, json_pack("{s:s, s:s, s:i, s:s?, s:I}", "key", e->key,
+                                         e->legacy ? "hash" : "sha256", hex, "status",
+                                         e->status, "body", e->body, "created",
                                          (json_int_t)e->created));
   }
-  json_t *doc = json_pack("{s:i, s:o}", "version", 1, "keys", arr);
+  json_t *doc = json_pack("{s:i, s:o}", "version", FILE_VERSION, "keys", arr);
   char *text = doc ? json_dumps(doc, JSON_COMPACT) : NULL;
   json_decref(doc);
   if (!text) return fg_fail(FG_ENOMEM, "out of memory writing %s", s->path);
@@ -111,20 +147,27 @@ static int load(fg_idem *s) {
     return FG_ENOMEM;
   }
   json_array_foreach(keys, i, it) {
-    const char *key = NULL, *hash = NULL, *body = NULL;
+    const char *key = NULL, *hash = NULL, *sha = NULL;
+    json_t *jbody = NULL; /* null while the command ran: saved before it had an answer */
     int status = 0;
     json_int_t created = 0;
-    if (json_unpack(it, "{s:s, s:s, s:i, s?s, s:I}", "key", &key, "hash", &hash, "status",
-                    &status, "body", &body, "created", &created) != 0 ||
-        !fg_idem_key_valid(key)) {
+    entry *e = &s->e[s->n];
+    memset(e, 0, sizeof *e);
+    if (json_unpack(it, "{s:s, s?s, s?s, s:i, s?o, s:I}", "key", &key, "hash", &hash,
+                    "sha256", &sha, "status", &status, "body", &jbody, "created",
+                    &created) != 0 ||
+        !fg_idem_key_valid(key) || !!hash == !!sha || (sha && !digest_parse(sha, e->sha256)) ||
+        (jbody && !json_is_string(jbody) && !json_is_null(jbody))) {
       json_decref(doc);
       return fg_fail(FG_EFORMAT, "%s: entry %zu is malformed; move the file away to start "
                      "afresh", s->path, i);
     }
-    entry *e = &s->e[s->n++];
+    s->n++;
     snprintf(e->key, sizeof e->key, "%s", key);
-    e->hash = strtoull(hash, NULL, 16);
+    e->legacy = hash != NULL;
+    if (hash) e->legacy_hash = strtoull(hash, NULL, 16);
     e->created = created;
+    const char *body = json_string_value(jbody);
     /* no answer yet, or only "accepted" (202): the command was cut short by the stop */
     const int final = status != 0 && status != 202 && body;
     e->status = final ? status : 504;
@@ -170,12 +213,15 @@ static entry *find_locked(fg_idem *s, const char *key) {
   return NULL;
 }
 
-int fg_idem_begin(fg_idem *s, const char *key, uint64_t hash, int *status, char **body) {
+int fg_idem_begin(fg_idem *s, const char *key, const char *path, const void *req_body,
+                  size_t req_len, int *status, char **body) {
   *body = NULL;
+  uint8_t digest[FG_SHA256_BYTES];
+  request_digest(path, req_body, req_len, digest);
   pthread_mutex_lock(&s->lock);
   entry *e = find_locked(s, key);
   int rc;
-  if (e && e->hash != hash) {
+  if (e && !entry_matches(e, digest, path, req_body, req_len)) {
     rc = FG_IDEM_CONFLICT;
   } else if (e && e->status == 0) {
     rc = FG_IDEM_RUNNING;
@@ -193,7 +239,7 @@ int fg_idem_begin(fg_idem *s, const char *key, uint64_t hash, int *status, char 
       e = &s->e[s->n++];
       memset(e, 0, sizeof *e);
       snprintf(e->key, sizeof e->key, "%s", key);
-      e->hash = hash;
+      memcpy(e->sha256, digest, sizeof digest);
       e->created = (int64_t)time(NULL);
       rc = save_locked(s);
       if (rc < 0) s->n--; /* not stored: the request must not run */

@@ -3,7 +3,13 @@
  * Keys are kept in one file under the state dir, rewritten atomically when a key is taken
  * and when its answer is known, so a daemon that restarts (or is killed) mid-command does
  * not run a retried command a second time: a key whose command was cut short (no answer, or
- * only the 202 of its acknowledgement) answers 504 outcome_unknown after a restart. The newest FG_IDEM_MAX keys of the last 24 hours are kept. */
+ * only the 202 of its acknowledgement) answers 504 outcome_unknown after a restart. The newest
+ * FG_IDEM_MAX keys of the last 24 hours are kept.
+ *
+ * A key remembers its request by the SHA-256 of its path and body, so a retry is told from a
+ * different request by its bytes, not by a 64-bit hash that could be made to collide. The
+ * file is version 2; a version 1 file (64-bit FNV-1a hashes) still loads, and its keys are
+ * compared by that hash until they age out. */
 #ifndef FG_DAEMON_IDEM_H
 #define FG_DAEMON_IDEM_H
 
@@ -30,10 +36,11 @@ void fg_idem_free(fg_idem *s);
 /* Checks that a header value is a usable key: 1..FG_IDEM_KEY_MAX printable ASCII. */
 int fg_idem_key_valid(const char *key);
 
-/* Looks key up for a request whose body hashes to hash (fg_idem_hash). On FG_IDEM_REPLAY
- * the caller owns *body (malloc'd). Returns the result, or a negative FG_E* when the key
- * could not be stored (the request must not run then). */
-int fg_idem_begin(fg_idem *s, const char *key, uint64_t hash, int *status, char **body);
+/* Looks key up for the request to path with body req_body [req_len] (both kept by the
+ * caller). On FG_IDEM_REPLAY the caller owns *body (malloc'd). Returns the result, or a
+ * negative FG_E* when the key could not be stored (the request must not run then). */
+int fg_idem_begin(fg_idem *s, const char *key, const char *path, const void *req_body,
+                  size_t req_len, int *status, char **body);
 
 /* Stores the answer of a key taken by fg_idem_begin. 0 or FG_EIO. */
 int fg_idem_finish(fg_idem *s, const char *key, int status, const char *body);
@@ -45,8 +52,5 @@ int fg_idem_update(fg_idem *s, const char *key, int status, const char *body);
 /* Releases a key taken by fg_idem_begin whose request did not run (refused before it
  * started), so that a retry with the key runs. 0 or FG_EIO. */
 int fg_idem_cancel(fg_idem *s, const char *key);
-
-/* FNV-1a 64 of a request body. */
-uint64_t fg_idem_hash(const void *data, size_t len);
 
 #endif

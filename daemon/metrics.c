@@ -2,11 +2,14 @@
 
 #include "config.h"
 
+#include <dirent.h>
 #include <stdarg.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 /* Status codes the daemon answers with get their own counter; anything else lands in
  * the last slot and is reported as "other". */
@@ -122,6 +125,129 @@ static void sb_printf(sbuf *sb, const char *fmt, ...) {
     sb->buf = p;
     sb->cap = cap;
   }
+}
+
+/* ---------------------------------------------------------------- process metrics */
+
+/* What /proc/self says about this process; a field that could not be read is negative and
+ * its family is left out rather than reported as 0. */
+typedef struct proc_sample {
+  double cpu_s, start_time_s;
+  double resident_bytes, virtual_bytes;
+  double open_fds, max_fds;
+} proc_sample;
+
+/* Reads the whole of a small /proc file into buf (NUL-terminated). 0 or -1. */
+static int read_small(const char *path, char *buf, size_t size) {
+  FILE *f = fopen(path, "re");
+  if (!f) return -1;
+  size_t n = fread(buf, 1, size - 1, f);
+  fclose(f);
+  buf[n] = '\0';
+  return n > 0 ? 0 : -1;
+}
+
+/* The boot time (btime of /proc/stat) in seconds since the epoch, or -1. */
+static double boot_time_s(void) {
+  FILE *f = fopen("/proc/stat", "re");
+  if (!f) return -1;
+  char line[256];
+  double bt = -1;
+  while (fgets(line, sizeof line, f))
+    if (strncmp(line, "btime ", 6) == 0) {
+      bt = strtod(line + 6, NULL);
+      break;
+    }
+  fclose(f);
+  return bt;
+}
+
+static void proc_read(proc_sample *s) {
+  s->cpu_s = s->start_time_s = s->resident_bytes = s->virtual_bytes = -1;
+  s->open_fds = s->max_fds = -1;
+  const double tick_hz = (double)sysconf(_SC_CLK_TCK);
+  const double page_bytes = (double)sysconf(_SC_PAGESIZE);
+  char buf[1024];
+  /* stat: "pid (comm) state ..."; comm may hold spaces and parentheses, so the fields are
+   * counted from the last ')'. utime and stime are fields 14 and 15, starttime 22. */
+  if (read_small("/proc/self/stat", buf, sizeof buf) == 0 && tick_hz > 0) {
+    const char *p = strrchr(buf, ')');
+    unsigned long long utime = 0, stime = 0, start = 0;
+    if (p && sscanf(p + 2, "%*c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %llu %llu %*d %*d "
+                           "%*d %*d %*d %*d %llu", &utime, &stime, &start) == 3) {
+      s->cpu_s = (double)(utime + stime) / tick_hz;
+      const double bt = boot_time_s();
+      if (bt > 0) s->start_time_s = bt + (double)start / tick_hz;
+    }
+  }
+  /* statm: size and resident, in pages */
+  unsigned long long size_pages, resident_pages;
+  if (read_small("/proc/self/statm", buf, sizeof buf) == 0 && page_bytes > 0 &&
+      sscanf(buf, "%llu %llu", &size_pages, &resident_pages) == 2) {
+    s->virtual_bytes = (double)size_pages * page_bytes;
+    s->resident_bytes = (double)resident_pages * page_bytes;
+  }
+  DIR *d = opendir("/proc/self/fd");
+  if (d) {
+    double n = 0;
+    for (struct dirent *e; (e = readdir(d)) != NULL;)
+      if (e->d_name[0] != '.') n++;
+    s->open_fds = n - 1; /* not the one that lists them */
+    closedir(d);
+  }
+  struct rlimit rl;
+  if (getrlimit(RLIMIT_NOFILE, &rl) == 0)
+    s->max_fds = rl.rlim_cur == RLIM_INFINITY ? -1 : (double)rl.rlim_cur;
+}
+
+/* One process_* family of one sample, unless it could not be read. */
+static void proc_family(sbuf *sb, const char *name, const char *type, const char *help,
+                        double v) {
+  if (v < 0) return;
+  sb_printf(sb, "# HELP %s %s\n# TYPE %s %s\n%s %.17g\n", name, help, name, type, name, v);
+}
+
+static void render_process(sbuf *sb) {
+  proc_sample s;
+  proc_read(&s);
+  proc_family(sb, "process_cpu_seconds_total", "counter",
+              "Total user and system CPU time spent in seconds.", s.cpu_s);
+  proc_family(sb, "process_open_fds", "gauge", "Number of open file descriptors.",
+              s.open_fds);
+  proc_family(sb, "process_max_fds", "gauge", "Maximum number of open file descriptors.",
+              s.max_fds);
+  proc_family(sb, "process_virtual_memory_bytes", "gauge", "Virtual memory size in bytes.",
+              s.virtual_bytes);
+  proc_family(sb, "process_resident_memory_bytes", "gauge", "Resident memory size in bytes.",
+              s.resident_bytes);
+  proc_family(sb, "process_start_time_seconds", "gauge",
+              "Start time of the process since unix epoch in seconds.", s.start_time_s);
+}
+
+/* The image decoder pool (decoder.h). */
+static void render_decoder(sbuf *sb, const fg_decoder_stats *d) {
+  static const char *const results[FG_DECODER_RESULTS] = {"ok", "refused", "crashed",
+                                                          "timeout", "error"};
+  sb_printf(sb, "# HELP fieldgrip_decoder_processes Image decoder child processes alive, by "
+                "state.\n# TYPE fieldgrip_decoder_processes gauge\n"
+                "fieldgrip_decoder_processes{state=\"idle\"} %d\n"
+                "fieldgrip_decoder_processes{state=\"busy\"} %d\n", d->idle, d->busy);
+  sb_printf(sb, "# HELP fieldgrip_decoder_starts_total Image decoder child processes started "
+                "(on demand, and in place of one that died).\n"
+                "# TYPE fieldgrip_decoder_starts_total counter\n"
+                "fieldgrip_decoder_starts_total %llu\n", (unsigned long long)d->started);
+  sb_printf(sb, "# HELP fieldgrip_decoder_requests_total Images decoded or encoded in the "
+                "decoder children, by result: ok; refused (not a valid image, or too large "
+                "for a child's memory); crashed (the child died on it); timeout (ended for "
+                "taking too long, in wall or CPU time); error (no child could run it).\n"
+                "# TYPE fieldgrip_decoder_requests_total counter\n");
+  for (int i = 0; i < FG_DECODER_RESULTS; i++)
+    sb_printf(sb, "fieldgrip_decoder_requests_total{result=\"%s\"} %llu\n", results[i],
+              (unsigned long long)d->requests[i]);
+  sb_printf(sb, "# HELP fieldgrip_decoder_idle_deaths_total Image decoder children found dead "
+                "while idle (killed from outside, out of memory); each is replaced.\n"
+                "# TYPE fieldgrip_decoder_idle_deaths_total counter\n"
+                "fieldgrip_decoder_idle_deaths_total %llu\n", (unsigned long long)d->died_idle);
 }
 
 char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
@@ -245,6 +371,8 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "fieldgrip_voxel_cache_bytes %zu\n",
             atomic_load(&voxel_builds), (double)atomic_load(&voxel_build_us) / 1e6,
             g->voxel_cache_bytes);
+  render_decoder(&sb, &g->decoder);
+  render_process(&sb);
   if (sb.failed) {
     free(sb.buf);
     return NULL;

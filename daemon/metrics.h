@@ -1,11 +1,15 @@
 /* Prometheus counters and histograms of the daemon, updated lock-free from HTTP threads.
  *
  * Requests are counted per route template (the route table's index), method and status
- * code; latencies go into one histogram per route. */
+ * code; latencies go into one histogram per route. The standard process_* families
+ * (memory, file descriptors, CPU time, start time) are read from /proc/self at scrape time,
+ * as Prometheus client libraries do. */
 #ifndef FG_DAEMON_METRICS_H
 #define FG_DAEMON_METRICS_H
 
 #include <stddef.h>
+
+#include "decoder.h"
 
 #define FG_METRICS_MAX_ROUTES 64
 
@@ -59,6 +63,7 @@ typedef struct fg_metrics_gauges {
   size_t voxel_cache_bytes;             /* heap bytes of every voxel feature cache */
   size_t jobs[FG_METRICS_JOB_STATES];   /* jobs known, by state (queued, running, done,
                                            failed, cancelled) */
+  fg_decoder_stats decoder;             /* the image decoder pool */
 } fg_metrics_gauges;
 
 /* Renders the text exposition format into a malloc'd NUL-terminated buffer the caller owns;

@@ -753,15 +753,20 @@ size_t fg_robot_metrics(fg_robot_svc *svc, char *buf, size_t size) {
     if (peers[i])
       append(buf, size, &len, "fieldgrip_modbus_requests_total{peer=\"%s\"} %llu\n", names[i],
              (unsigned long long)ls[i].requests);
-  append(buf, size, &len, "# HELP fieldgrip_modbus_errors_total Failed Modbus requests and "
-         "connection attempts, by kind.\n# TYPE fieldgrip_modbus_errors_total counter\n");
+  /* Four distinct causes: no answer in time, an exception reply, a request that failed on the
+   * wire (the connection dropped or was reset, or the reply was garbled), and an attempt to
+   * open the connection that failed. */
+  append(buf, size, &len, "# HELP fieldgrip_modbus_errors_total Modbus errors by kind: timeout "
+         "(no reply in time), exception (an exception reply), transport (a request failed on "
+         "the wire: connection lost or reply garbled), connect (a connection attempt failed)."
+         "\n# TYPE fieldgrip_modbus_errors_total counter\n");
   for (int i = 0; i < 2; i++) {
     if (!peers[i]) continue;
     const fg_mb_link_state *l = &ls[i];
     append(buf, size, &len,
            "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"timeout\"} %llu\n"
            "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"exception\"} %llu\n"
-           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"connection\"} %llu\n"
+           "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"transport\"} %llu\n"
            "fieldgrip_modbus_errors_total{peer=\"%s\",kind=\"connect\"} %llu\n",
            names[i], (unsigned long long)l->timeouts, names[i],
            (unsigned long long)l->exceptions, names[i],

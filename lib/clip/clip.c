@@ -18,7 +18,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <zlib.h>
 
 #include "core/blas.h"
 #include "core/error.h"
@@ -358,21 +357,14 @@ static int model_resolve(fg_clip *c) {
   return 0;
 }
 
-/* crc32 and adler32 of every byte of the file: a weights file that changes in any byte
- * changes its fingerprint. */
-static void fingerprint(const fg_st *st, char out[17]) {
-  const void *base;
-  size_t len;
-  fg_st_bytes(st, &base, &len);
-  uLong crc = crc32(0L, Z_NULL, 0), ad = adler32(0L, Z_NULL, 0);
-  const unsigned char *p = base;
-  for (size_t off = 0; off < len;) {
-    const uInt chunk = (uInt)(len - off > (1u << 30) ? (1u << 30) : len - off);
-    crc = crc32(crc, p + off, chunk);
-    ad = adler32(ad, p + off, chunk);
-    off += chunk;
-  }
-  snprintf(out, 17, "%08lx%08lx", crc & 0xffffffffUL, ad & 0xffffffffUL);
+/* SHA-256 of every byte of the file: a weights file that changes in any byte changes its
+ * fingerprint, and nobody can make two files share one (cached features are keyed by it), as
+ * they could with a checksum. It equals `sha256sum weights.safetensors`, so a user can tell
+ * which file a daemon runs. */
+static void fingerprint(const fg_st *st, char out[FG_SHA256_HEX + 1]) {
+  fg_span whole;
+  fg_st_bytes(st, &whole.data, &whole.len);
+  fg_sha256_hex(&whole, 1, out);
 }
 
 int fg_clip_load(fg_clip **out, const char *path) {

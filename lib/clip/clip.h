@@ -22,6 +22,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "core/digest.h"
+
 typedef struct fg_clip fg_clip;
 
 typedef struct fg_clip_info {
@@ -31,7 +33,9 @@ typedef struct fg_clip_info {
   int naming;            /* 0 OpenAI, 1 Hugging Face */
   const char *dtype;     /* "F32", "F16" or "BF16": how the weights are stored and kept */
   size_t weights_bytes;  /* the tensors the model uses, as stored */
-  char fingerprint[17];  /* hex digest of the file's bytes: changes when the weights do */
+  /* SHA-256 of the whole weights file in lowercase hex, as sha256sum prints it: changes
+   * when any byte of the weights does */
+  char fingerprint[FG_SHA256_HEX + 1];
 } fg_clip_info;
 
 /* Opens a weights file and checks that every tensor the model needs is there with a

@@ -1,6 +1,11 @@
 /* Bearer token: with [http] token set, every request but GET /v1/health needs
- * "Authorization: Bearer <token>"; anything else is 401 "unauthorized" with WWW-Authenticate. */
+ * "Authorization: Bearer <token>"; anything else is 401 "unauthorized" with WWW-Authenticate.
+ * [http] token_file: the token read from a file of the daemon's own, at start and at each
+ * reload, and a file others may read refused at start-up. */
 #include "harness.h"
+
+#include <signal.h>
+#include <sys/stat.h>
 
 #define TOKEN "s3cret-Token_1"
 
@@ -23,8 +28,80 @@ static void expect_401(const char *method, const char *path, const char *header_
   h_resp_free(r);
 }
 
+/* Writes a token file under the temp dir with the given mode; returns its malloc'd path. */
+static char *token_file(const char *text, mode_t mode) {
+  char *path = h_fmt("%s/token", h_tmpdir());
+  unlink(path);
+  h_write_file(path, text, strlen(text));
+  ASSERT_EQ(chmod(path, mode), 0);
+  return path;
+}
+
+/* Status of GET /v1/scenes with the given token. */
+static int scenes_status(const char *token) {
+  char *hdr = h_fmt("Authorization: Bearer %s", token);
+  h_resp *r = req_auth("GET", "/v1/scenes", hdr, NULL);
+  int status = r->status;
+  h_resp_free(r);
+  free(hdr);
+  return status;
+}
+
+/* Runs the daemon on the current config file and expects it to refuse to start with a
+ * message holding want. */
+static void expect_start_refused(const char *want) {
+  char *state = h_fmt("%s/state-refused", h_tmpdir());
+  const char *args[] = {"--config", h_config_path(), "--state-dir", state, "--listen",
+                        "127.0.0.1:0", NULL};
+  char *out = NULL;
+  int rc = h_run_daemon_capture(args, &out);
+  if (rc == 0 || rc >= 128) FG_TEST_FAIL("exit %d, expected a failure exit; output: %s", rc, out);
+  ASSERT_STRCONTAINS(out, want);
+  ASSERT_STRCONTAINS(out, "token_file");
+  ASSERT(strstr(out, "listening on") == NULL);
+  free(out);
+  free(state);
+}
+
+static void check_token_file(void) {
+  char *path = token_file("from-a-file\n", 0600);
+  h_write_config("[http]\ntoken_file = token\n"); /* relative to the config's folder */
+  h_start();
+  ASSERT_EQ(scenes_status("from-a-file"), 200);
+  ASSERT_EQ(scenes_status("from-a-fil"), 401);
+  expect_401("GET", "/v1/scenes", NULL, NULL);
+
+  /* a reload reads the file again: the new token works at once, the old one no more */
+  free(token_file("rotated-token\n", 0400));
+  h_signal(SIGHUP);
+  for (int i = 0; scenes_status("rotated-token") != 200; i++) {
+    if (i >= 500) FG_TEST_FAIL("the rotated token is not taken after SIGHUP");
+    h_sleep_ms(20);
+  }
+  ASSERT_EQ(scenes_status("from-a-file"), 401);
+  /* a reload that finds the file readable by others keeps the running token */
+  free(token_file("leaked\n", 0644));
+  h_signal(SIGHUP);
+  if (!h_wait_log("reload failed", 1, 10.0)) FG_TEST_FAIL("no \"reload failed\" after SIGHUP");
+  ASSERT_EQ(scenes_status("rotated-token"), 200);
+  ASSERT_EQ(scenes_status("leaked"), 401);
+  h_stop();
+
+  /* at start-up: readable by others, empty, missing, both keys */
+  expect_start_refused("chmod 600");
+  free(token_file("\n", 0600));
+  expect_start_refused("is empty");
+  unlink(path);
+  expect_start_refused("cannot open");
+  free(token_file("x\n", 0600));
+  h_write_config("[http]\ntoken = abc\ntoken_file = token\n");
+  expect_start_refused("keep one");
+  free(path);
+}
+
 int main(int argc, char **argv) {
   h_init(argc, argv);
+  check_token_file();
   h_write_config("[http]\ntoken = " TOKEN "\n");
   h_start();
 

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "clip_util.h"
+#include "core/digest.h"
 #include "core/error.h"
 #include "io/npy.h"
 
@@ -19,7 +20,7 @@ static h_resp *embed(const char *body) { return h_post_json("/v1/embed/text", bo
 
 /* The embeddings of one text over HTTP: out [E], and the reply's model fingerprint (static). */
 static const char *embed_one(const char *text, float *out) {
-  static char fp[32];
+  static char fp[FG_SHA256_HEX + 1];
   char *body = h_fmt("{\"text\": \"%s\"}", text);
   h_resp *r = embed(body);
   free(body);
@@ -163,7 +164,10 @@ static void text_endpoint(void) {
   ASSERT_EQ(JINT(r->json, "model.image_size"), 32);
   ASSERT_EQ(JINT(r->json, "model.patch_size"), 8);
   ASSERT_EQ(JINT(r->json, "model.context_length"), 77);
-  ASSERT_EQ(strlen(JSTR(r->json, "model.fingerprint")), 16);
+  /* the weights file's SHA-256 in hex, as sha256sum prints it */
+  const char *fp = JSTR(r->json, "model.fingerprint");
+  ASSERT_EQ(strlen(fp), FG_SHA256_HEX);
+  ASSERT_EQ(strspn(fp, "0123456789abcdef"), FG_SHA256_HEX);
   h_resp_free(r);
 
   /* normalize: unit rows in the same direction */
@@ -354,7 +358,7 @@ static void reloads(void) {
   float *after = malloc((size_t)g_E * sizeof *after);
   float *mine = malloc((size_t)g_E * sizeof *mine);
   ASSERT(before && after && mine);
-  char fp0[32], fp1[32];
+  char fp0[FG_SHA256_HEX + 1], fp1[FG_SHA256_HEX + 1];
   snprintf(fp0, sizeof fp0, "%s", embed_one("a mug", before));
   ASSERT_EQ(h_metric("fieldgrip_clip_loads_total{result=\"ok\"}"), 1);
 

@@ -11,7 +11,9 @@
 #include <unistd.h>
 
 #include "clip_util.h"
+#include "core/digest.h"
 #include "core/error.h"
+#include "core/fsutil.h"
 #include "core/half.h"
 #include "io/npy.h"
 #include "training.h"
@@ -40,7 +42,7 @@ static void strip_features(const char *dir) {
 
 /* The model's fingerprint, from POST /v1/embed/text (static). */
 static const char *fingerprint(void) {
-  static char fp[32];
+  static char fp[FG_SHA256_HEX + 1];
   h_resp *r = h_post_json("/v1/embed/text", "{\"text\": \"x\"}");
   ASSERT_STATUS(r, 200);
   snprintf(fp, sizeof fp, "%s", JSTR(r->json, "model.fingerprint"));
@@ -291,10 +293,18 @@ int main(int argc, char **argv) {
   ASSERT(json_is_null(JGET(r->json, "feature_dim")));
   h_resp_free(r);
 
-  /* the first training computes every frame's features */
-  char fp0[32];
+  /* the first training computes every frame's features; a file named by the 16-digit
+   * checksum fingerprint of earlier versions is another model's and goes */
+  char fp0[FG_SHA256_HEX + 1];
   snprintf(fp0, sizeof fp0, "%s", fingerprint());
+  char *clip_dir = h_fmt("%s/scenes/c/clip", h_state_dir());
+  ASSERT_OK(fg_mkdir_p(clip_dir));
+  free(clip_dir);
+  char *legacy = cache_path("c", 0, "9a3c00e1f4b27d65");
+  h_write_file(legacy, "x", 1);
   json_decref(train_checked("c", VIEWS, 0));
+  ASSERT(access(legacy, F_OK) != 0);
+  free(legacy);
   r = h_get("/v1/scenes/c");
   ASSERT_EQ(JINT(r->json, "feature_dim"), g_E);
   ASSERT(json_is_true(JGET(r->json, "trained")));
@@ -314,7 +324,7 @@ int main(int argc, char **argv) {
 
   /* new weights: another fingerprint, the features are computed again and the old ones go */
   reload_weights(4, 2);
-  char fp1[32];
+  char fp1[FG_SHA256_HEX + 1];
   snprintf(fp1, sizeof fp1, "%s", fingerprint());
   ASSERT(strcmp(fp0, fp1) != 0);
   json_decref(train_checked("c", VIEWS, 0));

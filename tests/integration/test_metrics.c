@@ -1,7 +1,14 @@
 /* /metrics in the Prometheus text format: request counters by method, route template and
  * code, the duration histogram, scene/frame gauges and the ingested-frames counter, checked
- * against the exact requests this test made. */
+ * against the exact requests this test made; the process_* families against /proc, the
+ * image decoder pool's families, and the kinds of Modbus errors. */
+#include <arpa/inet.h>
+#include <dirent.h>
+#include <netinet/in.h>
 #include <strings.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "config.h"
 #include "harness.h"
@@ -81,6 +88,131 @@ static h_resp *scrape_settled(double requests, int *scrapes) {
     h_resp_free(r);
     h_sleep_ms(20);
   }
+}
+
+/* ---------------------------------------------------------------- process, decoder, Modbus */
+
+/* The family's one sample, checking its TYPE line. */
+static double family(const char *text, const char *name, const char *type) {
+  char want[160];
+  snprintf(want, sizeof want, "# TYPE %s %s\n", name, type);
+  if (!strstr(text, want)) FG_TEST_FAIL("no \"%s\" in /metrics:\n%s", want, text);
+  double v = metric(text, name, NULL);
+  if (v < 0) FG_TEST_FAIL("no sample of %s in /metrics:\n%s", name, text);
+  return v;
+}
+
+static double fds_of(pid_t pid) {
+  char path[64];
+  snprintf(path, sizeof path, "/proc/%d/fd", (int)pid);
+  DIR *d = opendir(path);
+  ASSERT(d);
+  double n = 0;
+  for (struct dirent *e; (e = readdir(d)) != NULL;) n += e->d_name[0] != '.';
+  closedir(d);
+  return n;
+}
+
+/* The standard process_* families, checked against what /proc says about the daemon from
+ * outside it. */
+static void check_process_metrics(void) {
+  h_resp *r = h_get("/metrics");
+  ASSERT_STATUS(r, 200);
+  const char *text = r->body;
+  const pid_t pid = h_pid();
+  const double rss = family(text, "process_resident_memory_bytes", "gauge");
+  const double vsz = family(text, "process_virtual_memory_bytes", "gauge");
+  const double fds = family(text, "process_open_fds", "gauge");
+  const double max_fds = family(text, "process_max_fds", "gauge");
+  const double start = family(text, "process_start_time_seconds", "gauge");
+  const double cpu = family(text, "process_cpu_seconds_total", "counter");
+  char path[64], buf[256];
+  snprintf(path, sizeof path, "/proc/%d/statm", (int)pid);
+  FILE *f = fopen(path, "r");
+  ASSERT(f && fgets(buf, sizeof buf, f));
+  fclose(f);
+  unsigned long long pages, resident;
+  ASSERT(sscanf(buf, "%llu %llu", &pages, &resident) == 2);
+  const double page = (double)sysconf(_SC_PAGESIZE);
+  /* a scrape apart, so within a factor of two */
+  ASSERT(rss > 1e6 && rss < 2 * (double)resident * page && rss > 0.5 * (double)resident * page);
+  ASSERT(vsz >= rss);
+  ASSERT(fds >= 3 && fabs(fds - fds_of(pid)) <= 8);
+  snprintf(path, sizeof path, "/proc/%d/limits", (int)pid);
+  f = fopen(path, "r");
+  ASSERT(f);
+  double want_max = -1;
+  while (fgets(buf, sizeof buf, f))
+    if (strncmp(buf, "Max open files", 14) == 0) want_max = strtod(buf + 26, NULL);
+  fclose(f);
+  ASSERT_EQ(max_fds, want_max);
+  const double now = (double)time(NULL);
+  ASSERT(start > now - 600 && start <= now + 1);
+  ASSERT(cpu >= 0 && cpu < 600);
+  h_resp_free(r);
+}
+
+/* Decoder children, and requests by result: the two frames of main decoded, then a
+ * "PNG" that is not one is refused by a child, which stays alive. */
+static void check_decoder_metrics(void) {
+  h_resp *r = h_get("/metrics");
+  const char *ok[] = {"result", "ok", NULL};
+  const char *refused[] = {"result", "refused", NULL};
+  ASSERT(metric(r->body, "fieldgrip_decoder_requests_total", ok) >= 2);
+  ASSERT_EQ(metric(r->body, "fieldgrip_decoder_requests_total", refused), 0);
+  ASSERT(family(r->body, "fieldgrip_decoder_starts_total", "counter") >= 1);
+  family(r->body, "fieldgrip_decoder_processes", "gauge");
+  family(r->body, "fieldgrip_decoder_idle_deaths_total", "counter");
+  h_resp_free(r);
+
+  static const char junk[] = "\x89PNG\r\n\x1a\n but not a PNG at all";
+  const char *meta = "{\"transform_matrix\": [[1,0,0,0],[0,1,0,0],[0,0,1,0.5],[0,0,0,1]], "
+                     "\"fl_x\": 30, \"fl_y\": 30, \"cx\": 16, \"cy\": 12}";
+  r = h_upload("/v1/scenes/m/frames", junk, sizeof junk - 1, meta, NULL, 0);
+  ASSERT(r->status == 400 || r->status == 415);
+  h_resp_free(r);
+  r = h_get("/metrics");
+  ASSERT_EQ(metric(r->body, "fieldgrip_decoder_requests_total", refused), 1);
+  const char *crashed[] = {"result", "crashed", NULL};
+  ASSERT_EQ(metric(r->body, "fieldgrip_decoder_requests_total", crashed), 0);
+  ASSERT(metric(r->body, "fieldgrip_decoder_processes", NULL) >= 1);
+  h_resp_free(r);
+}
+
+/* A robot on a port where nothing listens: failed connection attempts count as
+ * kind="connect", and no other kind moves; "connection" is not a kind any more. */
+static void check_modbus_error_kinds(void) {
+  int s = socket(AF_INET, SOCK_STREAM, 0);
+  struct sockaddr_in a = {.sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK)};
+  socklen_t alen = sizeof a;
+  ASSERT(s >= 0 && bind(s, (struct sockaddr *)&a, sizeof a) == 0 &&
+         getsockname(s, (struct sockaddr *)&a, &alen) == 0);
+  close(s); /* the port is now closed: connecting to it is refused */
+  char *conf = h_fmt("[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\n"
+                     "timeout_ms = 300\n", ntohs(a.sin_port));
+  h_stop();
+  h_write_config(conf);
+  free(conf);
+  h_start();
+  /* a command makes it try at once, besides its own retries */
+  h_resp *r = h_post_json("/v1/robot/commands", "{\"command\": \"open\"}");
+  ASSERT(r->status >= 500);
+  h_resp_free(r);
+  const char *connect[] = {"peer", "robot", "kind", "connect", NULL};
+  for (int i = 0;; i++) {
+    r = h_get("/metrics");
+    double n = metric(r->body, "fieldgrip_modbus_errors_total", connect);
+    if (n >= 1) break;
+    if (i >= 500) FG_TEST_FAIL("no failed connection attempt counted:\n%s", r->body);
+    h_resp_free(r);
+    h_sleep_ms(20);
+  }
+  const char *transport[] = {"peer", "robot", "kind", "transport", NULL};
+  const char *old[] = {"kind", "connection", NULL};
+  ASSERT_EQ(metric(r->body, "fieldgrip_modbus_errors_total", transport), 0);
+  ASSERT_EQ(metric(r->body, "fieldgrip_modbus_errors_total", old), -1);
+  ASSERT_STRCONTAINS(r->body, "transport (a request failed on the wire");
+  h_resp_free(r);
 }
 
 int main(int argc, char **argv) {
@@ -174,6 +306,9 @@ int main(int argc, char **argv) {
     h_sleep_ms(20);
   }
 
+  check_process_metrics();
+  check_decoder_metrics();
+  check_modbus_error_kinds();
   h_stop();
   h_done();
   printf("ok\n");

@@ -197,6 +197,8 @@ static void check_killed_mid_command(void) {
 
   simproc_kill(&sim);
   ASSERT(wait_state(id, "unknown", 5));
+  /* the poll that found the connection gone is a transport error, not a failed connect */
+  ASSERT(h_metric("fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"transport\"}") >= 1);
   /* its key answered at the acknowledgement; a retry now gets the command as it ended */
   r = send_move(", \"wait\": false", "k-async");
   r_expect(r, 502, "robot_unknown");

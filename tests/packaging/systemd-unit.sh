@@ -2,7 +2,9 @@
 # Checks systemd/fieldgripd.service:
 #  1. `systemd-analyze verify` prints nothing, on a copy whose ExecStart names the freshly
 #     built daemon (the installed path /usr/local/sbin/fieldgripd need not exist here);
-#  2. `systemd-analyze security --offline=true` rates the sandbox at most MAX_EXPOSURE.
+#  2. `systemd-analyze security --offline=true` rates the sandbox at most MAX_EXPOSURE;
+#  3. the unit hands over the token credential that config/fieldgripd.conf reads
+#     (token_file = ${CREDENTIALS_DIRECTORY}/token).
 # Usage: systemd-unit.sh UNIT_FILE FIELDGRIPD_BINARY
 # A missing systemd-analyze is a failure, not a skip: CI installs systemd.
 set -euo pipefail
@@ -54,6 +56,13 @@ if [ $rc -ne 0 ] || [ -n "$out" ]; then
   exit 1
 fi
 echo "verify: clean"
+
+if ! grep -qx 'LoadCredential=token:/etc/fieldgrip/token' "$unit"; then
+  echo "FAIL: $unit lacks LoadCredential=token:/etc/fieldgrip/token, which the shipped" \
+       "configuration's token_file = \${CREDENTIALS_DIRECTORY}/token needs" >&2
+  exit 1
+fi
+echo "credential: token"
 
 echo "# systemd-analyze security --offline=true $unit"
 set +e

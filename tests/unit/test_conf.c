@@ -368,6 +368,65 @@ static void test_paths(void) {
   fg_conf_free(c);
 }
 
+/* ---------------------------------------------------------------- token_file */
+
+/* Writes a token file with the given mode; returns its malloc'd path. */
+static char *write_secret(const char *name, const char *text, mode_t mode) {
+  char *path = write_file(name, text);
+  ASSERT_EQ(chmod(path, mode), 0);
+  return path;
+}
+
+static void test_token_file(void) {
+  free(write_secret("tok", "s3cret-1\n", 0600));
+  fg_conf *c = load_ok("[http]\ntoken_file = tok\n");
+  ASSERT_STREQ(c->token, "s3cret-1"); /* the newline dropped */
+  char want[PATH_MAX + 16];
+  snprintf(want, sizeof want, "%s/tok", tmp_root);
+  ASSERT_STREQ(c->token_file, want);
+  fg_conf_free(c);
+  /* CRLF, no newline at all, an empty token key beside it, an owner-only read bit */
+  free(write_secret("tok", "s3cret-2\r\n", 0400));
+  c = load_ok("[http]\ntoken =\ntoken_file = tok\n");
+  ASSERT_STREQ(c->token, "s3cret-2");
+  fg_conf_free(c);
+  free(write_secret("tok", "s3cret-3", 0600));
+  c = load_ok("[http]\ntoken_file = tok\n");
+  ASSERT_STREQ(c->token, "s3cret-3");
+  fg_conf_free(c);
+
+  /* refused: readable by others, empty, two lines, missing, both keys */
+  free(write_secret("tok", "s3cret\n", 0644));
+  EXPECT_ERROR("[http]\ntoken_file = tok\n", 2, "[http] token_file", "chmod 600");
+  free(write_secret("tok", "s3cret\n", 0640));
+  EXPECT_ERROR("[http]\ntoken_file = tok\n", 2, "group or others (mode 0640)", NULL);
+  free(write_secret("tok", "\n", 0600));
+  EXPECT_ERROR("[http]\n\ntoken_file = tok\n", 3, "is empty", NULL);
+  free(write_secret("tok", "", 0600));
+  EXPECT_ERROR("[http]\ntoken_file = tok\n", 2, "is empty", NULL);
+  free(write_secret("tok", "one\ntwo\n", 0600));
+  EXPECT_ERROR("[http]\ntoken_file = tok\n", 2, "more than one line", NULL);
+  EXPECT_ERROR("[http]\ntoken_file = nowhere\n", 2, "cannot open", "nowhere");
+  free(write_secret("tok", "s3cret\n", 0600));
+  EXPECT_ERROR("[http]\ntoken = abc\ntoken_file = tok\n", 3, "token is set too (line 2)",
+               "keep one");
+  c = load_ok("[http]\ntoken_file =\n"); /* empty: none, like token */
+  ASSERT(!c->token && !c->token_file);
+  fg_conf_free(c);
+
+  /* ${CREDENTIALS_DIRECTORY}: systemd's LoadCredential= folder */
+  unsetenv("CREDENTIALS_DIRECTORY");
+  EXPECT_ERROR("[http]\ntoken_file = ${CREDENTIALS_DIRECTORY}/tok\n", 2,
+               "${CREDENTIALS_DIRECTORY} is not set", "LoadCredential=");
+  ASSERT_EQ(setenv("CREDENTIALS_DIRECTORY", tmp_root, 1), 0);
+  c = load_ok("[http]\ntoken_file = ${CREDENTIALS_DIRECTORY}/tok\n");
+  ASSERT_STREQ(c->token, "s3cret");
+  ASSERT_STREQ(c->token_file, want);
+  fg_conf_free(c);
+  EXPECT_ERROR("[http]\ntoken_file = ${CREDENTIALS_DIRECTORY}\n", 2, "expected", "/NAME");
+  unsetenv("CREDENTIALS_DIRECTORY");
+}
+
 /* ---------------------------------------------------------------- listen and scene names */
 
 static void test_listen(void) {
@@ -606,7 +665,14 @@ static void test_shipped(void) {
   char path[PATH_MAX], err[1024];
   fg_conf *c = NULL;
   snprintf(path, sizeof path, "%s/config/fieldgripd.conf", src);
+  /* its token comes from the credential systemd/fieldgripd.service loads */
+  ASSERT(fg_conf_load(path, &c, err, sizeof err) != 0);
+  ASSERT_STRCONTAINS(err, "${CREDENTIALS_DIRECTORY} is not set");
+  free(write_secret("token", "from-systemd\n", 0400));
+  ASSERT_EQ(setenv("CREDENTIALS_DIRECTORY", tmp_root, 1), 0);
   if (fg_conf_load(path, &c, err, sizeof err) != 0) FG_TEST_FAIL("%s", err);
+  unsetenv("CREDENTIALS_DIRECTORY");
+  ASSERT_STREQ(c->token, "from-systemd");
   fg_conf *d = fg_conf_defaults();
   ASSERT(d);
   ASSERT_EQ(c->robot.transport, FG_TRANSPORT_NONE);
@@ -634,6 +700,7 @@ int main(void) {
   test_spec_example();
   test_values();
   test_paths();
+  test_token_file();
   test_listen();
   test_scene_names();
   test_errors();

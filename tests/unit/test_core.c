@@ -1,6 +1,7 @@
-/* Unit tests of lib/core: error detail, half floats, poses, atomic files. */
+/* Unit tests of lib/core: error detail, half floats, poses, atomic files, SHA-256. */
 #include "test.h"
 
+#include "core/digest.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/half.h"
@@ -243,8 +244,27 @@ static void test_fsutil(void) {
   ASSERT(access(dir, F_OK) != 0);
 }
 
+/* FIPS 180-2's test vectors, and a message in parts equals it whole. */
+static void test_sha256(void) {
+  char hex[FG_SHA256_HEX + 1];
+  fg_sha256_hex(NULL, 0, hex);
+  ASSERT_STREQ(hex, "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  const fg_span abc = {"abc", 3};
+  fg_sha256_hex(&abc, 1, hex);
+  ASSERT_STREQ(hex, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  const char *m = "abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq";
+  const fg_span parts[] = {{m, 10}, {"", 0}, {m + 10, strlen(m) - 10}};
+  fg_sha256_hex(parts, 3, hex);
+  ASSERT_STREQ(hex, "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+  uint8_t raw[FG_SHA256_BYTES];
+  fg_sha256(&abc, 1, raw);
+  ASSERT_EQ(raw[0], 0xba);
+  ASSERT_EQ(raw[31], 0xad);
+}
+
 int main(void) {
   test_error();
+  test_sha256();
   test_half();
   test_pose();
   test_fsutil();

@@ -2,8 +2,11 @@
  * give the same floats as fg_image_decode and fg_depth_decode in process, errors come back
  * with the child's detail, a child
  * that crashes or is killed is replaced, the pool stays within max_procs under concurrent
- * use, idle children are reaped, and fg_decoder_free leaves no process behind.
- * argv[1] is the fieldgrip-decode program. */
+ * use, idle children are reaped, and fg_decoder_free leaves no process behind. Children run
+ * confined (rlimits, no_new_privs); an image past the CPU or memory limit is an error, not a
+ * crash of the caller, and the installed program has no test hooks.
+ * argv[1] is the test build fieldgrip-decode-test (with the hooks), argv[2] the installed
+ * fieldgrip-decode. */
 #include "test.h"
 
 #include "config.h"
@@ -22,7 +25,8 @@
 #include <time.h>
 #include <unistd.h>
 
-static const char *program;
+static const char *program;  /* with the test hooks */
+static const char *shipped;  /* as installed */
 
 /* The crash and hang hooks of decode_main.c are armed with these prefixes. */
 #define CRASH_MAGIC "FG-CRASH-TEST"
@@ -605,12 +609,131 @@ static void test_wire(void) {
   ASSERT(WIFEXITED(status) && WEXITSTATUS(status) == 0);
 }
 
+/* ---- confinement ------------------------------------------------------------------------ */
+
+/* The line of /proc/PID/FILE that starts with key, or "" (static). */
+static const char *proc_line(pid_t pid, const char *file, const char *key) {
+  static char line[512];
+  char path[64];
+  snprintf(path, sizeof path, "/proc/%d/%s", (int)pid, file);
+  FILE *f = fopen(path, "r");
+  ASSERT(f);
+  int found = 0;
+  while (!found && fgets(line, sizeof line, f)) found = strncmp(line, key, strlen(key)) == 0;
+  fclose(f);
+  if (!found) line[0] = '\0';
+  return line;
+}
+
+/* A live child of the installed program runs with the limits of decoder.h. */
+static void test_child_limits(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, shipped, 1, 30));
+  fg_image img;
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  pid_t pid;
+  ASSERT_EQ(fg_decoder_child_pids(d, &pid, 1), 1);
+  ASSERT_STRCONTAINS(proc_line(pid, "status", "NoNewPrivs:"), "1");
+  unsigned long long soft, hard;
+  const char *core = proc_line(pid, "limits", "Max core file size");
+  ASSERT(sscanf(core + 26, "%llu %llu", &soft, &hard) == 2 && soft == 0 && hard == 0);
+  const char *files = proc_line(pid, "limits", "Max open files");
+  ASSERT(sscanf(files + 26, "%llu %llu", &soft, &hard) == 2);
+  ASSERT_EQ(soft, FG_DECODER_MAX_FDS);
+  ASSERT_EQ(hard, FG_DECODER_MAX_FDS);
+  const char *cpu = proc_line(pid, "limits", "Max cpu time");
+  ASSERT(sscanf(cpu + 26, "%llu", &soft) == 1 && soft >= FG_DECODER_CPU_SECONDS &&
+         soft < FG_DECODER_CPU_SECONDS + 60);
+#if !defined(__SANITIZE_ADDRESS__)
+  const char *as = proc_line(pid, "limits", "Max address space");
+  ASSERT(sscanf(as + 26, "%llu", &soft) == 1);
+  ASSERT_EQ(soft, FG_DECODER_MAX_ADDRESS_BYTES);
+#endif
+  /* the file size limit is off only when our stderr is a regular file (a log) */
+  struct stat st;
+  const char *fsize = proc_line(pid, "limits", "Max file size");
+  if (fstat(2, &st) == 0 && !S_ISREG(st.st_mode))
+    ASSERT(sscanf(fsize + 26, "%llu", &soft) == 1 && soft == 0);
+  fg_decoder_free(d);
+  free(png);
+}
+
+/* The installed program ignores the hooks' variables (main sets them): a marker that would
+ * crash the test build is an ordinary bad image to it. */
+static void test_shipped_has_no_hooks(void) {
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, shipped, 1, 30));
+  static const char hostile[] = CRASH_MAGIC " and then whatever would have crashed a codec";
+  fg_image img;
+  int rc = fg_decoder_decode(d, hostile, sizeof hostile, NULL, &img);
+  ASSERT(rc < 0);
+  if (strstr(fg_error_detail(), "stopped on"))
+    FG_TEST_FAIL("the installed decoder crashed on the test marker: %s", fg_error_detail());
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 1); /* the child lives on */
+  fg_decoder_free(d);
+}
+
+/* A request that spins past the CPU limit: the child is ended by SIGXCPU, the call fails
+ * with FG_EFORMAT saying so, and the pool goes on. */
+static void test_cpu_limit(void) {
+  setenv("FG_DECODE_SPIN_ON", "FG-SPIN-TEST", 1);
+  setenv("FG_DECODE_TEST_CPU_S", "1", 1);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  static const char spin[] = "FG-SPIN-TEST and then a codec that loops";
+  fg_image img;
+  ASSERT_ERR(fg_decoder_decode(d, spin, sizeof spin, NULL, &img), FG_EFORMAT, "of CPU time");
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 0);
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  ASSERT_OK(fg_decoder_decode(d, png, len, NULL, &img));
+  fg_image_release(&img);
+  fg_decoder_free(d);
+  free(png);
+  unsetenv("FG_DECODE_SPIN_ON");
+  unsetenv("FG_DECODE_TEST_CPU_S");
+}
+
+/* An image whose pixels do not fit into the child's address space: FG_ERANGE saying the
+ * decoder ran out of memory, answered by the child (which lives on), not a crash. */
+static void test_memory_limit(void) {
+#if defined(__SANITIZE_ADDRESS__)
+  printf("memory limit: not checked under AddressSanitizer (no RLIMIT_AS there)\n");
+  return;
+#endif
+  enum { BW = 4096, BH = 4096 }; /* 192 MiB of float RGB */
+  uint8_t *px = calloc((size_t)BW * BH, 3);
+  ASSERT(px);
+  uint8_t *big;
+  size_t big_len;
+  ASSERT_OK(fg_image_encode_png(px, BW, BH, 3, 8, &big, &big_len));
+  free(px);
+  setenv("FG_DECODE_TEST_AS_HEADROOM_MB", "96", 1);
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, program, 1, 30));
+  fg_image img;
+  ASSERT_ERR(fg_decoder_decode(d, big, big_len, NULL, &img), FG_ERANGE, "ran out of memory");
+  printf("memory limit: %s\n", fg_error_detail());
+  ASSERT(img.rgb == NULL);
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 1);
+  fg_decoder_free(d);
+  unsetenv("FG_DECODE_TEST_AS_HEADROOM_MB");
+  free(big);
+}
+
 int main(int argc, char **argv) {
-  if (argc != 2) {
-    fprintf(stderr, "usage: %s PATH-OF-fieldgrip-decode\n", argv[0]);
+  if (argc != 3) {
+    fprintf(stderr, "usage: %s PATH-OF-fieldgrip-decode-test PATH-OF-fieldgrip-decode\n",
+            argv[0]);
     return 2;
   }
   program = argv[1];
+  shipped = argv[2];
   /* The crash test aborts a child on purpose; no core file for it. */
   struct rlimit nocore = {0, 0};
   setrlimit(RLIMIT_CORE, &nocore);
@@ -627,6 +750,10 @@ int main(int argc, char **argv) {
   test_free_leaves_nothing();
   test_missing_program();
   test_impostors();
+  test_child_limits();
+  test_shipped_has_no_hooks();
+  test_cpu_limit();
+  test_memory_limit();
   printf("decoder: all passed\n");
   return 0;
 }
