@@ -57,6 +57,12 @@ if [ -t 1 ]; then bold=$'\e[1m'; dim=$'\e[2m'; reset=$'\e[0m'; fi
 
 say() { printf '\n%s== %s%s\n' "$bold" "$*" "$reset"; }
 die() { printf 'demo: %s\n' "$*" >&2; exit 1; }
+# A check of the answers against the scans' ground truth. The scans' own class embeddings
+# must pass it; CLIP's features of these plain renders are your weights' business, so with
+# [clip] a miss is reported and the loop goes on.
+miss() {
+  if [ "$clip" -eq 1 ]; then printf 'demo: note: %s\n' "$*"; else die "$*"; fi
+}
 
 # ---------------------------------------------------------------- build
 
@@ -331,8 +337,8 @@ jq -c '{occupied, best}' <<<"$reply"
 inside=$(jq -n --argjson p "$(jq -c .best.position <<<"$reply")" \
               --argjson b "$(jq -c '.objects[] | select(.name == "mug") | .aabb' "$out/scan0/gt.json")" \
          '[range(3) as $i | $p[$i] >= $b.min[$i] - 0.01 and $p[$i] <= $b.max[$i] + 0.01] | all')
-[ "$inside" = true ] || die "the best voxel is not on the mug (its box in gt.json: $(jq -c '.objects[] | select(.name == "mug") | .aabb' "$out/scan0/gt.json"))"
-echo "the best voxel is on the mug (within its box in the scan's ground truth)"
+[ "$inside" = true ] || miss "the best voxel is not on the mug (its box in gt.json: $(jq -c '.objects[] | select(.name == "mug") | .aabb' "$out/scan0/gt.json"))"
+[ "$inside" = true ] && echo "the best voxel is on the mug (within its box in the scan's ground truth)"
 
 # The same question in a view from above the table
 cam='{"transform_matrix": [[1,0,0,0.45],[0,1,0,0],[0,0,1,0.9],[0,0,0,1]], "fl_x": 300, "fl_y": 300, "cx": 160, "cy": 120, "w": 320, "h": 240}'
@@ -349,7 +355,7 @@ expect 200
 jq -c '{task, retrieval, grasp: .grasps[0] | {id, score, width, position: .pose.position, quaternion: .pose.quaternion}}' <<<"$reply"
 grasp=$(jq -r '.grasps[0].id // empty' <<<"$reply")
 [ -n "$grasp" ] || die "no grasp found: $(jq -r '.reason // .' <<<"$reply")"
-[ "$(jq -r .task <<<"$reply")" = box ] || die "the question retrieved task $(jq -r .task <<<"$reply"), not box"
+[ "$(jq -r .task <<<"$reply")" = box ] || miss "the question retrieved task $(jq -r .task <<<"$reply"), not box"
 off_mm=$(jq -n --argjson a "$(jq -c '.grasps[0].pose.position' <<<"$reply")" \
               --argjson b "$(object_grasp 0 box | jq -c .position)" \
          '[range(3) as $i | ($a[$i] - $b[$i]) | . * .] | add | sqrt * 1000 | . * 10 | round / 10')
@@ -366,7 +372,7 @@ say "The gripper's report"
 api_curl GET /v1/gripper
 expect 200
 jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
-[ "$(jq -r .object_detected <<<"$reply")" = true ] || die "the gripper holds nothing: $reply"
+[ "$(jq -r .object_detected <<<"$reply")" = true ] || miss "the gripper holds nothing: $reply"
 
 say "Done: the loop ran through"
 echo "scans, heatmaps and logs: $out"
