@@ -26,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -201,6 +202,22 @@ static void reload(fg_app *app, const options *o) {
   fg_notify_ready("running; configuration reloaded");
 }
 
+/* Raises the soft open-files limit to the hard one: every client connection is a file
+ * descriptor, and the soft default of 1024 would stall accept() long before [http]
+ * max_connections. Failing is not fatal: the HTTP layer fits its cap to the limit. */
+static void raise_fd_limit(void) {
+  struct rlimit rl;
+  if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur >= rl.rlim_max) return;
+  rlim_t was = rl.rlim_cur;
+  rl.rlim_cur = rl.rlim_max;
+  if (setrlimit(RLIMIT_NOFILE, &rl) != 0)
+    fg_warn("cannot raise the open-files limit from %llu to %llu: %s", (unsigned long long)was,
+            (unsigned long long)rl.rlim_max, strerror(errno));
+  else
+    fg_debug("open-files limit raised from %llu to %llu", (unsigned long long)was,
+             (unsigned long long)rl.rlim_max);
+}
+
 /* Frees what the start-up set up once the configuration was installed, in reverse order;
  * parts not set up yet are NULL. A running training stops after its step and keeps its
  * field. */
@@ -317,6 +334,7 @@ int main(int argc, char **argv) {
     .conf_acquire = fg_app_conf_acquire,
     .conf_release = fg_app_conf_release,
   };
+  raise_fd_limit();
   fg_http *http;
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {
