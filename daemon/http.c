@@ -674,7 +674,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     snprintf(c->resp.header, sizeof c->resp.header, "Retry-After: 1");
     char msg[200];
     snprintf(msg, sizeof msg, "%d requests for long work are waiting already ([http] "
-             "max_queued_requests); send this one again in a second", c->req.conf->max_queued_requests);
+             "max_queued_requests); send this one again in a second",
+             c->req.conf->max_queued_requests);
     return respond_now(c, 503, "server_busy", msg);
   }
   fg_error_clear();
@@ -722,8 +723,10 @@ static void on_connection(void *cls, struct MHD_Connection *conn, void **socket_
   if (code == MHD_CONNECTION_NOTIFY_CLOSED) {
     fg_conns_close(h->conns, *socket_context);
     *socket_context = NULL;
+    fg_metrics_add_http_connections(-1);
     return;
   }
+  fg_metrics_add_http_connections(1);
   const union MHD_ConnectionInfo *ci =
     MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
   if (!ci) return;
@@ -749,7 +752,6 @@ static void *sweeper_main(void *arg) {
     if (fg_conns_sweep(h->conns, &lim, mono_now(), closed) > 0)
       for (int r = 0; r < FG_CONN_REASONS; r++)
         if (closed[r]) fg_metrics_count_http_closed((fg_conn_reason)r, closed[r]);
-    fg_metrics_set_http_connections(fg_conns_count(h->conns));
     struct timespec until;
     clock_gettime(CLOCK_MONOTONIC, &until);
     until.tv_nsec += SWEEP_MS * 1000000L;

@@ -39,13 +39,13 @@ static atomic_ullong clip_frames_computed, clip_frames_cached;
 static atomic_ullong clip_loads_ok, clip_loads_failed;
 static atomic_ullong heatmaps[FG_METRICS_HEATMAP_KINDS];
 static atomic_ullong voxel_builds, voxel_build_us;
-static atomic_ullong http_connections;
+static atomic_llong http_connections;
 static atomic_ullong http_closed[FG_CONN_REASONS];
 static atomic_int offload_threads, offload_running, offload_queued;
 static atomic_ullong offload_rejected;
 
-void fg_metrics_set_http_connections(size_t n) {
-  atomic_store_explicit(&http_connections, n, memory_order_relaxed);
+void fg_metrics_add_http_connections(int delta) {
+  atomic_fetch_add_explicit(&http_connections, delta, memory_order_relaxed);
 }
 
 void fg_metrics_count_http_closed(int reason, size_t n) {
@@ -196,9 +196,9 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
   static const char *const close_reasons[FG_CONN_REASONS] = {
     [FG_CONN_SHED] = "shed", [FG_CONN_HEADER_TIMEOUT] = "header_timeout",
     [FG_CONN_IDLE_TIMEOUT] = "idle_timeout", [FG_CONN_BODY_TOO_SLOW] = "body_too_slow"};
-  sb_printf(&sb, "# HELP fieldgrip_http_connections Client connections open (as of the last "
-                 "sweep, at most 250 ms ago).\n# TYPE fieldgrip_http_connections gauge\n"
-                 "fieldgrip_http_connections %llu\n"
+  sb_printf(&sb, "# HELP fieldgrip_http_connections Client connections open, this one "
+                 "included.\n# TYPE fieldgrip_http_connections gauge\n"
+                 "fieldgrip_http_connections %lld\n"
                  "# HELP fieldgrip_http_connections_closed_total Client connections the daemon "
                  "closed: shed at [http] max_connections, or too slow, by reason.\n"
                  "# TYPE fieldgrip_http_connections_closed_total counter\n",

@@ -50,7 +50,7 @@ void fg_metrics_add_voxel_build(double seconds);
 /* The HTTP layer: connections open now; connections it closed, by fg_conn_reason
  * (http_conns.h); offload threads, handlers running and requests queued; requests refused
  * 503 server_busy because the queue was full. */
-void fg_metrics_set_http_connections(size_t n);
+void fg_metrics_add_http_connections(int delta);
 void fg_metrics_count_http_closed(int reason, size_t n);
 void fg_metrics_set_offload(int threads, int running, int queued);
 void fg_metrics_count_offload_rejected(void);
