@@ -55,7 +55,10 @@ static const char *const section_names[SEC_COUNT] = {
     [SEC_GRIPPER_MODBUS] = "gripper.modbus",
 };
 
-enum { K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB, K_TOKEN_FILE };
+enum {
+  K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB, K_TOKEN_FILE, K_MAX_JSON_KB, K_MAX_CONNECTIONS,
+  K_HEADER_TIMEOUT_S, K_IDLE_TIMEOUT_S, K_MIN_BODY_KB_PER_S, K_MAX_QUEUED_REQUESTS
+};
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
 enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION, K_DEPTH_WEIGHT, K_DISTORTION_WEIGHT };
@@ -71,7 +74,11 @@ enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
 #define MAX_KEYS 13
 
-static const char *const http_keys[] = {"listen", "token", "max_upload_mb", "token_file", NULL};
+static const char *const http_keys[] = {"listen",           "token",
+                                        "max_upload_mb",    "token_file",
+                                        "max_json_kb",      "max_connections",
+                                        "header_timeout_s", "idle_timeout_s",
+                                        "min_body_kb_per_s", "max_queued_requests", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
@@ -497,6 +504,12 @@ fg_conf *fg_conf_defaults(void) {
   if (!c) return NULL;
   c->listen = strdup(FG_CONF_DEFAULT_LISTEN);
   c->max_upload_bytes = (size_t)64 << 20;
+  c->max_json_bytes = (size_t)1 << 20;
+  c->max_connections = 1024;
+  c->header_timeout_s = 10;
+  c->idle_timeout_s = 60;
+  c->min_body_bytes_per_s = (size_t)8 << 10;
+  c->max_queued_requests = 64;
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
   c->train_steps = 2000;
   c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
@@ -778,10 +791,25 @@ static int conf_handler(void *user, const char *section, const char *name, const
       c->token = NULL;
       return v[0] ? set_string(st, &c->token, v) : 1;
     }
-    if (k == K_TOKEN_FILE) return set_token_file(st, name, v);
-    if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
-    c->max_upload_bytes = (size_t)x << 20;
-    return 1;
+    switch (k) {
+    case K_TOKEN_FILE: return set_token_file(st, name, v);
+    case K_MAX_UPLOAD_MB:
+      if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
+      c->max_upload_bytes = (size_t)x << 20;
+      return 1;
+    case K_MAX_JSON_KB:
+      if (!parse_int(st, name, v, 1, 1048576, &x)) return 0;
+      c->max_json_bytes = (size_t)x << 10;
+      return 1;
+    case K_MAX_CONNECTIONS: return parse_int(st, name, v, 16, 1000000, &c->max_connections);
+    case K_HEADER_TIMEOUT_S: return parse_int(st, name, v, 1, 3600, &c->header_timeout_s);
+    case K_IDLE_TIMEOUT_S: return parse_int(st, name, v, 1, 86400, &c->idle_timeout_s);
+    case K_MIN_BODY_KB_PER_S:
+      if (!parse_int(st, name, v, 0, 1048576, &x)) return 0;
+      c->min_body_bytes_per_s = (size_t)x << 10;
+      return 1;
+    default: return parse_int(st, name, v, 1, 100000, &c->max_queued_requests);
+    }
   case SEC_STATE:
     if (k == K_DIR) return set_path(st, name, &c->state_dir, v);
     return set_import_dirs(st, name, v);

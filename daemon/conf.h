@@ -55,7 +55,13 @@ typedef struct fg_conf {
   char *listen;          /* "host:port", "[v6]:port" */
   char *token;           /* NULL or "" = no authentication; from token or token_file */
   char *token_file;      /* [http] token_file, resolved (absolute), or NULL */
-  size_t max_upload_bytes; /* from max_upload_mb (1..4096) */
+  size_t max_upload_bytes; /* from max_upload_mb (1..4096): frame uploads, image embeddings */
+  size_t max_json_bytes; /* from max_json_kb (1..1048576, default 1024): every other body */
+  int max_connections;   /* 16..1000000, default 1024; past it the oldest idle one is shed */
+  int header_timeout_s;  /* 1..3600, default 10: a new connection's request headers */
+  int idle_timeout_s;    /* 1..86400, default 60: kept alive without a next request, or silent */
+  size_t min_body_bytes_per_s; /* from min_body_kb_per_s (0..1048576, default 8); 0: none */
+  int max_queued_requests; /* 1..100000, default 64: long work waiting for a thread */
   /* [state] */
   char *state_dir;
   char **import_dirs;    /* absolute paths */

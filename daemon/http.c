@@ -1,6 +1,7 @@
 #include "http.h"
 
 #include "conf.h"
+#include "http_conns.h"
 #include "metrics.h"
 
 #include "core/error.h"
@@ -15,7 +16,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/resource.h>
 #include <time.h>
+
+/* How often the connection table is swept for connections past their deadlines. */
+#define SWEEP_MS 250
+/* File descriptors kept for everything but client connections: state files, the decoder
+ * children's pipes, Modbus peers, the log. */
+#define FD_RESERVE 256
 
 /* ---------------------------------------------------------------- per-request state */
 
@@ -36,6 +44,7 @@ typedef struct conn_ctx {
   char multipart_error[160];
   struct MHD_PostProcessor *pp;
   struct timespec start;
+  fg_conn *track;             /* the connection's entry in the table; NULL if untracked */
   struct conn_ctx *next;      /* offload queue */
 } conn_ctx;
 
@@ -58,7 +67,14 @@ struct fg_http {
   pthread_mutex_t qlock;
   pthread_cond_t qcond;
   conn_ctx *qhead, *qtail;
+  int n_queued, n_running;    /* requests in the offload queue, and handlers running */
   int stopping;
+  /* Client connections (http_conns.h) and the thread that enforces their deadlines. */
+  fg_conns *conns;
+  pthread_cond_t sweep_cond;  /* with qlock; signalled at stop */
+  int sweeper_started;
+  pthread_t sweeper;
+  int idle_timeout_s;         /* libmicrohttpd's default connection timeout, set at start */
   /* Streamed bodies: every live one, and the ticker thread that resumes parked ones. */
   pthread_mutex_t slock;
   pthread_cond_t scond;
@@ -441,23 +457,35 @@ static void *offload_main(void *arg) {
     }
     h->qhead = c->next;
     if (!h->qhead) h->qtail = NULL;
+    h->n_queued--;
+    h->n_running++;
+    fg_metrics_set_offload(h->n_workers, h->n_running, h->n_queued);
     pthread_mutex_unlock(&h->qlock);
 
     fg_error_clear();
     c->route->handler(&c->req, &c->resp);
+    pthread_mutex_lock(&h->qlock);
+    h->n_running--;
+    fg_metrics_set_offload(h->n_workers, h->n_running, h->n_queued);
+    pthread_mutex_unlock(&h->qlock);
     c->ready = 1;
     MHD_resume_connection(c->conn);
   }
 }
 
-/* Queues c for the pool; -1 once fg_http_stop has begun (the pool may be gone, and nothing
- * may stay suspended when MHD_stop_daemon runs). */
-static int offload(fg_http *h, conn_ctx *c) {
+/* Queues c for the pool. -1 once fg_http_stop has begun (the pool may be gone, and nothing
+ * may stay suspended when MHD_stop_daemon runs); -2 when max_queued requests already wait:
+ * a bounded queue keeps a burst of uploads from holding their bodies in memory without
+ * end, and tells clients to come back instead. */
+static int offload(fg_http *h, conn_ctx *c, int max_queued) {
   pthread_mutex_lock(&h->qlock);
-  if (h->stopping) {
+  if (h->stopping || h->n_queued >= max_queued) {
+    int rc = h->stopping ? -1 : -2;
     pthread_mutex_unlock(&h->qlock);
-    return -1;
+    return rc;
   }
+  h->n_queued++;
+  fg_metrics_set_offload(h->n_workers, h->n_running, h->n_queued);
   c->stage = STAGE_OFFLOADED;
   MHD_suspend_connection(c->conn);
   c->next = NULL;
@@ -472,8 +500,22 @@ static int offload(fg_http *h, conn_ctx *c) {
 /* ---------------------------------------------------------------- the access handler */
 
 static enum MHD_Result respond_now(conn_ctx *c, int status, const char *code, const char *msg) {
+  fg_conns_request_ready(c->http->conns, c->track);
   fg_resp_error(&c->resp, status, code, "%s", msg);
   return send_response(c);
+}
+
+/* The 413 message for c's route: the body's size (0: unknown) and the key that sets the
+ * limit. */
+static void limit_message(const conn_ctx *c, char *msg, size_t cap, unsigned long long n) {
+  char size[48] = "the body is larger";
+  if (n) snprintf(size, sizeof size, "the body has %llu bytes,", n);
+  if (c->route->flags & FG_ROUTE_LARGE_BODY)
+    snprintf(msg, cap, "%s more than the limit of %zu MB ([http] max_upload_mb)", size,
+             c->limit >> 20);
+  else
+    snprintf(msg, cap, "%s more than the limit of %zu KiB for a JSON body ([http] max_json_kb)",
+             size, c->limit >> 10);
 }
 
 /* First call for a request: route it, check the token and the announced size, and get
@@ -486,7 +528,10 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
   c->req.path = url;
   c->req.mhd_conn = c->conn;
   c->req.content_type = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_TYPE);
-  c->limit = c->req.conf->max_upload_bytes;
+  const fg_conf *conf = c->req.conf;
+  if (conf->idle_timeout_s != h->idle_timeout_s) /* changed by a reload */
+    MHD_set_connection_option(c->conn, MHD_CONNECTION_OPTION_TIMEOUT,
+                              (unsigned)conf->idle_timeout_s);
 
   int path_known = 0, public_route = 0;
   for (size_t i = 0; i < h->cfg.n_routes; i++) {
@@ -522,14 +567,17 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
   }
   c->resp.allow[0] = 0;
 
+  /* Images are large; every other body is JSON, kept small so that many clients at once
+   * cannot make the daemon hold much. */
+  c->limit = (c->route->flags & FG_ROUTE_LARGE_BODY) ? conf->max_upload_bytes
+                                                     : conf->max_json_bytes;
   const char *cl = fg_req_header(&c->req, MHD_HTTP_HEADER_CONTENT_LENGTH);
   if (cl) {
     char *end;
     unsigned long long n = strtoull(cl, &end, 10);
     if (*end == '\0' && n > c->limit) {
       char msg[200];
-      snprintf(msg, sizeof msg, "the body has %llu bytes, more than the limit of %zu MB "
-               "([http] max_upload_mb)", n, c->limit >> 20);
+      limit_message(c, msg, sizeof msg, n);
       return respond_now(c, 413, "payload_too_large", msg);
     }
   }
@@ -560,6 +608,11 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     c->conn = conn;
     c->route_idx = -1;
     clock_gettime(CLOCK_MONOTONIC, &c->start);
+    const union MHD_ConnectionInfo *ci =
+      MHD_get_connection_info(conn, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+    c->track = ci ? ci->socket_context : NULL;
+    fg_conns_request_begin(h->conns, c->track,
+                           (double)c->start.tv_sec + (double)c->start.tv_nsec * 1e-9);
     return begin_request(h, c, url, method);
   }
   if (c->ready) { /* back from the offload pool */
@@ -574,6 +627,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     size_t n = *upload_data_size;
     *upload_data_size = 0;
     c->received += n;
+    fg_conns_body(h->conns, c->track, n);
     if (c->received > c->limit) {
       c->too_large = 1;
       /* Discard, so the client gets its 413; a body that goes on far past the limit is cut. */
@@ -591,10 +645,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     return MHD_YES;
   }
   /* The whole body is in. */
+  fg_conns_request_ready(h->conns, c->track);
   if (c->too_large) {
-    char msg[160];
-    snprintf(msg, sizeof msg, "the body is larger than the limit of %zu MB ([http] max_upload_mb)",
-             c->limit >> 20);
+    char msg[200];
+    limit_message(c, msg, sizeof msg, 0);
     return respond_now(c, 413, "payload_too_large", msg);
   }
   if (c->pp) {
@@ -611,9 +665,18 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *conn, const 
     return respond_now(c, 400, "invalid_request", msg);
   }
   if (c->route->flags & FG_ROUTE_OFFLOAD) {
-    if (offload(h, c) == 0) return MHD_YES;
-    return respond_now(c, 503, "shutting_down", "the daemon is shutting down; send the "
-                       "request again once it is back");
+    int rc = offload(h, c, c->req.conf->max_queued_requests);
+    if (rc == 0) return MHD_YES;
+    if (rc == -1)
+      return respond_now(c, 503, "shutting_down", "the daemon is shutting down; send the "
+                         "request again once it is back");
+    fg_metrics_count_offload_rejected();
+    snprintf(c->resp.header, sizeof c->resp.header, "Retry-After: 1");
+    char msg[200];
+    snprintf(msg, sizeof msg, "%d requests for long work are waiting already ([http] "
+             "max_queued_requests); send this one again in a second",
+             c->req.conf->max_queued_requests);
+    return respond_now(c, 503, "server_busy", msg);
   }
   fg_error_clear();
   c->route->handler(&c->req, &c->resp);
@@ -630,6 +693,7 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
   double secs = (double)(now.tv_sec - c->start.tv_sec) + (now.tv_nsec - c->start.tv_nsec) * 1e-9;
   int status = c->resp.status ? c->resp.status : 499;
   fg_metrics_observe_request(c->route_idx, status, secs);
+  fg_conns_request_end(h->conns, c->track, (double)now.tv_sec + (double)now.tv_nsec * 1e-9);
   fg_debug("%s %s -> %d in %.1f ms%s", c->req.method ? c->req.method : "?",
            c->req.path ? c->req.path : "?", status, secs * 1e3,
            toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " (connection ended early)");
@@ -647,6 +711,75 @@ static void on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
   if (c->req.conf) h->cfg.conf_release(h->cfg.app, c->req.conf);
   free(c);
   *con_cls = NULL;
+}
+
+/* ---------------------------------------------------------------- connections */
+
+/* libmicrohttpd opened or closed a client connection: keep the table in step. The entry
+ * goes into the connection's socket context, where the access handler finds it. */
+static void on_connection(void *cls, struct MHD_Connection *conn, void **socket_context,
+                          enum MHD_ConnectionNotificationCode code) {
+  fg_http *h = cls;
+  if (code == MHD_CONNECTION_NOTIFY_CLOSED) {
+    fg_conns_close(h->conns, *socket_context);
+    *socket_context = NULL;
+    fg_metrics_add_http_connections(-1);
+    return;
+  }
+  fg_metrics_add_http_connections(1);
+  const union MHD_ConnectionInfo *ci =
+    MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+  if (!ci) return;
+  int shed = 0;
+  *socket_context = fg_conns_open(h->conns, ci->connect_fd, mono_now(), &shed);
+  if (shed) fg_metrics_count_http_closed(FG_CONN_SHED, 1);
+}
+
+/* Shuts down connections past their deadlines every SWEEP_MS, under the limits of the
+ * configuration in force (a reload changes them for every connection at the next sweep). */
+static void *sweeper_main(void *arg) {
+  fg_http *h = arg;
+  pthread_setname_np(pthread_self(), "fg-http-sweep");
+  pthread_mutex_lock(&h->qlock);
+  while (!h->stopping) {
+    pthread_mutex_unlock(&h->qlock);
+    const fg_conf *conf = h->cfg.conf_acquire(h->cfg.app);
+    fg_conns_limits lim = {.header_timeout_s = conf->header_timeout_s,
+                           .idle_timeout_s = conf->idle_timeout_s,
+                           .min_body_bytes_per_s = (double)conf->min_body_bytes_per_s};
+    h->cfg.conf_release(h->cfg.app, conf);
+    size_t closed[FG_CONN_REASONS] = {0};
+    if (fg_conns_sweep(h->conns, &lim, mono_now(), closed) > 0)
+      for (int r = 0; r < FG_CONN_REASONS; r++)
+        if (closed[r]) fg_metrics_count_http_closed((fg_conn_reason)r, closed[r]);
+    struct timespec until;
+    clock_gettime(CLOCK_MONOTONIC, &until);
+    until.tv_nsec += SWEEP_MS * 1000000L;
+    if (until.tv_nsec >= 1000000000L) {
+      until.tv_sec++;
+      until.tv_nsec -= 1000000000L;
+    }
+    pthread_mutex_lock(&h->qlock);
+    if (!h->stopping) pthread_cond_timedwait(&h->sweep_cond, &h->qlock, &until);
+  }
+  pthread_mutex_unlock(&h->qlock);
+  return NULL;
+}
+
+/* The connection cap that fits the open-files limit: libmicrohttpd's hard limit (a little
+ * above the cap, where it refuses new connections outright) plus FD_RESERVE must stay under
+ * it, or accept() would fail with EMFILE and leave every new client waiting in the kernel's
+ * backlog. */
+static size_t cap_for_fds(size_t want) {
+  struct rlimit rl;
+  if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur == RLIM_INFINITY) return want;
+  size_t avail = rl.rlim_cur > FD_RESERVE + 16 + 18 ? (size_t)rl.rlim_cur - FD_RESERVE - 16 : 18;
+  size_t fit = avail * 8 / 9; /* fit + fit / 8 + 16 <= rlim_cur - FD_RESERVE */
+  if (want <= fit) return want;
+  fg_warn("[http] max_connections %zu does not fit the open-files limit of %llu (raise "
+          "LimitNOFILE=); keeping at most %zu connections", want,
+          (unsigned long long)rl.rlim_cur, fit);
+  return fit;
 }
 
 static void on_mhd_log(void *cls, const char *fmt, va_list ap) {
@@ -684,6 +817,21 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
     return fg_fail(FG_ENOMEM, "out of memory");
   }
   h->cfg = *cfg;
+  const fg_conf *conf = cfg->conf_acquire(cfg->app);
+  size_t max_conns = cap_for_fds((size_t)conf->max_connections);
+  h->idle_timeout_s = conf->idle_timeout_s;
+  cfg->conf_release(cfg->app, conf);
+  if (fg_conns_new(&h->conns, max_conns) != 0) {
+    free(h);
+    freeaddrinfo(ai);
+    free(host);
+    return FG_ENOMEM;
+  }
+  pthread_condattr_t ca;
+  pthread_condattr_init(&ca);
+  pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+  pthread_cond_init(&h->sweep_cond, &ca);
+  pthread_condattr_destroy(&ca);
   pthread_mutex_init(&h->qlock, NULL);
   pthread_cond_init(&h->qcond, NULL);
   pthread_mutex_init(&h->slock, NULL);
@@ -700,7 +848,10 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
     MHD_OPTION_SOCK_ADDR, ai->ai_addr,
     MHD_OPTION_THREAD_POOL_SIZE, (unsigned)(cfg->poll_threads > 0 ? cfg->poll_threads : 1),
     MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
-    MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)120,
+    MHD_OPTION_NOTIFY_CONNECTION, on_connection, h,
+    /* The backstop: the table sheds idle connections at max_conns already. */
+    MHD_OPTION_CONNECTION_LIMIT, (unsigned)(max_conns + max_conns / 8 + 16),
+    MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)h->idle_timeout_s,
     MHD_OPTION_LISTENING_ADDRESS_REUSE, (unsigned)1,
     MHD_OPTION_END);
   freeaddrinfo(ai);
@@ -711,6 +862,8 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
     pthread_cond_destroy(&h->qcond);
     pthread_mutex_destroy(&h->slock);
     pthread_cond_destroy(&h->scond);
+    pthread_cond_destroy(&h->sweep_cond);
+    fg_conns_free(h->conns);
     free(h);
     free(host);
     return rc;
@@ -728,13 +881,15 @@ int fg_http_start(fg_http **out, const fg_http_config *cfg, char *bound, size_t 
       h->n_workers = i;
       break;
     }
+  fg_metrics_set_offload(h->n_workers, 0, 0);
   h->ticker_started = pthread_create(&h->ticker, NULL, ticker_main, h) == 0;
-  if (!h->workers || h->n_workers == 0 || !h->ticker_started) {
+  h->sweeper_started = pthread_create(&h->sweeper, NULL, sweeper_main, h) == 0;
+  if (!h->workers || h->n_workers == 0 || !h->ticker_started || !h->sweeper_started) {
     free(h->workers);
     h->workers = NULL;
     h->n_workers = 0;
     fg_http_stop(h);
-    return fg_fail(FG_ENOMEM, "cannot start the request worker or stream threads");
+    return fg_fail(FG_ENOMEM, "cannot start the request worker, stream or sweeper threads");
   }
   *out = h;
   return 0;
@@ -749,8 +904,10 @@ void fg_http_stop(fg_http *h) {
   pthread_mutex_lock(&h->qlock);
   h->stopping = 1;
   pthread_cond_broadcast(&h->qcond);
+  pthread_cond_broadcast(&h->sweep_cond);
   pthread_mutex_unlock(&h->qlock);
   for (int i = 0; i < h->n_workers; i++) pthread_join(h->workers[i], NULL);
+  if (h->sweeper_started) pthread_join(h->sweeper, NULL);
   /* End streamed bodies: nothing may stay suspended when MHD_stop_daemon runs. */
   pthread_mutex_lock(&h->slock);
   h->streams_closing = 1;
@@ -763,6 +920,8 @@ void fg_http_stop(fg_http *h) {
   pthread_mutex_unlock(&h->slock);
   if (h->ticker_started) pthread_join(h->ticker, NULL);
   MHD_stop_daemon(h->mhd);
+  fg_conns_free(h->conns);
+  pthread_cond_destroy(&h->sweep_cond);
   pthread_mutex_destroy(&h->qlock);
   pthread_cond_destroy(&h->qcond);
   pthread_mutex_destroy(&h->slock);

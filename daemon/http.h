@@ -3,6 +3,13 @@
  * take long (decoding images, importing data sets), so that they never hold a polling
  * thread while other connections wait.
  *
+ * Floods and slow clients: a table of connections (http_conns.h) caps them at [http]
+ * max_connections by shedding the oldest idle ones, and closes those that send their
+ * headers or their body too slowly; the offload queue holds at most [http]
+ * max_queued_requests (more are answered 503 server_busy with Retry-After); bodies are
+ * refused 413 past max_json_kb, or max_upload_mb for FG_ROUTE_LARGE_BODY routes, before
+ * they are read when their Content-Length says so.
+ *
  * Handlers see a complete request (fg_req) and fill a response (fg_resp); they never touch
  * libmicrohttpd. */
 #ifndef FG_DAEMON_HTTP_H
@@ -81,6 +88,7 @@ enum {
   FG_ROUTE_PUBLIC = 1,    /* no token needed */
   FG_ROUTE_OFFLOAD = 2,   /* run on the offload pool */
   FG_ROUTE_MULTIPART = 4, /* body is multipart/form-data */
+  FG_ROUTE_LARGE_BODY = 8, /* body up to [http] max_upload_mb (images); else max_json_kb */
 };
 
 typedef struct fg_route {

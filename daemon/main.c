@@ -26,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -45,10 +46,19 @@ static void usage(FILE *out) {
           "                         port 0 picks a free port\n"
           "  -s, --state-dir DIR    keep scenes and frames in DIR, overriding [state] dir\n"
           "      --log-level LEVEL  error, warn, info (default) or debug\n"
+          "      --list-routes      print the HTTP routes served, one \"METHOD PATH\" a line\n"
+          "                         (paths as proto/openapi.yaml writes them), and exit\n"
           "  -V, --version          print the version and exit\n"
           "  -h, --help             print this help and exit\n\n"
           "Signals: SIGHUP reloads the configuration file, SIGTERM and SIGINT stop.\n",
           FG_CONF_DEFAULT_PATH);
+}
+
+/* Prints the route table as "METHOD PATH" lines, PATH with named parameters as
+ * proto/openapi.yaml spells them, so that a test can hold the two in step. */
+static void list_routes(void) {
+  for (size_t i = 0; i < fg_api_n_routes; i++)
+    printf("%s %s\n", fg_api_routes[i].method, fg_api_routes[i].metric);
 }
 
 static int parse_args(int argc, char **argv, options *o) {
@@ -56,6 +66,7 @@ static int parse_args(int argc, char **argv, options *o) {
     {"config", required_argument, NULL, 'c'},  {"listen", required_argument, NULL, 'l'},
     {"state-dir", required_argument, NULL, 's'}, {"log-level", required_argument, NULL, 'L'},
     {"version", no_argument, NULL, 'V'},       {"help", no_argument, NULL, 'h'},
+    {"list-routes", no_argument, NULL, 'R'},
     {NULL, 0, NULL, 0},
   };
   int c;
@@ -75,6 +86,7 @@ static int parse_args(int argc, char **argv, options *o) {
     }
     case 'V': printf("fieldgripd %s\n", FG_VERSION); return 0;
     case 'h': usage(stdout); return 0;
+    case 'R': list_routes(); return 0;
     default: usage(stderr); return 2;
     }
   }
@@ -152,6 +164,9 @@ static void reload(fg_app *app, const options *o) {
   if (strcmp(cur->listen, conf->listen) != 0)
     fg_warn("reload: [http] listen changed to %s; it takes effect at the next restart",
             conf->listen);
+  if (cur->max_connections != conf->max_connections)
+    fg_warn("reload: [http] max_connections changed to %d; it takes effect at the next restart",
+            conf->max_connections);
   if (strcmp(cur->state_dir, conf->state_dir) != 0) {
     fg_warn("reload: [state] dir changed to %s; it takes effect at the next restart",
             conf->state_dir);
@@ -185,6 +200,22 @@ static void reload(fg_app *app, const options *o) {
   fg_metrics_count_reload(1);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
   fg_notify_ready("running; configuration reloaded");
+}
+
+/* Raises the soft open-files limit to the hard one: every client connection is a file
+ * descriptor, and the soft default of 1024 would stall accept() long before [http]
+ * max_connections. Failing is not fatal: the HTTP layer fits its cap to the limit. */
+static void raise_fd_limit(void) {
+  struct rlimit rl;
+  if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur >= rl.rlim_max) return;
+  rlim_t was = rl.rlim_cur;
+  rl.rlim_cur = rl.rlim_max;
+  if (setrlimit(RLIMIT_NOFILE, &rl) != 0)
+    fg_warn("cannot raise the open-files limit from %llu to %llu: %s", (unsigned long long)was,
+            (unsigned long long)rl.rlim_max, strerror(errno));
+  else
+    fg_debug("open-files limit raised from %llu to %llu", (unsigned long long)was,
+             (unsigned long long)rl.rlim_max);
 }
 
 /* Frees what the start-up set up once the configuration was installed, in reverse order;
@@ -303,6 +334,7 @@ int main(int argc, char **argv) {
     .conf_acquire = fg_app_conf_acquire,
     .conf_release = fg_app_conf_release,
   };
+  raise_fd_limit();
   fg_http *http;
   char bound[128];
   if (fg_http_start(&http, &hc, bound, sizeof bound) != 0) {

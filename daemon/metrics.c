@@ -1,6 +1,7 @@
 #include "metrics.h"
 
 #include "config.h"
+#include "http_conns.h"
 
 #include <dirent.h>
 #include <stdarg.h>
@@ -41,6 +42,29 @@ static atomic_ullong clip_frames_computed, clip_frames_cached;
 static atomic_ullong clip_loads_ok, clip_loads_failed;
 static atomic_ullong heatmaps[FG_METRICS_HEATMAP_KINDS];
 static atomic_ullong voxel_builds, voxel_build_us;
+static atomic_llong http_connections;
+static atomic_ullong http_closed[FG_CONN_REASONS];
+static atomic_int offload_threads, offload_running, offload_queued;
+static atomic_ullong offload_rejected;
+
+void fg_metrics_add_http_connections(int delta) {
+  atomic_fetch_add_explicit(&http_connections, delta, memory_order_relaxed);
+}
+
+void fg_metrics_count_http_closed(int reason, size_t n) {
+  if (reason < 0 || reason >= FG_CONN_REASONS) return;
+  atomic_fetch_add_explicit(&http_closed[reason], n, memory_order_relaxed);
+}
+
+void fg_metrics_set_offload(int threads, int running, int queued) {
+  atomic_store_explicit(&offload_threads, threads, memory_order_relaxed);
+  atomic_store_explicit(&offload_running, running, memory_order_relaxed);
+  atomic_store_explicit(&offload_queued, queued, memory_order_relaxed);
+}
+
+void fg_metrics_count_offload_rejected(void) {
+  atomic_fetch_add_explicit(&offload_rejected, 1, memory_order_relaxed);
+}
 
 void fg_metrics_set_route(int idx, const char *method, const char *route) {
   if (idx < 0 || idx >= FG_METRICS_MAX_ROUTES) return;
@@ -295,6 +319,31 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
               route, method, count, route, method, (double)atomic_load(&slots[s].sum_us) / 1e6,
               route, method, count);
   }
+  static const char *const close_reasons[FG_CONN_REASONS] = {
+    [FG_CONN_SHED] = "shed", [FG_CONN_HEADER_TIMEOUT] = "header_timeout",
+    [FG_CONN_IDLE_TIMEOUT] = "idle_timeout", [FG_CONN_BODY_TOO_SLOW] = "body_too_slow"};
+  sb_printf(&sb, "# HELP fieldgrip_http_connections Client connections open, this one "
+                 "included.\n# TYPE fieldgrip_http_connections gauge\n"
+                 "fieldgrip_http_connections %lld\n"
+                 "# HELP fieldgrip_http_connections_closed_total Client connections the daemon "
+                 "closed: shed at [http] max_connections, or too slow, by reason.\n"
+                 "# TYPE fieldgrip_http_connections_closed_total counter\n",
+            atomic_load(&http_connections));
+  for (int r = 0; r < FG_CONN_REASONS; r++)
+    sb_printf(&sb, "fieldgrip_http_connections_closed_total{reason=\"%s\"} %llu\n",
+              close_reasons[r], atomic_load(&http_closed[r]));
+  sb_printf(&sb, "# HELP fieldgrip_http_offload_threads Threads that run long requests.\n"
+                 "# TYPE fieldgrip_http_offload_threads gauge\nfieldgrip_http_offload_threads %d\n"
+                 "# HELP fieldgrip_http_offload_running Long requests running on them now.\n"
+                 "# TYPE fieldgrip_http_offload_running gauge\nfieldgrip_http_offload_running %d\n"
+                 "# HELP fieldgrip_http_offload_queued Long requests waiting for a thread.\n"
+                 "# TYPE fieldgrip_http_offload_queued gauge\nfieldgrip_http_offload_queued %d\n"
+                 "# HELP fieldgrip_http_offload_rejected_total Long requests answered 503 "
+                 "server_busy because [http] max_queued_requests were waiting.\n"
+                 "# TYPE fieldgrip_http_offload_rejected_total counter\n"
+                 "fieldgrip_http_offload_rejected_total %llu\n",
+            atomic_load(&offload_threads), atomic_load(&offload_running),
+            atomic_load(&offload_queued), atomic_load(&offload_rejected));
   sb_printf(&sb, "# HELP fieldgrip_scenes Scenes in the state dir.\n# TYPE fieldgrip_scenes gauge\n"
                  "fieldgrip_scenes %zu\n", g->scenes);
   sb_printf(&sb, "# HELP fieldgrip_frames Frames stored, over all scenes.\n"

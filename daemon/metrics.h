@@ -51,6 +51,14 @@ typedef enum {
 void fg_metrics_count_heatmap(fg_metrics_heatmap_kind kind);
 void fg_metrics_add_voxel_build(double seconds);
 
+/* The HTTP layer: connections open now; connections it closed, by fg_conn_reason
+ * (http_conns.h); offload threads, handlers running and requests queued; requests refused
+ * 503 server_busy because the queue was full. */
+void fg_metrics_add_http_connections(int delta);
+void fg_metrics_count_http_closed(int reason, size_t n);
+void fg_metrics_set_offload(int threads, int running, int queued);
+void fg_metrics_count_offload_rejected(void);
+
 /* Job states, in the order of the gauge's labels (jobs.h uses the same order). */
 #define FG_METRICS_JOB_STATES 5
 

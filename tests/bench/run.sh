@@ -3,7 +3,7 @@
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [geometry]
-#                           [depth_throughput] [fox]
+#                           [depth_throughput] [fox] [http_idle]
 #   (no names: all of them but fox; train takes about 6 minutes, throughput about 3; grasp several,
 #   most of them in the PyTorch peer)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -75,6 +75,11 @@
 #           cavities >= 95 % free, IoU >= 0.6
 #   depth_throughput  training samples/s on a depth tabletop with the depth loss on and off,
 #           60 s each (target: on >= 90 % of off)
+#   http_idle  GET /v1/health on new connections while BENCH_IDLE_N (default 10000) idle
+#           connections are open (bench_http_idle): BENCH_IDLE_REQUESTS (default 200)
+#           requests, p50 / p99 / max ms, twice: with [http] max_connections above N (every
+#           idle connection held) and at the default 1024 (the oldest shed as new ones come).
+#           Target p99 <= 50 ms
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -89,13 +94,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,88p' "$0" >&2
+  sed -n '2,93p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -555,6 +560,31 @@ bench_depth_throughput() {
   echo "bench=depth_throughput samples_per_s_without=$(field samples_per_s "$off") samples_per_s_with=$(field samples_per_s "$on") ratio=$ratio target_min_ratio=0.9 pass=$pass"
 }
 
+bench_http_idle() {
+  local bin=$build/tests/bench/bench_http_idle n=${BENCH_IDLE_N:-10000}
+  local reqs=${BENCH_IDLE_REQUESTS:-200} cap out rc line p99 pass
+  if [ ! -x "$bin" ]; then
+    echo "bench=http_idle error=not_built hint=meson_compile_bench_http_idle pass=no"
+    failed=1; return
+  fi
+  for cap in $((n + 100)) 1024; do
+    start_daemon "http_idle_$cap" \
+      "$(printf '[http]\nmax_connections = %s\nheader_timeout_s = 600' "$cap")"
+    rc=0
+    out=$("$bin" "$base" "$n" "$reqs") || rc=$?
+    stop_daemon
+    line=$(printf '%s\n' "$out" | grep '^bench=http_idle ' || true)
+    if [ -z "$line" ] || [ $rc -ne 0 ]; then
+      echo "${line:-bench=http_idle error=bench_http_idle_exit_$rc pass=no}"
+      failed=1; continue
+    fi
+    p99=$(field p99_ms "$line")
+    pass=$(awk -v p="$p99" 'BEGIN { print (p <= 50) ? "yes" : "no" }')
+    [ "$pass" = yes ] || failed=1
+    echo "$line max_connections=$cap target_max_p99_ms=50 pass=$pass"
+  done
+}
+
 bench_fox() {
   local fox=${FG_FOX_DIR:-} v out line psnr pass
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
@@ -589,7 +619,8 @@ for b in "${benches[@]}"; do
     geometry) bench_geometry ;;
     depth_throughput) bench_depth_throughput ;;
     fox) bench_fox ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox)" >&2; exit 2 ;;
+    http_idle) bench_http_idle ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

@@ -67,6 +67,12 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_STREQ(c->listen, "127.0.0.1:7070");
   ASSERT(c->token == NULL || c->token[0] == '\0');
   ASSERT_EQ(c->max_upload_bytes, 64u << 20);
+  ASSERT_EQ(c->max_json_bytes, 1u << 20);
+  ASSERT_EQ(c->max_connections, 1024);
+  ASSERT_EQ(c->header_timeout_s, 10);
+  ASSERT_EQ(c->idle_timeout_s, 60);
+  ASSERT_EQ(c->min_body_bytes_per_s, 8u << 10);
+  ASSERT_EQ(c->max_queued_requests, 64);
   ASSERT_STREQ(c->state_dir, "/var/lib/fieldgrip");
   ASSERT_EQ(c->n_import_dirs, 0);
   ASSERT(c->clip_weights == NULL);
@@ -303,6 +309,24 @@ static void test_values(void) {
   ASSERT_NEAR(s->background[2], 1, 0);
   fg_conf_free(c);
 
+  /* the connection and body limits of [http], each at a value other than its default */
+  c = load_ok("[http]\nmax_json_kb = 64\nmax_connections = 16\nheader_timeout_s = 1\n"
+              "idle_timeout_s = 86400\nmin_body_kb_per_s = 0\nmax_queued_requests = 1\n");
+  ASSERT_EQ(c->max_json_bytes, 64u << 10);
+  ASSERT_EQ(c->max_connections, 16);
+  ASSERT_EQ(c->header_timeout_s, 1);
+  ASSERT_EQ(c->idle_timeout_s, 86400);
+  ASSERT_EQ(c->min_body_bytes_per_s, 0);
+  ASSERT_EQ(c->max_queued_requests, 1);
+  ASSERT_EQ(c->max_upload_bytes, 64u << 20);
+  fg_conf_free(c);
+  c = load_ok("[http]\nmax_json_kb = 1048576\nmax_connections = 1000000\n"
+              "min_body_kb_per_s = 3\n");
+  ASSERT_EQ(c->max_json_bytes, (size_t)1 << 30);
+  ASSERT_EQ(c->max_connections, 1000000);
+  ASSERT_EQ(c->min_body_bytes_per_s, 3u << 10);
+  fg_conf_free(c);
+
   /* an empty token means no authentication */
   c = load_ok("[http]\ntoken =\n");
   ASSERT(c->token == NULL || c->token[0] == '\0');
@@ -517,6 +541,17 @@ static void test_errors(void) {
   EXPECT_ERROR("[train]\ndistortion_weight = lots\n", 2, "[train] distortion_weight:", "number");
   EXPECT_ERROR("[http]\nmax_upload_mb = 0\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[http]\nmax_upload_mb = 4097\n", 2, "[http] max_upload_mb:", "1 to 4096");
+  EXPECT_ERROR("[http]\nmax_json_kb = 0\n", 2, "[http] max_json_kb:", "1 to 1048576");
+  EXPECT_ERROR("[http]\nmax_connections = 15\n", 2, "[http] max_connections:",
+               "16 to 1000000");
+  EXPECT_ERROR("[http]\nheader_timeout_s = 0\n", 2, "[http] header_timeout_s:", "1 to 3600");
+  EXPECT_ERROR("[http]\nidle_timeout_s = 86401\n", 2, "[http] idle_timeout_s:", "1 to 86400");
+  EXPECT_ERROR("[http]\nmin_body_kb_per_s = -1\n", 2, "[http] min_body_kb_per_s:",
+               "0 to 1048576");
+  EXPECT_ERROR("[http]\nmax_queued_requests = 0\n", 2, "[http] max_queued_requests:",
+               "1 to 100000");
+  EXPECT_ERROR("[http]\nheader_timeout_s = 1\nheader_timeout_s = 2\n", 3,
+               "[http] header_timeout_s:", "duplicate key");
   EXPECT_ERROR("[robot]\nport = 0\n", 2, "[robot] port:", "1 to 65535");
   EXPECT_ERROR("[robot]\nunit_id = 248\n", 2, "[robot] unit_id:", "0 to 247");
   EXPECT_ERROR("[robot]\nbase = 65516\n", 2, "[robot] base:", "0 to 65515");
@@ -680,6 +715,12 @@ static void test_shipped(void) {
   ASSERT_EQ(c->gripper_modbus.motion_timeout_ms, d->gripper_modbus.motion_timeout_ms);
   ASSERT_EQ(c->gripper_model, d->gripper_model);
   ASSERT(c->depth_weight == d->depth_weight && c->distortion_weight == d->distortion_weight);
+  ASSERT_EQ(c->max_json_bytes, d->max_json_bytes);
+  ASSERT_EQ(c->max_connections, d->max_connections);
+  ASSERT_EQ(c->header_timeout_s, d->header_timeout_s);
+  ASSERT_EQ(c->idle_timeout_s, d->idle_timeout_s);
+  ASSERT_EQ(c->min_body_bytes_per_s, d->min_body_bytes_per_s);
+  ASSERT_EQ(c->max_queued_requests, d->max_queued_requests);
   fg_conf_free(c);
   fg_conf_free(d);
   snprintf(path, sizeof path, "%s/config/demo.conf", src);
