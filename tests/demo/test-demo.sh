@@ -4,12 +4,16 @@
 # first step that goes wrong (a non-2xx answer, a best heatmap voxel off the mug, a query
 # that retrieves another task than the box's, no grasp, a pick that does not end done, a
 # gripper that holds nothing); here we check that it ran through, that it printed every
-# step's curl command and the files it names, and that it left no process behind.
-# argv: demo.sh, build folder.
+# step's curl command and the files it names, and that it left no process behind. A second
+# run with [clip] (a tiny random model in CLIP's layout) checks that the questions are
+# then texts and the frames go up without features.
+# argv: demo.sh, build folder, gen_clip, CLIP's BPE vocabulary.
 set -euo pipefail
 
 demo=$1
 build=$2
+gen_clip=$3
+vocab=$4
 tmp=$(mktemp -d)
 out_log=$tmp/out.log
 trap 'rm -rf "$tmp"' EXIT
@@ -48,9 +52,14 @@ host = 127.0.0.1
 port = $modbus_port
 CONF
 
-rc=0
-bash "$demo" --exit --build "$build" --config "$tmp/demo.conf" --out "$tmp/out" >"$out_log" 2>&1 || rc=$?
-[ "$rc" -eq 0 ] || fail "demo.sh exited $rc"
+run_demo() { # CONFIG [demo.sh options]: runs it into $tmp/out, output in $out_log
+  local rc=0 conf=$1
+  shift
+  rm -rf "$tmp/out"
+  bash "$demo" --exit --build "$build" --config "$conf" --out "$tmp/out" "$@" >"$out_log" 2>&1 || rc=$?
+  [ "$rc" -eq 0 ] || fail "demo.sh exited $rc"
+}
+run_demo "$tmp/demo.conf"
 
 grep -q '^== Done: the loop ran through' "$out_log" || fail "no final line"
 grep -q '"object_detected":true' "$out_log" || fail "no gripper report with an object"
@@ -78,3 +87,17 @@ for p in "$http_port" "$modbus_port"; do
   if (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then fail "something still listens on $p"; fi
 done
 echo "ok: the demo ran through in $SECONDS s"
+
+# With [clip]: texts, and CLIP computes the frames' features in the trainings
+"$gen_clip" "$tmp/clip.safetensors" --preset tiny >/dev/null
+{ cat "$tmp/demo.conf"; printf '[clip]\nweights = %s\nvocab = %s\n' "$tmp/clip.safetensors" "$vocab"; } \
+  >"$tmp/clip.conf"
+start=$SECONDS
+run_demo "$tmp/clip.conf"
+grep -q '^== Done: the loop ran through' "$out_log" || fail "[clip]: no final line"
+grep -q '^\[clip\] is configured' "$out_log" || fail "[clip] was not noticed"
+grep -q "/v1/scenes/tabletop/heatmap .*-d '{\"text\": \"a mug\"" "$out_log" || fail "[clip]: no text heatmap query"
+grep -q '"features":null' "$out_log" || fail "[clip]: frames were uploaded with features"
+if grep -q 'features=@' "$out_log"; then fail "[clip]: frames were uploaded with features"; fi
+grep -q '"state":"done","stage":"finished"' "$out_log" || fail "[clip]: the pick did not finish"
+echo "ok: with [clip] in $((SECONDS - start)) s"
