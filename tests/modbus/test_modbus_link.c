@@ -1,8 +1,8 @@
 /* Tests of lib/modbus link, peer and devices against fieldgrip-sim (argv[1]) on 127.0.0.1:
  * requests and their error classes (exception, timeout, connection lost), the reconnection
- * policy (backoff, two timeouts in a row, a peer that comes up late, a restart on the same
- * port), whether a failed write may have been applied, the robot's ack/done handshake in
- * both encodings, the gripper's activation and moves, and the peer's worker thread (calls,
+ * policy (backoff, two timeouts in a row, a reply later than its request's timeout, a peer
+ * that comes up late, a restart on the same port), whether a failed write may have been
+ * applied, the robot's ack/done handshake in both encodings, the gripper's activation and moves, and the peer's worker thread (calls,
  * a full queue, cancellation at shutdown, the idle job). Each case starts its own
  * simulator. An optional second argument runs one case. */
 #include <errno.h>
@@ -345,6 +345,69 @@ static void test_late_reply(void) {
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
   fg_mb_link_free(probe);
+  fg_mb_link_free(l);
+  simproc_stop(&p);
+}
+
+/* Sends SIGCONT to a stopped simulator once the link has counted its requests-th request:
+ * that request has passed its flush, so the reply to the request before it, which the
+ * simulator sends first, arrives after the flush. */
+typedef struct {
+  fg_mb_link *link;
+  pid_t pid;
+  uint64_t requests;
+} cont_after;
+
+static void *cont_after_thread(void *arg) {
+  cont_after *c = arg;
+  fg_mb_link_state st;
+  const double t0 = simproc_now_ms();
+  do {
+    simproc_sleep_ms(1);
+    fg_mb_link_state_get(c->link, &st);
+  } while (st.requests < c->requests && simproc_now_ms() - t0 < 10 * SLACK_MS);
+  kill(c->pid, SIGCONT);
+  return NULL;
+}
+
+/* A reply later than the flush before the next request reaches that request first: it is
+ * dropped, and the request takes its own reply from the same connection, for a read and
+ * for a write. */
+static void test_reply_after_flush(void) {
+  simproc p;
+  simproc_start(&p, 0, NULL);
+  fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
+  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  example_words(7, FG_POSE_INT16, w);
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+
+  ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  cont_after c = {.link = l, .pid = p.pid, .requests = link_state(l).requests + 1};
+  pthread_t t;
+  ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
+  memset(v, 0, sizeof v);
+  ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
+  ASSERT_EQ(pthread_join(t, NULL), 0);
+  ASSERT_EQ(v[0], 7);
+  ASSERT_EQ(v[1], 2);
+
+  ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  c.requests = link_state(l).requests + 1;
+  ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
+  example_words(8, FG_POSE_INT16, w);
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_EQ(pthread_join(t, NULL), 0);
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
+  ASSERT_EQ(v[0], 8);
+
+  fg_mb_link_state st = link_state(l);
+  ASSERT_EQ(fg_mb_link_generation(l), 1);
+  ASSERT_EQ(st.reconnects, 0);
+  ASSERT_EQ(st.timeouts, 2);
+  ASSERT_EQ(st.errors, 2);
+  ASSERT_EQ(st.requests, 6);
   fg_mb_link_free(l);
   simproc_stop(&p);
 }
@@ -1046,6 +1109,7 @@ int main(int argc, char **argv) {
       {"exception", test_exception},
       {"timeout", test_timeout},
       {"late_reply", test_late_reply},
+      {"reply_after_flush", test_reply_after_flush},
       {"peer_down_then_up", test_peer_down_then_up},
       {"peer_killed_restart", test_peer_killed_restart},
       {"drop_write", test_drop_write},
