@@ -226,6 +226,8 @@ int h_count_files(const char *dir, const char *needle);
 /* realpath of $FG_SHARED_DATA; fails the test when it is unset or missing. Caller frees. */
 char *h_shared_data(void);
 void h_sleep_ms(int ms);
+/* Seconds on the monotonic clock: for deadlines of waits and for latencies measured. */
+double h_now_s(void);
 
 /* A growable byte buffer, NUL-terminated past n; exits the test on allocation failure. */
 typedef struct it_buf {

@@ -146,10 +146,15 @@ static void check_down_at_start(void) {
   r = r_post("/v1/gripper/close", "", NULL);
   r_expect(r, 503, "gripper_disconnected");
   h_resp_free(r);
-  /* the log says so once per peer, not at every attempt of the backoff */
+  /* the log says so once per peer, not at every attempt of the backoff: wait until each
+   * peer's worker has been refused three times, then count */
   ASSERT(h_wait_log("unreachable", 2, 5));
-  const struct timespec pause = {0, 400000000};
-  nanosleep(&pause, NULL);
+  const double deadline = h_now_s() + 20;
+  while (h_metric("fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"connect\"}") < 3 ||
+         h_metric("fieldgrip_modbus_errors_total{peer=\"gripper\",kind=\"connect\"}") < 3) {
+    ASSERT(h_now_s() < deadline);
+    h_sleep_ms(20);
+  }
   ASSERT_EQ(h_log_count("unreachable"), 2);
 
   simproc sim;
