@@ -155,6 +155,7 @@ int fg_mb_link_ensure(fg_mb_link *l) {
   pthread_mutex_lock(&l->lock);
   l->st.connected = 1;
   l->st.reconnects += l->generation > 1;
+  l->st.generation = l->generation;
   pthread_mutex_unlock(&l->lock);
   fg_info("modbus: %s %s connected (unit %d)", l->name, l->address, l->cfg.unit_id);
   return 0;

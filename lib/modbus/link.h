@@ -33,6 +33,7 @@ typedef struct fg_mb_link_state {
   char last_error[256]; /* "" when none yet */
   double last_error_s;  /* CLOCK_REALTIME seconds of it, 0 when none */
   uint64_t requests, errors, timeouts, exceptions, reconnects, connect_failures;
+  unsigned generation;  /* as fg_mb_link_generation: the number of the last connection */
 } fg_mb_link_state;
 
 typedef struct fg_mb_link fg_mb_link;

@@ -3,8 +3,8 @@
  * down at start (the daemon serves, commands answer 503) and coming up later, a peer killed
  * mid-command and restarted (unknown, then the next command works), a second command or a
  * gripper action while one runs (409), Idempotency-Key replays of a running command and of
- * one cut short by a daemon that was killed, no [robot] at all, and the Modbus lines of
- * /metrics.
+ * one cut short by a daemon that was killed, a gripper status that belongs to its connection,
+ * no [robot] at all, and the Modbus lines of /metrics.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
 #include "simproc.h"
@@ -253,6 +253,53 @@ static void check_daemon_killed(void) {
   simproc_stop(&sim);
 }
 
+/* The gripper stops answering (SIGSTOP) once activated: two timeouts close the connection
+ * and the worker reconnects (the kernel completes the handshake for the stopped process).
+ * Until a status is read on the new connection the state is "connected", not the earlier
+ * connection's "ready": the gripper may have been power cycled in between. */
+static void check_status_per_connection(void) {
+  simproc sim;
+  const char *args[] = {"--activation-ms", "50", NULL};
+  simproc_start(&sim, 0, args);
+  r_config(0, NULL, sim.port, NULL);
+  h_start();
+  h_resp *r = r_post("/v1/gripper/activate", "", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  ASSERT(r_wait_status("/v1/gripper", 10));
+  r = h_get("/v1/gripper");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "ready");
+  h_resp_free(r);
+
+  ASSERT_EQ(kill(sim.pid, SIGSTOP), 0);
+  /* every reply below is read whole: connected, the reconnection and the state together */
+  const double deadline = h_now_s() + 30;
+  int seen = 0;
+  while (!seen) {
+    ASSERT(h_now_s() < deadline);
+    r = h_get("/v1/gripper");
+    json_t *o = r->json;
+    if (json_is_true(json_object_get(o, "connected")) &&
+        json_integer_value(json_object_get(json_object_get(o, "counters"), "reconnects")) >= 1) {
+      ASSERT_STREQ(json_string_value(json_object_get(o, "state")), "connected");
+      ASSERT(json_is_null(json_object_get(o, "activated")));
+      ASSERT(json_is_null(json_object_get(o, "width")));
+      seen = 1;
+    } else if (json_is_true(json_object_get(o, "connected"))) {
+      ASSERT_STREQ(json_string_value(json_object_get(o, "state")), "ready"); /* still the first */
+    }
+    h_resp_free(r);
+    if (!seen) h_sleep_ms(10);
+  }
+  ASSERT_EQ(kill(sim.pid, SIGCONT), 0);
+  ASSERT(r_wait_status("/v1/gripper", 20));
+  r = h_get("/v1/gripper");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "ready");
+  h_resp_free(r);
+  h_stop();
+  simproc_stop(&sim);
+}
+
 static void check_not_configured(void) {
   h_write_config("");
   h_start();
@@ -291,6 +338,7 @@ int main(int argc, char **argv) {
   check_down_at_start();
   check_killed_mid_command();
   check_daemon_killed();
+  check_status_per_connection();
   check_not_configured();
   h_done();
   printf("ok\n");
