@@ -182,8 +182,9 @@ static void reload(fg_app *app, const options *o) {
   const fg_conf *now = fg_app_conf_acquire(app);
   fg_store_sync_declared(app->store, now);
   fg_app_conf_release(app, now);
-  fg_metrics_count_reload(1);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
+  /* counted last, so that a reload counted in /metrics has done and logged everything */
+  fg_metrics_count_reload(1);
   fg_notify_ready("running; configuration reloaded");
 }
 

@@ -306,6 +306,22 @@ void h_signal(int sig) {
   if (kill(g_pid, sig) != 0) FG_TEST_FAIL("kill %d: %s", sig, strerror(errno));
 }
 
+/* The reloads the daemon has finished, good and failed. */
+static double reloads_finished(void) {
+  return h_metric("fieldgrip_config_reloads_total{result=\"ok\"}") +
+         h_metric("fieldgrip_config_reloads_total{result=\"failed\"}");
+}
+
+void h_reload(void) {
+  const double before = reloads_finished();
+  h_signal(SIGHUP);
+  const double deadline = h_now_s() + 60;
+  while (reloads_finished() < before + 1) {
+    if (h_now_s() > deadline) FG_TEST_FAIL("no reload finished within 60 s of SIGHUP");
+    h_sleep_ms(20);
+  }
+}
+
 int h_alive(void) {
   int status = 0;
   if (child_exited(&status)) return 0;

@@ -48,6 +48,13 @@ void h_kill(void);
 /* Sends a signal to the running daemon (SIGHUP for a reload). */
 void h_signal(int sig);
 
+/* Sends SIGHUP and waits (60 s hang guard) until the daemon has finished that reload, good
+ * or failed: fieldgrip_config_reloads_total moves once a reload has done and logged
+ * everything, while other signs (a new token accepted, a CLIP load counted, a log line)
+ * come before its end. Reloads run one at a time; use this for every SIGHUP so that none is
+ * in flight when the count is taken. */
+void h_reload(void);
+
 /* 1 while the daemon process is running (not exited, not a zombie that was reaped). */
 int h_alive(void);
 
