@@ -1,7 +1,8 @@
 /* Configuration: start-up errors name file, line and key; SIGHUP with a bad file keeps the old
  * settings (and logs "reload failed"); SIGHUP with a good file brings a new token, a new
  * upload limit and new declared scenes, re-creates a deleted declared scene, and leaves the
- * listening socket alone (listen changes need a restart). */
+ * listening socket alone (listen changes need a restart); SIGHUPs in a burst, and SIGTERM,
+ * arriving during a reload neither end the daemon nor get lost. */
 #include <signal.h>
 
 #include "harness.h"
@@ -191,6 +192,24 @@ int main(int argc, char **argv) {
   ASSERT_STATUS(r, 200);
   h_resp_free(r);
   ASSERT_EQ(status_with("tokenB", "/v1/scenes"), 200);
+
+  /* SIGHUPs without pause until three more reloads have run, so that many arrive while one
+   * runs: they are taken in turn (one that meets another still pending merges with it, as
+   * signals do) and none ends the daemon. SIGTERM sent during a reload still stops it
+   * cleanly (h_stop wants exit 0). */
+  const double reloads_before = h_metric("fieldgrip_config_reloads_total{result=\"ok\"}");
+  const double burst_deadline = h_now_s() + 30;
+  while (h_metric("fieldgrip_config_reloads_total{result=\"ok\"}") < reloads_before + 3) {
+    ASSERT(h_now_s() < burst_deadline);
+    for (int i = 0; i < 100; i++) h_signal(SIGHUP);
+    ASSERT(h_alive());
+  }
+  h_reload();
+  ASSERT(h_alive());
+  r = h_get("/v1/health");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  h_signal(SIGHUP);
 
   h_stop();
   h_done();
