@@ -519,7 +519,10 @@ h_resp *h_request(const h_req *req) {
   /* Send the path exactly as written ("/v1/scenes/.." must reach the daemon as such). */
   curl_easy_setopt(c, CURLOPT_PATH_AS_IS, 1L);
   /* A hang guard for a wedged daemon; meson's timeout is the real limit. */
-  curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
+  if (req->timeout_ms > 0)
+    curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, req->timeout_ms);
+  else
+    curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
   curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT, 30L);
   it_buf body = {0};
   curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);

@@ -124,6 +124,7 @@ typedef struct h_req {
   h_read_fn read_cb;        /* streamed body from a read callback (POST) */
   void *read_ud;
   long long read_len;       /* body length for read_cb; < 0: chunked transfer encoding */
+  long timeout_ms;          /* the whole exchange; 0: the 300 s hang guard */
 } h_req;
 
 /* The default token for requests with auth H_AUTH_DEFAULT; NULL for none. Copied. */
