@@ -22,6 +22,7 @@
 
 #include <errno.h>
 #include <getopt.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -197,8 +198,9 @@ static void reload(fg_app *app, const options *o) {
   const fg_conf *now = fg_app_conf_acquire(app);
   fg_store_sync_declared(app->store, now);
   fg_app_conf_release(app, now);
-  fg_metrics_count_reload(1);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
+  /* counted last, so that a reload counted in /metrics has done and logged everything */
+  fg_metrics_count_reload(1);
   fg_notify_ready("running; configuration reloaded");
 }
 
@@ -216,6 +218,19 @@ static void raise_fd_limit(void) {
   else
     fg_debug("open-files limit raised from %llu to %llu", (unsigned long long)was,
              (unsigned long long)rl.rlim_max);
+}
+
+static pthread_t g_main_thread;
+
+/* Runs on a thread that did not block SIGHUP, SIGTERM or SIGINT: one that a library started
+ * before main() (OpenBLAS starts its pool from a constructor) and so did not inherit the mask.
+ * The kernel hands a signal to such a thread whenever the main thread is not inside
+ * sigtimedwait, during a reload say, and the default action would end the daemon at once.
+ * Passed on to the main thread, which blocks it until its loop takes it. Async-signal-safe. */
+static void signal_to_main(int sig) {
+  const int saved = errno;
+  pthread_kill(g_main_thread, sig);
+  errno = saved;
 }
 
 /* Frees what the start-up set up once the configuration was installed, in reverse order;
@@ -239,13 +254,20 @@ int main(int argc, char **argv) {
   if (rc >= 0) return rc;
 
   /* Signals are taken synchronously by the main thread; every thread started later inherits
-   * this mask, so none of them is interrupted. */
+   * this mask, so none of them is interrupted. Threads that libraries started before main()
+   * did not, and pass what they get on to the main thread (signal_to_main). */
   sigset_t sigs;
   sigemptyset(&sigs);
   sigaddset(&sigs, SIGTERM);
   sigaddset(&sigs, SIGINT);
   sigaddset(&sigs, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &sigs, NULL);
+  g_main_thread = pthread_self();
+  struct sigaction sa = {.sa_handler = signal_to_main, .sa_flags = SA_RESTART};
+  sigfillset(&sa.sa_mask);
+  sigaction(SIGTERM, &sa, NULL);
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGHUP, &sa, NULL);
   signal(SIGPIPE, SIG_IGN);
 
   char err[1024];

@@ -692,6 +692,7 @@ static void peer_view(fg_mb_peer *p, int unit_id, fg_peer_view *v) {
   v->timeouts = ls.timeouts;
   v->exceptions = ls.exceptions;
   v->reconnects = ls.reconnects;
+  v->generation = ls.generation;
 }
 
 void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st) {
@@ -715,7 +716,9 @@ void fg_gripper_state_get(fg_robot_svc *svc, fg_gripper_state *st) {
   st->width_m = NAN;
   if (!svc->gripper) return;
   pthread_mutex_lock(&svc->lock);
-  st->have_status = svc->g_have && st->peer.connected;
+  /* a status of an earlier connection is not this one's: the gripper may have been power
+   * cycled (and lost its activation) in between */
+  st->have_status = svc->g_have && st->peer.connected && svc->g_gen == st->peer.generation;
   st->status = svc->g_status;
   pthread_mutex_unlock(&svc->lock);
   if (st->have_status) st->width_m = fg_robotiq_position_to_width(svc->model, st->status.position);

@@ -127,6 +127,7 @@ typedef struct fg_peer_view {
   char last_error[256]; /* "" when none */
   double last_error_s;  /* CLOCK_REALTIME */
   uint64_t requests, errors, timeouts, exceptions, reconnects;
+  unsigned generation;  /* the number of the last connection, 0 before the first */
 } fg_peer_view;
 
 /* The robot peer's state for GET /v1/robot. */

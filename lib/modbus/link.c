@@ -155,6 +155,7 @@ int fg_mb_link_ensure(fg_mb_link *l) {
   pthread_mutex_lock(&l->lock);
   l->st.connected = 1;
   l->st.reconnects += l->generation > 1;
+  l->st.generation = l->generation;
   pthread_mutex_unlock(&l->lock);
   fg_info("modbus: %s %s connected (unit %d)", l->name, l->address, l->cfg.unit_id);
   return 0;
@@ -252,13 +253,55 @@ static void request_ok(fg_mb_link *l) {
   l->maybe_sent = 1;
 }
 
+/* Reads the next reply on the connection as the one to the request of function fn (3, 4 or
+ * 16) for n registers at addr, and checks it as libmodbus would; a read's words go to
+ * words. For a request whose reply libmodbus refused because another came first (see
+ * request). Returns n, or -1 with errno set as libmodbus sets it. */
+static int receive_own_reply(fg_mb_link *l, int fn, int addr, int n, uint16_t *words) {
+  uint8_t rsp[MODBUS_MAX_ADU_LENGTH];
+  const int len = modbus_receive_confirmation(l->ctx, rsp);
+  if (len < 0) return -1;
+  const int h = modbus_get_header_length(l->ctx); /* the function code's offset */
+  if (len > h + 1 && rsp[h] == (fn | 0x80)) {
+    errno = MODBUS_ENOBASE + rsp[h + 1];
+    return -1;
+  }
+  if (len < h + 5 || rsp[h] != fn) {
+    errno = EMBBADDATA;
+    return -1;
+  }
+  if (fn == MODBUS_FC_WRITE_MULTIPLE_REGISTERS) {
+    if ((rsp[h + 1] << 8 | rsp[h + 2]) != addr || (rsp[h + 3] << 8 | rsp[h + 4]) != n) {
+      errno = EMBBADDATA;
+      return -1;
+    }
+    return n;
+  }
+  if (rsp[h + 1] != 2 * n || len < h + 2 + 2 * n) {
+    errno = EMBBADDATA;
+    return -1;
+  }
+  for (int i = 0; i < n; i++) words[i] = (uint16_t)(rsp[h + 2 + 2 * i] << 8 | rsp[h + 3 + 2 * i]);
+  return n;
+}
+
 /* One request of function fn (3, 4 or 16) through the common prologue and error sorting. */
 static int request(fg_mb_link *l, int fn, int addr, int n, uint16_t *words) {
+  const int after_timeout = l->stale;
   FG_TRY(request_begin(l));
-  const int got = fn == MODBUS_FC_READ_HOLDING_REGISTERS ? modbus_read_registers(l->ctx, addr, n, words)
-                  : fn == MODBUS_FC_READ_INPUT_REGISTERS
-                      ? modbus_read_input_registers(l->ctx, addr, n, words)
-                      : modbus_write_registers(l->ctx, addr, n, words);
+  int got = fn == MODBUS_FC_READ_HOLDING_REGISTERS ? modbus_read_registers(l->ctx, addr, n, words)
+            : fn == MODBUS_FC_READ_INPUT_REGISTERS
+                ? modbus_read_input_registers(l->ctx, addr, n, words)
+                : modbus_write_registers(l->ctx, addr, n, words);
+  if (got != n && after_timeout && errno == EMBBADDATA) {
+    /* The timed-out request's reply came after the flush and reached this request first
+     * (a transaction id, or over RTU a function or a count, that is not this request's).
+     * libmodbus has consumed it; the next message is this request's own, as at most one
+     * reply is outstanding (a second timeout in a row closes the connection). */
+    fg_info("modbus: %s %s: dropped a reply that came after its request timed out", l->name,
+            l->address);
+    got = receive_own_reply(l, fn, addr, n, words);
+  }
   if (got != n) {
     const int e = errno;
     char what[64];

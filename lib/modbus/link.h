@@ -1,8 +1,10 @@
 /* A Modbus client connection to one peer (TCP through modbus_new_tcp_pi, or RTU), with the
  * reconnection policy libmodbus 3.1.6 lacks: a broken pipe, a reset, a refused connection or
  * two timeouts in a row close the connection, and the next request reconnects once a
- * backoff (100 ms doubling to 5 s) has passed. A write is never repeated here: whether a
- * failed write reached the peer is the caller's question (fg_mb_link_maybe_sent).
+ * backoff (100 ms doubling to 5 s) has passed. A reply that comes after its request timed
+ * out is dropped, before the next request or when it reaches that request first, so one
+ * slow reply costs one request and not the connection. A write is never repeated here:
+ * whether a failed write reached the peer is the caller's question (fg_mb_link_maybe_sent).
  *
  * A link belongs to one thread (libmodbus contexts are not thread-safe); only
  * fg_mb_link_state may be called from others. */
@@ -31,6 +33,7 @@ typedef struct fg_mb_link_state {
   char last_error[256]; /* "" when none yet */
   double last_error_s;  /* CLOCK_REALTIME seconds of it, 0 when none */
   uint64_t requests, errors, timeouts, exceptions, reconnects, connect_failures;
+  unsigned generation;  /* as fg_mb_link_generation: the number of the last connection */
 } fg_mb_link_state;
 
 typedef struct fg_mb_link fg_mb_link;

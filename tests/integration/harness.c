@@ -53,7 +53,7 @@ void h_sleep_ms(int ms) {
   }
 }
 
-static double now_s(void) {
+double h_now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
@@ -237,7 +237,7 @@ void h_start(void) {
   g_port = 0;
 
   const char *needle = "listening on http://127.0.0.1:";
-  double deadline = now_s() + 10.0;
+  double deadline = h_now_s() + 10.0;
   for (;;) {
     size_t len = 0;
     char *log = h_read_file(g_logpath, &len);
@@ -261,16 +261,16 @@ void h_start(void) {
       describe_status(status, why, sizeof why);
       FG_TEST_FAIL("the daemon exited before it listened (%s)", why);
     }
-    if (now_s() > deadline)
+    if (h_now_s() > deadline)
       FG_TEST_FAIL("no \"%s<port>\" line in %s within 10 s", needle, g_logpath);
     h_sleep_ms(20);
   }
 }
 
 static int wait_exit(double timeout_s, int *status) {
-  double deadline = now_s() + timeout_s;
+  double deadline = h_now_s() + timeout_s;
   while (!child_exited(status)) {
-    if (now_s() > deadline) return 0;
+    if (h_now_s() > deadline) return 0;
     h_sleep_ms(10);
   }
   return 1;
@@ -306,6 +306,22 @@ void h_signal(int sig) {
   if (kill(g_pid, sig) != 0) FG_TEST_FAIL("kill %d: %s", sig, strerror(errno));
 }
 
+/* The reloads the daemon has finished, good and failed. */
+static double reloads_finished(void) {
+  return h_metric("fieldgrip_config_reloads_total{result=\"ok\"}") +
+         h_metric("fieldgrip_config_reloads_total{result=\"failed\"}");
+}
+
+void h_reload(void) {
+  const double before = reloads_finished();
+  h_signal(SIGHUP);
+  const double deadline = h_now_s() + 60;
+  while (reloads_finished() < before + 1) {
+    if (h_now_s() > deadline) FG_TEST_FAIL("no reload finished within 60 s of SIGHUP");
+    h_sleep_ms(20);
+  }
+}
+
 int h_alive(void) {
   int status = 0;
   if (child_exited(&status)) return 0;
@@ -327,10 +343,10 @@ int h_log_count(const char *needle) {
 }
 
 int h_wait_log(const char *needle, int min_count, double timeout_s) {
-  double deadline = now_s() + timeout_s;
+  double deadline = h_now_s() + timeout_s;
   for (;;) {
     if (h_log_count(needle) >= min_count) return 1;
-    if (now_s() > deadline) return 0;
+    if (h_now_s() > deadline) return 0;
     h_sleep_ms(20);
   }
 }
@@ -361,11 +377,11 @@ int h_run_daemon_capture(const char *const *args, char **out) {
   }
   close(fd);
   int status = 0;
-  double deadline = now_s() + 60.0;
+  double deadline = h_now_s() + 60.0;
   for (;;) {
     pid_t r = waitpid(pid, &status, WNOHANG);
     if (r == pid) break;
-    if (now_s() > deadline) {
+    if (h_now_s() > deadline) {
       kill(pid, SIGKILL);
       waitpid(pid, &status, 0);
       FG_TEST_FAIL("%s did not exit within 60 s", g_daemon);
@@ -503,7 +519,10 @@ h_resp *h_request(const h_req *req) {
   /* Send the path exactly as written ("/v1/scenes/.." must reach the daemon as such). */
   curl_easy_setopt(c, CURLOPT_PATH_AS_IS, 1L);
   /* A hang guard for a wedged daemon; meson's timeout is the real limit. */
-  curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
+  if (req->timeout_ms > 0)
+    curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, req->timeout_ms);
+  else
+    curl_easy_setopt(c, CURLOPT_TIMEOUT, 300L);
   curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT, 30L);
   it_buf body = {0};
   curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);

@@ -48,6 +48,13 @@ void h_kill(void);
 /* Sends a signal to the running daemon (SIGHUP for a reload). */
 void h_signal(int sig);
 
+/* Sends SIGHUP and waits (60 s hang guard) until the daemon has finished that reload, good
+ * or failed: fieldgrip_config_reloads_total moves once a reload has done and logged
+ * everything, while other signs (a new token accepted, a CLIP load counted, a log line)
+ * come before its end. Reloads run one at a time; use this for every SIGHUP so that none is
+ * in flight when the count is taken. */
+void h_reload(void);
+
 /* 1 while the daemon process is running (not exited, not a zombie that was reaped). */
 int h_alive(void);
 
@@ -117,6 +124,7 @@ typedef struct h_req {
   h_read_fn read_cb;        /* streamed body from a read callback (POST) */
   void *read_ud;
   long long read_len;       /* body length for read_cb; < 0: chunked transfer encoding */
+  long timeout_ms;          /* the whole exchange; 0: the 300 s hang guard */
 } h_req;
 
 /* The default token for requests with auth H_AUTH_DEFAULT; NULL for none. Copied. */
@@ -226,6 +234,8 @@ int h_count_files(const char *dir, const char *needle);
 /* realpath of $FG_SHARED_DATA; fails the test when it is unset or missing. Caller frees. */
 char *h_shared_data(void);
 void h_sleep_ms(int ms);
+/* Seconds on the monotonic clock: for deadlines of waits and for latencies measured. */
+double h_now_s(void);
 
 /* A growable byte buffer, NUL-terminated past n; exits the test on allocation failure. */
 typedef struct it_buf {

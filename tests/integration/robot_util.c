@@ -50,6 +50,22 @@ int r_wait_true(const char *path, const char *key, double timeout_s) {
   return 0;
 }
 
+int r_wait_status(const char *path, double timeout_s) {
+  const double deadline = h_now_s() + timeout_s;
+  for (;;) {
+    h_resp *r = h_get(path);
+    json_t *o = r->json;
+    const char *state = json_string_value(json_object_get(o, "state"));
+    const int yes = o && json_is_true(json_object_get(o, "connected")) &&
+                    (state ? strcmp(state, "connected") != 0
+                           : json_is_integer(json_object_get(o, "ack")));
+    h_resp_free(r);
+    if (yes) return 1;
+    if (h_now_s() > deadline) return 0;
+    h_sleep_ms(20);
+  }
+}
+
 void r_expect_at(const char *file, int line, const h_resp *r, long status, const char *code) {
   if (r->status != status) {
     fprintf(stderr, "%s:%d: status %ld, expected %ld: %s\n", file, line, r->status, status,

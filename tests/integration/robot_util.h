@@ -17,6 +17,12 @@ h_resp *r_post(const char *path, const char *json, const char *idem_key);
 /* Waits up to timeout_s for GET path's JSON key to be true (a boolean). 1 when it was. */
 int r_wait_true(const char *path, const char *key, double timeout_s);
 
+/* Waits up to timeout_s for GET path (/v1/robot or /v1/gripper) to report its peer
+ * connected and its registers read: the robot's "ack" is a number, the gripper's "state"
+ * is past "connected" (connected, no status read yet on this connection). "connected"
+ * alone says nothing about the registers. 1 when it did. */
+int r_wait_status(const char *path, double timeout_s);
+
 /* Asserts r's status, and for an error its code. */
 void r_expect_at(const char *file, int line, const h_resp *r, long status, const char *code);
 #define r_expect(r, status, code) r_expect_at(__FILE__, __LINE__, (r), (status), (code))

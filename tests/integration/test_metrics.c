@@ -5,6 +5,7 @@
 #include <arpa/inet.h>
 #include <dirent.h>
 #include <netinet/in.h>
+#include <math.h>
 #include <strings.h>
 #include <sys/socket.h>
 #include <time.h>
@@ -67,6 +68,45 @@ static void expect_requests(const char *text, const char *method, const char *ro
     FG_TEST_FAIL("fieldgrip_http_requests_total{method=\"%s\",route=\"%s\",code=\"%s\"} is %g, "
                  "expected %g; /metrics:\n%s",
                  method, route, code, v, n, text);
+}
+
+/* The duration histogram of one route: its cumulative buckets rise to its count, n; its sum
+ * is above zero, within what the buckets allow (each duration above the bucket below its own
+ * and at most its bound; the daemon sums whole microseconds, so each may be up to one lower)
+ * and at most n times wall_s, the time in which all n requests were made and counted. A sum
+ * in the wrong unit, one that is not added to, or buckets that disagree with it fail. */
+static void expect_histogram(const char *text, const char *route, double n, double wall_s) {
+  char prefix[256];
+  snprintf(prefix, sizeof prefix, "fieldgrip_http_request_duration_seconds_bucket{route=\"%s\",",
+           route);
+  double lo = 0, hi = 0, prev_le = 0, prev_cum = 0;
+  int buckets = 0;
+  for (const char *line = strstr(text, prefix); line; line = strstr(line + 1, prefix)) {
+    if (line != text && line[-1] != '\n') continue;
+    const char *le = strstr(line, "le=\"");
+    ASSERT(le != NULL);
+    le += 4;
+    const double bound = strncmp(le, "+Inf", 4) == 0 ? INFINITY : strtod(le, NULL);
+    const char *val = strstr(le, "} ");
+    ASSERT(val != NULL);
+    const double cum = strtod(val + 2, NULL);
+    ASSERT(cum >= prev_cum); /* cumulative */
+    const double in_bucket = cum - prev_cum;
+    lo += in_bucket * prev_le;
+    hi += in_bucket > 0 ? in_bucket * bound : 0;
+    prev_le = bound;
+    prev_cum = cum;
+    buckets++;
+  }
+  ASSERT(buckets > 1);
+  ASSERT(isinf(prev_le));
+  ASSERT_EQ(prev_cum, n);
+  const char *rw[] = {"route", route, NULL};
+  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_count", rw), n);
+  const double sum = metric(text, "fieldgrip_http_request_duration_seconds_sum", rw);
+  if (!(sum > 0 && sum >= lo - n * 1e-6 - 1e-6 && sum <= hi + 1e-6 && sum <= n * wall_s))
+    FG_TEST_FAIL("%s: duration sum %.6f s for %g requests; the buckets allow %.6f .. %.6f s and "
+                 "the requests took place within %.3f s", route, sum, n, lo, hi, wall_s);
 }
 
 /* Requests are counted when their response has been sent, which may be a moment after the
@@ -219,6 +259,7 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   h_start();
 
+  const double t_first = h_now_s();
   for (int i = 0; i < 3; i++) {
     h_resp *r = h_get("/v1/health");
     ASSERT_STATUS(r, 200);
@@ -257,6 +298,7 @@ int main(int argc, char **argv) {
 
   int scrapes = 0;
   r = scrape_settled(3 + 1 + 1 + 1 + 1 + 2 + 1, &scrapes);
+  const double wall_s = h_now_s() - t_first;
   const char *ct = h_resp_header(r, "Content-Type");
   ASSERT(ct && strncasecmp(ct, "text/plain", 10) == 0);
   ASSERT_STRCONTAINS(ct, "version=0.0.4");
@@ -279,15 +321,9 @@ int main(int argc, char **argv) {
   ASSERT_EQ(metric(text, "fieldgrip_frames", NULL), 2);
   ASSERT_EQ(metric(text, "fieldgrip_scenes", NULL), 1);
 
-  /* The histogram: +Inf bucket = count, per route. */
-  const char *hinf[] = {"route", "/v1/health", "le", "+Inf", NULL};
-  const char *hroute[] = {"route", "/v1/health", NULL};
-  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_bucket", hinf), 3);
-  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_count", hroute), 3);
-  double sum = metric(text, "fieldgrip_http_request_duration_seconds_sum", hroute);
-  ASSERT(sum >= 0);
-  const char *finf[] = {"route", "/v1/scenes/{s}/frames", "le", "+Inf", NULL};
-  ASSERT_EQ(metric(text, "fieldgrip_http_request_duration_seconds_bucket", finf), 3);
+  /* The histograms, per route. */
+  expect_histogram(text, "/v1/health", 3, wall_s);
+  expect_histogram(text, "/v1/scenes/{s}/frames", 3, wall_s);
   h_resp_free(r);
 
   /* Later scrapes see the earlier ones (once they are recorded), and nothing else changed. */

@@ -1,8 +1,10 @@
 /* Persistence: scenes and frames survive a clean restart, a kill -9 after an import, and a
  * kill -9 in the middle of an upload (no half-written frame, no temp file left after start-up)
- * and during an import (whatever is listed afterwards is whole);
+ * and while an import decodes (known to have begun and been cut off; whatever is listed
+ * afterwards is whole);
  * deleted scenes stay deleted; scenes declared in the config come back empty. */
 #include <curl/curl.h>
+#include <dirent.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <unistd.h>
@@ -278,49 +280,128 @@ static void test_kill_mid_upload(void) {
 
 /* ---- kill -9 while an import runs ---- */
 
-static atomic_int g_import_started;
+typedef struct importer {
+  char *body, *path;
+  atomic_int started, done;
+  long status; /* 0: no answer (cut off by the kill) */
+} importer;
 
 static void *import_thread(void *arg) {
-  atomic_store(&g_import_started, 1);
-  h_resp *r = h_post_json("/v1/scenes/lego2/import", arg);
-  /* Cut off by the kill, or done before it: both are fine here. */
+  importer *im = arg;
+  atomic_store(&im->started, 1);
+  h_resp *r = h_post_json(im->path, im->body);
+  im->status = r->status;
   if (r->status != 0 && r->status != 200)
     fprintf(stderr, "import during kill: %ld %s\n", r->status, r->body);
   h_resp_free(r);
+  atomic_store(&im->done, 1);
   return NULL;
 }
 
-static void test_kill_mid_import(void) {
-  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"lego2\", \"workspace\": {\"min\": [-1.5, -1.5, -1.5], "
-                                        "\"max\": [1.5, 1.5, 1.5]}}");
-  ASSERT_STATUS(r, 201);
-  h_resp_free(r);
-  char *shared = h_shared_data();
-  char *body = h_fmt("{\"path\": \"%s/lego\", \"transforms\": \"transforms_train.json\"}", shared);
-  char *tpath = h_fmt("%s/lego/transforms_train.json", shared);
-  free(shared);
+/* The daemon's image decoders (fieldgrip-decode children) running now, as pids in out[0 ..
+ * max-1]; returns how many. */
+static int decoder_pids(pid_t *out, int max) {
+  DIR *d = opendir("/proc");
+  ASSERT(d != NULL);
+  int n = 0;
+  struct dirent *e;
+  while ((e = readdir(d)) != NULL) {
+    if (e->d_name[0] < '1' || e->d_name[0] > '9') continue;
+    char *path = h_fmt("/proc/%s/stat", e->d_name);
+    char *stat = h_read_file(path, NULL);
+    free(path);
+    if (!stat) continue; /* gone meanwhile */
+    /* "pid (comm) state ppid ...": comm may hold spaces, so parse after the last ')' */
+    const char *close = strrchr(stat, ')');
+    char state;
+    int ppid;
+    if (close && strstr(stat, "(fieldgrip-decod") && sscanf(close + 1, " %c %d", &state, &ppid) == 2 &&
+        ppid == h_pid() && n < max)
+      out[n++] = (pid_t)atoi(e->d_name);
+    free(stat);
+  }
+  closedir(d);
+  return n;
+}
+
+/* Starts the lego import into scene and SIGKILLs the daemon once the import is decoding (a
+ * decoder child that was not there before has appeared). Returns 1 when the kill cut it off
+ * (no answer came), 0 when the import answered first (a starved test thread; the caller tries
+ * again). */
+static int kill_during_import(const char *scene, const char *shared) {
+  pid_t before[64], now[64];
+  const int n_before = decoder_pids(before, 64);
+  importer im = {0};
+  im.path = h_fmt("/v1/scenes/%s/import", scene);
+  im.body = h_fmt("{\"path\": \"%s/lego\", \"transforms\": \"transforms_train.json\"}", shared);
   pthread_t th;
-  ASSERT_EQ(pthread_create(&th, NULL, import_thread, body), 0);
-  while (!atomic_load(&g_import_started)) h_sleep_ms(1);
-  /* Most likely mid-import; whenever it lands, the checks below hold. */
-  h_sleep_ms(400);
+  ASSERT_EQ(pthread_create(&th, NULL, import_thread, &im), 0);
+  const double deadline = h_now_s() + 60;
+  int decoding = 0;
+  while (!decoding && !atomic_load(&im.done)) {
+    ASSERT(h_now_s() < deadline);
+    const int n_now = decoder_pids(now, 64);
+    for (int i = 0; i < n_now && !decoding; i++) {
+      decoding = 1;
+      for (int j = 0; j < n_before; j++)
+        if (now[i] == before[j]) decoding = 0;
+    }
+    if (!decoding) h_sleep_ms(1);
+  }
   h_kill();
   ASSERT_EQ(pthread_join(th, NULL), 0);
-  free(body);
+  free(im.path);
+  free(im.body);
+  if (im.status != 0) {
+    ASSERT_EQ(im.status, 200);
+    fprintf(stderr, "the import into %s answered before the kill; again\n", scene);
+    return 0;
+  }
+  ASSERT(decoding); /* it had begun */
+  return 1;
+}
 
+/* SIGKILL while an import decodes its frames: the import gets no answer, and after a restart
+ * the scene lists whole frames only (none, or a prefix of the data set with its poses), and
+ * no temp file is left. */
+static void test_kill_mid_import(void) {
+  char *shared = h_shared_data();
+  char *tpath = h_fmt("%s/lego/transforms_train.json", shared);
+  /* a fresh daemon: decoders left idle by earlier work would hide the import's own */
+  h_stop();
   h_start();
+  char scene[32];
+  int cut = 0;
+  for (int attempt = 0; attempt < 3 && !cut; attempt++) {
+    snprintf(scene, sizeof scene, "lego%d", attempt + 2);
+    char *body = h_fmt("{\"name\": \"%s\", \"workspace\": {\"min\": [-1.5, -1.5, -1.5], "
+                       "\"max\": [1.5, 1.5, 1.5]}}", scene);
+    h_resp *r = h_post_json("/v1/scenes", body);
+    ASSERT_STATUS(r, 201);
+    h_resp_free(r);
+    free(body);
+    cut = kill_during_import(scene, shared);
+    h_start();
+  }
+  free(shared);
+  if (!cut) FG_TEST_FAIL("three imports in a row answered before the kill reached them");
+
   ASSERT_EQ(h_count_files(h_state_dir(), ".tmp."), 0);
-  json_t *scene = get_json("/v1/scenes/lego2");
-  long long n = JINT(scene, "frames");
-  json_decref(scene);
-  printf("frames of lego2 after a kill -9 during its import: %lld\n", n);
+  char *path = h_fmt("/v1/scenes/%s", scene);
+  json_t *sj = get_json(path);
+  long long n = JINT(sj, "frames");
+  json_decref(sj);
+  free(path);
+  printf("frames of %s after a kill -9 during its import: %lld\n", scene, n);
   ASSERT(n >= 0 && n <= 100);
   /* Whatever is listed is whole: frame i is transforms frame i, with its camera. */
   json_error_t jerr;
   json_t *tf = json_load_file(tpath, 0, &jerr);
   if (!tf) FG_TEST_FAIL("%s: %s", tpath, jerr.text);
   free(tpath);
-  json_t *frames = get_json("/v1/scenes/lego2/frames");
+  path = h_fmt("/v1/scenes/%s/frames", scene);
+  json_t *frames = get_json(path);
+  free(path);
   ASSERT_EQ(json_array_size(JGET(frames, "frames")), n);
   for (long long i = 0; i < n; i++) {
     json_t *f = json_array_get(JGET(frames, "frames"), (size_t)i);

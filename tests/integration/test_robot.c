@@ -40,8 +40,9 @@ static void check_example(const char *encoding, const uint16_t *words, int n) {
   snprintf(extra, sizeof extra, "encoding = %s", encoding);
   r_config(sim.port, extra, 0, NULL);
   h_start();
-  ASSERT(r_wait_true("/v1/robot", "connected", 5));
-  /* the daemon continues after the robot's ack (6), so the next seq is the example's 7 */
+  /* the daemon continues after the robot's ack (6), so the next seq is the example's 7: a
+   * dry run plans with what was read, so wait for the read, not just the connection */
+  ASSERT(r_wait_status("/v1/robot", 10));
   h_resp *r = r_post("/v1/robot/commands", R_EXAMPLE_BODY ", \"dry_run\": true}", NULL);
   r_expect(r, 200, NULL);
   ASSERT(json_is_true(json_object_get(r->json, "dry_run")));
@@ -82,7 +83,8 @@ static void check_gripper(void) {
   simproc_start(&sim, 0, args);
   r_config(sim.port, NULL, sim.port, NULL);
   h_start();
-  ASSERT(r_wait_true("/v1/gripper", "connected", 5));
+  /* "connected" until the first status read on the connection, then the gripper's state */
+  ASSERT(r_wait_status("/v1/gripper", 10));
   h_resp *r = h_get("/v1/gripper");
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "not_activated");
   h_resp_free(r);

@@ -3,8 +3,8 @@
  * down at start (the daemon serves, commands answer 503) and coming up later, a peer killed
  * mid-command and restarted (unknown, then the next command works), a second command or a
  * gripper action while one runs (409), Idempotency-Key replays of a running command and of
- * one cut short by a daemon that was killed, no [robot] at all, and the Modbus lines of
- * /metrics.
+ * one cut short by a daemon that was killed, a gripper status that belongs to its connection,
+ * no [robot] at all, and the Modbus lines of /metrics.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
 #include "simproc.h"
@@ -146,10 +146,15 @@ static void check_down_at_start(void) {
   r = r_post("/v1/gripper/close", "", NULL);
   r_expect(r, 503, "gripper_disconnected");
   h_resp_free(r);
-  /* the log says so once per peer, not at every attempt of the backoff */
+  /* the log says so once per peer, not at every attempt of the backoff: wait until each
+   * peer's worker has been refused three times, then count */
   ASSERT(h_wait_log("unreachable", 2, 5));
-  const struct timespec pause = {0, 400000000};
-  nanosleep(&pause, NULL);
+  const double deadline = h_now_s() + 20;
+  while (h_metric("fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"connect\"}") < 3 ||
+         h_metric("fieldgrip_modbus_errors_total{peer=\"gripper\",kind=\"connect\"}") < 3) {
+    ASSERT(h_now_s() < deadline);
+    h_sleep_ms(20);
+  }
   ASSERT_EQ(h_log_count("unreachable"), 2);
 
   simproc sim;
@@ -250,6 +255,53 @@ static void check_daemon_killed(void) {
   simproc_stop(&sim);
 }
 
+/* The gripper stops answering (SIGSTOP) once activated: two timeouts close the connection
+ * and the worker reconnects (the kernel completes the handshake for the stopped process).
+ * Until a status is read on the new connection the state is "connected", not the earlier
+ * connection's "ready": the gripper may have been power cycled in between. */
+static void check_status_per_connection(void) {
+  simproc sim;
+  const char *args[] = {"--activation-ms", "50", NULL};
+  simproc_start(&sim, 0, args);
+  r_config(0, NULL, sim.port, NULL);
+  h_start();
+  h_resp *r = r_post("/v1/gripper/activate", "", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  ASSERT(r_wait_status("/v1/gripper", 10));
+  r = h_get("/v1/gripper");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "ready");
+  h_resp_free(r);
+
+  ASSERT_EQ(kill(sim.pid, SIGSTOP), 0);
+  /* every reply below is read whole: connected, the reconnection and the state together */
+  const double deadline = h_now_s() + 30;
+  int seen = 0;
+  while (!seen) {
+    ASSERT(h_now_s() < deadline);
+    r = h_get("/v1/gripper");
+    json_t *o = r->json;
+    if (json_is_true(json_object_get(o, "connected")) &&
+        json_integer_value(json_object_get(json_object_get(o, "counters"), "reconnects")) >= 1) {
+      ASSERT_STREQ(json_string_value(json_object_get(o, "state")), "connected");
+      ASSERT(json_is_null(json_object_get(o, "activated")));
+      ASSERT(json_is_null(json_object_get(o, "width")));
+      seen = 1;
+    } else if (json_is_true(json_object_get(o, "connected"))) {
+      ASSERT_STREQ(json_string_value(json_object_get(o, "state")), "ready"); /* still the first */
+    }
+    h_resp_free(r);
+    if (!seen) h_sleep_ms(10);
+  }
+  ASSERT_EQ(kill(sim.pid, SIGCONT), 0);
+  ASSERT(r_wait_status("/v1/gripper", 20));
+  r = h_get("/v1/gripper");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "ready");
+  h_resp_free(r);
+  h_stop();
+  simproc_stop(&sim);
+}
+
 static void check_not_configured(void) {
   h_write_config("");
   h_start();
@@ -271,8 +323,8 @@ static void check_not_configured(void) {
   h_resp_free(r);
   /* a reload does not swap peers under running commands: it says so, and nothing changes */
   r_config(closed_port(), NULL, 0, NULL);
-  h_signal(SIGHUP);
-  ASSERT(h_wait_log("keep their settings until the next restart", 1, 10));
+  h_reload();
+  ASSERT_EQ(h_log_count("keep their settings until the next restart"), 1);
   r = h_get("/v1/robot");
   ASSERT(json_is_false(json_object_get(r->json, "configured")));
   h_resp_free(r);
@@ -288,6 +340,7 @@ int main(int argc, char **argv) {
   check_down_at_start();
   check_killed_mid_command();
   check_daemon_killed();
+  check_status_per_connection();
   check_not_configured();
   h_done();
   printf("ok\n");

@@ -1,8 +1,8 @@
 /* Tests of lib/modbus link, peer and devices against fieldgrip-sim (argv[1]) on 127.0.0.1:
  * requests and their error classes (exception, timeout, connection lost), the reconnection
- * policy (backoff, two timeouts in a row, a peer that comes up late, a restart on the same
- * port), whether a failed write may have been applied, the robot's ack/done handshake in
- * both encodings, the gripper's activation and moves, and the peer's worker thread (calls,
+ * policy (backoff, two timeouts in a row, a reply later than its request's timeout, a peer
+ * that comes up late, a restart on the same port), whether a failed write may have been
+ * applied, the robot's ack/done handshake in both encodings, the gripper's activation and moves, and the peer's worker thread (calls,
  * a full queue, cancellation at shutdown, the idle job). Each case starts its own
  * simulator. An optional second argument runs one case. */
 #include <errno.h>
@@ -10,6 +10,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -289,11 +290,10 @@ static void test_timeout(void) {
   ms = simproc_now_ms() - t0;
   ASSERT(ms >= timeout_ms - 1 && ms < timeout_ms + SLACK_MS);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
-  /* The second in a row closes it; the reconnection is not held back by a backoff. */
+  /* The second in a row closes it; the reconnection is not held back by a backoff (the
+   * first call connects: a backoff would refuse it with "next attempt in"). */
   ASSERT_EQ(link_state(l).connected, 0);
-  t0 = simproc_now_ms();
   ASSERT_OK(fg_mb_link_ensure(l));
-  ASSERT(simproc_now_ms() - t0 < 50);
   ASSERT_EQ(fg_mb_link_generation(l), 2);
   fg_mb_link_state st = link_state(l);
   ASSERT_EQ(st.timeouts, 2);
@@ -308,6 +308,30 @@ static void test_timeout(void) {
   close(lfd);
 }
 
+/* The size of a Modbus TCP reply to a read of 12 registers: MBAP header (7), function code,
+ * byte count, 12 words. */
+static const int k_read12_reply_bytes = 7 + 1 + 1 + 2 * 12;
+
+/* Waits until a socket of this process connected to 127.0.0.1:port holds at least bytes
+ * unread bytes: a reply has reached a link's socket and no request has taken it yet. The
+ * link's socket is libmodbus's, so it is found among the process's descriptors. */
+static void wait_unread(int port, int bytes) {
+  const double t0 = simproc_now_ms();
+  for (;;) {
+    for (int fd = 0; fd < 1024; fd++) {
+      struct sockaddr_in a;
+      socklen_t len = sizeof a;
+      int n = 0;
+      if (getpeername(fd, (struct sockaddr *)&a, &len) == 0 && a.sin_family == AF_INET &&
+          ntohs(a.sin_port) == port && ioctl(fd, FIONREAD, &n) == 0 && n >= bytes)
+        return;
+    }
+    if (simproc_now_ms() - t0 > SLACK_MS)
+      FG_TEST_FAIL("no reply of %d bytes from port %d within %d ms", bytes, port, SLACK_MS);
+    simproc_sleep_ms(1);
+  }
+}
+
 /* A peer that answers late: the timed-out request's reply must not spoil the next request,
  * and a success in between means two timeouts are not "in a row". */
 static void test_late_reply(void) {
@@ -318,17 +342,13 @@ static void test_late_reply(void) {
   example_words(7, FG_POSE_INT16, w);
   ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
 
-  /* A second connection: once the simulator has answered it after SIGCONT, it has answered
-   * the request queued before too, or does so in the same pass of its poll loop (the 10 ms
-   * below cover that pass). */
-  fg_mb_link *probe = link_open("probe", p.port, ROBOT, 2000);
-  ASSERT_OK(fg_mb_link_ensure(probe));
-
+  /* The stopped simulator cannot answer in time (SIGSTOP takes effect before it returns to
+   * its poll loop); once continued it answers, and the test waits until that reply lies in
+   * the link's socket before the next request. */
   ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
-  ASSERT_OK(fg_mb_read_registers(probe, BASE, 1, v)); /* the late reply is on its way */
-  simproc_sleep_ms(10);
+  wait_unread(p.port, k_read12_reply_bytes);
   memset(v, 0, sizeof v);
   ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
   ASSERT_EQ(v[0], 7);
@@ -339,25 +359,93 @@ static void test_late_reply(void) {
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
   ASSERT_EQ(link_state(l).connected, 1); /* the first timeout since the success */
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
-  ASSERT_OK(fg_mb_read_registers(probe, BASE, 1, v));
-  simproc_sleep_ms(10);
+  wait_unread(p.port, k_read12_reply_bytes);
   ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
-  fg_mb_link_free(probe);
   fg_mb_link_free(l);
   simproc_stop(&p);
 }
 
-/* Nothing listens at first: refusals, a backoff that doubles and refuses without trying,
- * then the peer comes up on that port and the first attempt after the backoff connects. */
-static void test_peer_down_then_up(void) {
+/* Sends SIGCONT to a stopped simulator once the link has counted its requests-th request:
+ * that request has passed its flush, so the reply to the request before it, which the
+ * simulator sends first, arrives after the flush. */
+typedef struct {
+  fg_mb_link *link;
+  pid_t pid;
+  uint64_t requests;
+} cont_after;
+
+static void *cont_after_thread(void *arg) {
+  cont_after *c = arg;
+  fg_mb_link_state st;
+  const double t0 = simproc_now_ms();
+  do {
+    simproc_sleep_ms(1);
+    fg_mb_link_state_get(c->link, &st);
+  } while (st.requests < c->requests && simproc_now_ms() - t0 < 10 * SLACK_MS);
+  kill(c->pid, SIGCONT);
+  return NULL;
+}
+
+/* A reply later than the flush before the next request reaches that request first: it is
+ * dropped, and the request takes its own reply from the same connection, for a read and
+ * for a write. */
+static void test_reply_after_flush(void) {
+  simproc p;
+  simproc_start(&p, 0, NULL);
+  fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
+  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  example_words(7, FG_POSE_INT16, w);
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+
+  ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  cont_after c = {.link = l, .pid = p.pid, .requests = link_state(l).requests + 1};
+  pthread_t t;
+  ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
+  memset(v, 0, sizeof v);
+  ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
+  ASSERT_EQ(pthread_join(t, NULL), 0);
+  ASSERT_EQ(v[0], 7);
+  ASSERT_EQ(v[1], 2);
+
+  ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  c.requests = link_state(l).requests + 1;
+  ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
+  example_words(8, FG_POSE_INT16, w);
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_EQ(pthread_join(t, NULL), 0);
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
+  ASSERT_EQ(v[0], 8);
+
+  fg_mb_link_state st = link_state(l);
+  ASSERT_EQ(fg_mb_link_generation(l), 1);
+  ASSERT_EQ(st.reconnects, 0);
+  ASSERT_EQ(st.timeouts, 2);
+  ASSERT_EQ(st.errors, 2);
+  ASSERT_EQ(st.requests, 6);
+  fg_mb_link_free(l);
+  simproc_stop(&p);
+}
+
+/* Whether a call that returned just now was surely made inside a backoff of window_ms that
+ * began no earlier than since_ms. */
+static int inside_window(double since_ms, int window_ms) {
+  return simproc_now_ms() - since_ms < window_ms - 1;
+}
+
+/* One run of test_peer_down_then_up. Returns 0 when a call meant to land inside a backoff
+ * came too late to tell (a starved test thread), so that the case is run again, 1 when every
+ * check was made. */
+static int peer_down_then_up_once(void) {
   const int port = free_port();
   fg_mb_link *l = link_open("robot", port, ROBOT, 500);
   char want[96];
   snprintf(want, sizeof want, "robot 127.0.0.1:%d", port);
   const char *who = want;
-  double t_fail = simproc_now_ms();
+  const double t_first = simproc_now_ms(); /* the backoff starts after this instant */
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
   ASSERT_STRCONTAINS(fg_error_detail(), "refused");
   fg_mb_link_state st = link_state(l);
@@ -366,39 +454,56 @@ static void test_peer_down_then_up(void) {
   ASSERT_STRCONTAINS(st.last_error, "refused");
   ASSERT(st.last_error_s > 1.5e9);
 
-  /* At once again: refused by the backoff, without a connection attempt. */
-  double t0 = simproc_now_ms();
+  /* At once again: refused by the backoff, without a connection attempt (the count of
+   * refusals stays). */
   ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
-  ASSERT(simproc_now_ms() - t0 < 20);
+  if (!inside_window(t_first, 100)) goto again;
   int ms = next_attempt_ms();
   ASSERT(ms > 0 && ms <= 100);
   ASSERT_STRCONTAINS(fg_error_detail(), "refused"); /* the cause is still told */
   ASSERT_EQ(link_state(l).connect_failures, 1);
   /* A request meanwhile fails the same way and cannot have been sent. */
   uint16_t v[12];
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL, "next attempt in");
+  ASSERT_EQ(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL);
+  if (!inside_window(t_first, 100)) goto again;
+  ASSERT_STRCONTAINS(fg_error_detail(), "next attempt in");
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 0);
   ASSERT_EQ(link_state(l).requests, 0);
   ASSERT_EQ(link_state(l).connect_failures, 1);
 
-  /* After the first backoff (100 ms) a real attempt, refused again: the backoff doubles. */
-  while (simproc_now_ms() - t_fail < 105) simproc_sleep_ms(2);
-  ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, "refused");
-  ASSERT_EQ(link_state(l).connect_failures, 2);
-  t_fail = simproc_now_ms();
-  ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, "next attempt in");
+  /* After the first backoff (100 ms) a real attempt, refused again: the backoff doubles.
+   * Every call until then is refused by the backoff alone; the loop ends at the attempt. */
+  double t_attempt;
+  for (;;) {
+    t_attempt = simproc_now_ms();
+    ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
+    if (link_state(l).connect_failures == 2) break;
+    ASSERT_EQ(link_state(l).connect_failures, 1);
+    ASSERT_STRCONTAINS(fg_error_detail(), "next attempt in");
+    if (simproc_now_ms() - t_first > 100 + SLACK_MS)
+      FG_TEST_FAIL("no second attempt within %d ms", 100 + SLACK_MS);
+    simproc_sleep_ms(2);
+  }
+  ASSERT(simproc_now_ms() - t_first >= 100 - 1); /* not before the first backoff ran out */
+  ASSERT_STRCONTAINS(fg_error_detail(), "refused");
+  ASSERT_ERR(fg_mb_link_ensure(l), FG_EUNAVAIL, who);
+  if (!inside_window(t_attempt, 200)) goto again;
+  const double t_asked = simproc_now_ms();
   ms = next_attempt_ms();
-  ASSERT(ms > 150 && ms <= 200);
+  /* 200 ms from the refusal, which lies between t_attempt and t_asked */
+  ASSERT(ms <= 200 && ms >= 200 - (t_asked - t_attempt) - 1);
 
+  /* The peer comes up; only this thread calls ensure, so no attempt is made while it
+   * starts, and the first one after the backoff connects. */
   simproc p;
   simproc_start(&p, port, NULL);
-  const double up_ms = simproc_now_ms() - t_fail;
+  const double up_ms = simproc_now_ms() - t_attempt;
   ensure_until_connected(l, 200 + SLACK_MS);
-  const double connected_ms = simproc_now_ms() - t_fail;
+  const double connected_ms = simproc_now_ms() - t_attempt;
   fprintf(stderr, "peer up %.0f ms after the second refusal, connected after %.0f ms\n", up_ms,
           connected_ms);
-  ASSERT(connected_ms >= 195);
-  ASSERT(connected_ms < (up_ms > 200 ? up_ms : 200) + 100);
+  ASSERT(connected_ms >= 200 - 1); /* the backoff held until its end ... */
+  ASSERT(connected_ms < (up_ms > 200 ? up_ms : 200) + SLACK_MS); /* ... and no longer */
   st = link_state(l);
   ASSERT_EQ(st.connect_failures, 2); /* the backoff, not more refusals, held it back */
   ASSERT_EQ(st.connected, 1);
@@ -407,6 +512,20 @@ static void test_peer_down_then_up(void) {
   ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
   fg_mb_link_free(l);
   simproc_stop(&p);
+  return 1;
+
+again:
+  fprintf(stderr, "peer_down_then_up: a call came after its backoff window; again\n");
+  fg_mb_link_free(l);
+  return 0;
+}
+
+/* Nothing listens at first: refusals, a backoff that doubles and refuses without trying,
+ * then the peer comes up on that port and the first attempt after the backoff connects. */
+static void test_peer_down_then_up(void) {
+  for (int run = 0; run < 10; run++)
+    if (peer_down_then_up_once()) return;
+  FG_TEST_FAIL("ten runs in a row were too slow to call inside a 100 ms backoff");
 }
 
 /* The peer dies mid-session (SIGKILL) and a new one starts on the same port. */
@@ -414,7 +533,8 @@ static void test_peer_killed_restart(void) {
   simproc p;
   simproc_start(&p, 0, NULL);
   const int port = p.port;
-  fg_mb_link *l = link_open("robot", port, ROBOT, 1000);
+  const int timeout_ms = 5000; /* far above any delay of a busy machine */
+  fg_mb_link *l = link_open("robot", port, ROBOT, timeout_ms);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
   example_words(7, FG_POSE_INT16, w);
   ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
@@ -422,16 +542,22 @@ static void test_peer_killed_restart(void) {
   ASSERT_EQ(v[10], 7);
   simproc_kill(&p);
 
-  /* The request went out on what looked like a live connection: it may have been sent. */
+  /* The request went out on what looked like a live connection: it may have been sent.
+   * Noticed at once (FG_EUNAVAIL), not after the response timeout (FG_ETIMEDOUT). */
   double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL, "connection lost");
-  ASSERT(simproc_now_ms() - t0 < 500); /* noticed at once, not after the response timeout */
+  ASSERT(simproc_now_ms() - t0 < timeout_ms);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(link_state(l).connected, 0);
-  /* The next one is refused by the backoff and cannot have been sent. */
-  ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL, "next attempt in");
+  /* The next one is refused by the backoff and cannot have been sent. (A call that a busy
+   * machine delays past the backoff tries to connect, is refused, and cannot have been sent
+   * either.) */
+  ASSERT_EQ(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 0);
-  ASSERT(next_attempt_ms() <= 100);
+  if (inside_window(t0, 100)) {
+    ASSERT_STRCONTAINS(fg_error_detail(), "next attempt in");
+    ASSERT(next_attempt_ms() <= 100);
+  }
 
   simproc_start(&p, port, NULL);
   ASSERT_EQ(p.port, port);
@@ -453,13 +579,14 @@ static void test_peer_killed_restart(void) {
 static void test_drop_write(void) {
   simproc p;
   simproc_start(&p, 0, (const char *const[]){"--drop-after", "2", NULL});
-  fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
+  const int timeout_ms = 5000; /* far above any delay of a busy machine */
+  fg_mb_link *l = link_open("robot", p.port, ROBOT, timeout_ms);
   uint16_t w[FG_POSE_MAX_WORDS], v[12];
   ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v)); /* request 1 */
   example_words(7, FG_POSE_INT16, w);
   double t0 = simproc_now_ms();
   ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL, "connection lost during");
-  ASSERT(simproc_now_ms() - t0 < 500);
+  ASSERT(simproc_now_ms() - t0 < timeout_ms); /* the drop, not the response timeout */
   ASSERT_STRCONTAINS(fg_error_detail(), "write of 10 registers at 128");
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(fg_mb_link_exception(l), 0);
@@ -504,7 +631,9 @@ static void test_robot_handshake(void) {
   ASSERT_OK(fg_robot_wait_ack(l, &rp, seq, &status, NULL, NULL));
   double t_ack = simproc_now_ms() - t0;
   ASSERT(t_ack >= 50 - 1 && t_ack < 50 + SLACK_MS);
-  ASSERT_EQ(status, FG_ROBOT_BUSY);
+  /* Busy, unless this thread was held up past the done-delay as well. */
+  if (t_ack < 100 - 1) ASSERT_EQ(status, FG_ROBOT_BUSY);
+  ASSERT(status == FG_ROBOT_BUSY || status == FG_ROBOT_DONE);
   ASSERT_OK(fg_robot_wait_done(l, &rp, seq, &status, NULL, NULL));
   double t_done = simproc_now_ms() - t0;
   ASSERT(t_done >= 100 - 1 && t_done < 100 + SLACK_MS);
@@ -514,18 +643,28 @@ static void test_robot_handshake(void) {
   assert_log(&p, "write unit=1 fn=16 addr=128 n=10 "
                  "words=1,1,4523,64329,350,2902,64334,0,800,40\n");
 
-  /* wait_done notices that the robot moved on to another seq. */
+  /* ... and the next seq completes as usual on the same connection. */
   example_words(2, FG_POSE_INT16, w);
   ASSERT_OK(fg_robot_write(l, &rp, w));
   ASSERT_OK(fg_robot_wait_ack(l, &rp, 2, &status, NULL, NULL));
+  ASSERT_OK(fg_robot_wait_done(l, &rp, 2, &status, NULL, NULL));
+  ASSERT_EQ(status, FG_ROBOT_DONE);
+  fg_mb_link_free(l);
+  simproc_stop(&p);
+
+  /* wait_done notices that the robot moved on to another seq. A robot that never finishes
+   * on its own: seq 2 cannot be done before seq 3 supersedes it, however slow this thread. */
+  simproc_start(&p, 0,
+                (const char *const[]){"--ack-delay-ms", "50", "--done-delay-ms", "60000", NULL});
+  l = link_open("robot", p.port, ROBOT, 1000);
+  example_words(2, FG_POSE_INT16, w);
+  ASSERT_OK(fg_robot_write(l, &rp, w));
+  ASSERT_OK(fg_robot_wait_ack(l, &rp, 2, &status, NULL, NULL));
+  ASSERT_EQ(status, FG_ROBOT_BUSY);
   example_words(3, FG_POSE_INT16, w);
   ASSERT_OK(fg_robot_write(l, &rp, w));
   ASSERT_ERR(fg_robot_wait_done(l, &rp, 2, &status, NULL, NULL), FG_EINVAL, "from 2 to 3");
-  /* ... and seq 3 itself completes as usual. */
-  t0 = simproc_now_ms();
-  ASSERT_OK(fg_robot_wait_done(l, &rp, 3, &status, NULL, NULL));
-  ASSERT_EQ(status, FG_ROBOT_DONE);
-  ASSERT(simproc_now_ms() - t0 < 50 + SLACK_MS);
+  ASSERT_EQ(status, FG_ROBOT_BUSY); /* seq 3 acknowledged and under way */
   fg_mb_link_free(l);
   simproc_stop(&p);
 }
@@ -545,7 +684,7 @@ static void test_robot_never_ack(void) {
              "did not acknowledge seq 1 within 200 ms");
   double ms = simproc_now_ms() - t0;
   ASSERT_STRCONTAINS(fg_error_detail(), "ack register 138 holds 0");
-  ASSERT(ms >= 200 - 1 && ms < 200 + 100);
+  ASSERT(ms >= 200 - 1 && ms < 200 + SLACK_MS);
   ASSERT_EQ(status, FG_ROBOT_IDLE);
   fprintf(stderr, "no ack: gave up after %.1f ms (ack_timeout_ms 200)\n", ms);
   /* The link is fine: an ack timeout is the robot's, not the connection's. */
@@ -555,13 +694,16 @@ static void test_robot_never_ack(void) {
   assert_log(&p, "write unit=1 fn=16 addr=128 n=10 "
                  "words=1,1,4523,64329,350,2902,64334,0,800,40\n");
 
-  /* A cancel function stops the wait early. */
+  /* A cancel function stops the wait early: with an ack timeout no run can reach, only the
+   * cancel can end it, at its third call. */
+  const fg_robot_profile rp_long = {.base = BASE, .encoding = FG_POSE_INT16,
+                                    .ack_timeout_ms = 600000, .done_timeout_ms = 2000};
   g_cancel_calls = 0;
   t0 = simproc_now_ms();
-  ASSERT_ERR(fg_robot_wait_ack(l, &rp, 1, &status, cancel_after_three, NULL), FG_ECANCELED,
+  ASSERT_ERR(fg_robot_wait_ack(l, &rp_long, 1, &status, cancel_after_three, NULL), FG_ECANCELED,
              "stopped");
   ASSERT_EQ(g_cancel_calls, 3);
-  ASSERT(simproc_now_ms() - t0 < 150);
+  ASSERT(simproc_now_ms() - t0 < SLACK_MS);
   fg_mb_link_free(l);
   simproc_stop(&p);
 }
@@ -595,7 +737,7 @@ static void test_robot_fail(void) {
   ASSERT_ERR(fg_robot_wait_done(l, &rp2, 4, &status, NULL, NULL), FG_ETIMEDOUT,
              "did not report seq 4 done within 150 ms");
   double ms = simproc_now_ms() - t0;
-  ASSERT(ms >= 150 - 1 && ms < 150 + 100);
+  ASSERT(ms >= 150 - 1 && ms < 150 + SLACK_MS);
   ASSERT_EQ(status, FG_ROBOT_BUSY);
   fg_mb_link_free(l);
   simproc_stop(&p);
@@ -704,7 +846,7 @@ static void test_gripper(void) {
   t0 = simproc_now_ms();
   ASSERT_ERR(fg_gripper_activate(l, 100, &s), FG_ETIMEDOUT, "did not finish its activation");
   double ms = simproc_now_ms() - t0;
-  ASSERT(ms >= 100 - 1 && ms < 100 + 100);
+  ASSERT(ms >= 100 - 1 && ms < 100 + SLACK_MS);
   ASSERT_EQ(s.sta, 1);
   ASSERT_ERR(fg_gripper_move(l, 255, 255, 255, 1000, &s), FG_EBUSY, "gSTA 1");
   fg_mb_link_free(l);
@@ -935,18 +1077,28 @@ static void test_peer_free_cancels(void) {
   pthread_t ct, ft;
   ASSERT_EQ(pthread_create(&ct, NULL, call_thread, &c), 0);
   while (!atomic_load(&c.calling)) simproc_sleep_ms(1);
-  simproc_sleep_ms(100); /* it queues its job meanwhile */
+  /* It queues its job meanwhile, or finds the peer stopping: either way it gets
+   * FG_ECANCELED with "shutting down", so nothing below depends on which. */
+  simproc_sleep_ms(100);
 
   ASSERT_EQ(pthread_create(&ft, NULL, free_thread, peer), 0);
   /* Once the peer is stopping, posts are refused; until then they queue (and are cancelled
    * with the rest). The worker is still blocked, so peer stays valid. */
   int extra = 7;
+  const double t_free = simproc_now_ms();
   for (;;) {
-    ASSERT(extra < 27); /* well short of a full queue, whose EBUSY would mean otherwise */
+    ASSERT(extra < 40);
     const int rc = fg_mb_peer_post(peer, job_record, &jobs[extra], job_done);
-    if (rc == FG_EBUSY || rc == FG_ECANCELED) break;
-    ASSERT_OK(rc);
-    extra++;
+    if (rc == FG_ECANCELED) break;
+    if (rc == FG_EBUSY) {
+      /* a full queue (the 5, maybe the caller's, the extras) while the freeing thread has
+       * not run yet: keep asking until it refuses for its own reason */
+      ASSERT(5 + 1 + (extra - 7) >= FG_MB_PEER_QUEUE - 1);
+    } else {
+      ASSERT_OK(rc);
+      extra++;
+    }
+    if (simproc_now_ms() - t_free > 10 * SLACK_MS) FG_TEST_FAIL("the peer never began to stop");
     simproc_sleep_ms(1);
   }
   board_release(&b);
@@ -964,7 +1116,7 @@ static void test_peer_free_cancels(void) {
 }
 
 typedef struct {
-  atomic_int calls, ok;
+  atomic_int calls, ok, failed; /* idle jobs begun, succeeded, failed */
   atomic_int other_thread;
   pthread_t main_thread;
 } idle_count;
@@ -975,12 +1127,27 @@ static int idle_job(fg_mb_link *l, void *arg) {
   if (!pthread_equal(pthread_self(), ic->main_thread)) atomic_store(&ic->other_thread, 1);
   fg_robotiq_status s;
   const int rc = fg_gripper_read(l, &s);
-  if (rc == 0) atomic_fetch_add(&ic->ok, 1);
+  if (rc == 0)
+    atomic_fetch_add(&ic->ok, 1);
+  else
+    atomic_fetch_add(&ic->failed, 1);
   return rc;
 }
 
+/* Polls until *counter reaches at least want; fails the test after limit_ms, naming what. */
+static void wait_count(atomic_int *counter, int want, double limit_ms, const char *what) {
+  const double t0 = simproc_now_ms();
+  while (atomic_load(counter) < want) {
+    if (simproc_now_ms() - t0 > limit_ms)
+      FG_TEST_FAIL("%s: %d, not %d, after %.0f ms", what, atomic_load(counter), want, limit_ms);
+    simproc_sleep_ms(2);
+  }
+}
+
 /* The idle job runs every idle_ms while nothing is queued and only while connected; the
- * worker reconnects by itself after the peer comes back. */
+ * worker reconnects by itself after the peer comes back. Every step waits for what it
+ * checks (a count of jobs, the link's counters) rather than for a time, so that a starved
+ * worker slows the case down but cannot fail it. */
 static void test_peer_idle(void) {
   simproc p;
   simproc_start(&p, 0, NULL);
@@ -988,44 +1155,56 @@ static void test_peer_idle(void) {
   idle_count ic;
   atomic_init(&ic.calls, 0);
   atomic_init(&ic.ok, 0);
+  atomic_init(&ic.failed, 0);
   atomic_init(&ic.other_thread, 0);
   ic.main_thread = pthread_self();
   const fg_mb_link_config cfg = tcp_config("gripper", port, GRIPPER, 500);
   fg_mb_peer *peer = NULL;
   const double t0 = simproc_now_ms();
   ASSERT_OK(fg_mb_peer_new(&peer, &cfg, 20, idle_job, &ic));
-  simproc_sleep_ms(300);
+  wait_count(&ic.ok, 5, 5 * 20 + SLACK_MS, "idle jobs done");
+  /* calls before the clock: a job counted is one begun within span */
+  const int calls = atomic_load(&ic.calls);
   const double span = simproc_now_ms() - t0;
-  int calls = atomic_load(&ic.calls);
   fprintf(stderr, "idle job: %d calls in %.0f ms (idle_ms 20)\n", calls, span);
-  ASSERT(calls >= 5);
   ASSERT(calls <= 1 + (int)(span / 20) + 1); /* never more often than every idle_ms */
-  ASSERT_EQ(atomic_load(&ic.ok), calls);
+  ASSERT_EQ(atomic_load(&ic.failed), 0);
   ASSERT_EQ(atomic_load(&ic.other_thread), 1);
 
-  /* Peer gone: the idle job fails once, then is not run while the link is down. */
+  /* Peer gone: the idle job fails once, then is not run while the link is down, though the
+   * worker keeps trying to reconnect (each refusal counted). */
   simproc_kill(&p);
-  simproc_sleep_ms(60);
+  wait_count(&ic.failed, 1, 20 + SLACK_MS, "idle jobs failed after the kill");
   const int calls_down = atomic_load(&ic.calls);
-  ASSERT(atomic_load(&ic.ok) < calls_down);
   fg_mb_link_state st;
   fg_mb_peer_state(peer, &st);
   ASSERT_EQ(st.connected, 0);
-  simproc_sleep_ms(60);
+  ASSERT_EQ(st.reconnects, 0);
+  const double t_refused = simproc_now_ms();
+  for (;;) {
+    fg_mb_peer_state(peer, &st);
+    if (st.connect_failures >= 2) break;
+    if (simproc_now_ms() - t_refused > 100 + 200 + SLACK_MS)
+      FG_TEST_FAIL("%llu connection attempts refused, not 2",
+                   (unsigned long long)st.connect_failures);
+    simproc_sleep_ms(2);
+  }
   ASSERT_EQ(atomic_load(&ic.calls), calls_down);
+  ASSERT_EQ(atomic_load(&ic.failed), 1);
+  ASSERT_EQ(st.connected, 0);
 
   /* Back on the same port: the worker reconnects after the backoff, without a request. */
   simproc_start(&p, port, NULL);
-  const double t_up = simproc_now_ms();
   const int ok_before = atomic_load(&ic.ok);
-  while (atomic_load(&ic.ok) <= ok_before) {
-    if (simproc_now_ms() - t_up > 1000 + SLACK_MS)
-      FG_TEST_FAIL("no idle job after the peer came back");
-    simproc_sleep_ms(5);
-  }
+  wait_count(&ic.ok, ok_before + 1, 400 + 100 + SLACK_MS, "idle jobs done after the restart");
   fg_mb_peer_state(peer, &st);
+  if (st.reconnects != 1 || atomic_load(&ic.failed) != 1)
+    FG_TEST_FAIL("after the restart: %llu reconnects, %d failed jobs, %llu timeouts, "
+                 "%llu connect failures; last error \"%s\"",
+                 (unsigned long long)st.reconnects, atomic_load(&ic.failed),
+                 (unsigned long long)st.timeouts, (unsigned long long)st.connect_failures,
+                 st.last_error);
   ASSERT_EQ(st.connected, 1);
-  ASSERT_EQ(st.reconnects, 1);
   fg_mb_peer_free(peer);
   simproc_stop(&p);
 }
@@ -1046,6 +1225,7 @@ int main(int argc, char **argv) {
       {"exception", test_exception},
       {"timeout", test_timeout},
       {"late_reply", test_late_reply},
+      {"reply_after_flush", test_reply_after_flush},
       {"peer_down_then_up", test_peer_down_then_up},
       {"peer_killed_restart", test_peer_killed_restart},
       {"drop_write", test_drop_write},

@@ -116,12 +116,17 @@ static void grip_activate(modbus_t *c) {
 }
 
 /* Sends a move and polls until gOBJ != 0; returns the final status and the elapsed time.
- * Checks that the echo is at once and that the position moves monotonically. */
+ * Checks that the echo is at once and that the position moves monotonically, and that any
+ * read sent 5 ms or more after the write (a few position units at the slowest speed) that
+ * finds the fingers still moving (gOBJ 0) finds them away from the start: the fingers move
+ * gradually, not in one jump at the end. *saw_between is 1 when such a read was made, 0 when
+ * this thread was held up past the whole motion and could not look. */
 static grip_status grip_move(modbus_t *c, int pos, int speed, int force, double *elapsed_ms,
                              int *saw_between) {
   grip_status start = grip_read(c);
   double t0 = simproc_now_ms();
   grip_write(c, 0x0900, (uint16_t)pos, (uint16_t)(speed << 8 | force));
+  const double t_written = simproc_now_ms(); /* the motion began before this */
   grip_status st = grip_read(c);
   ASSERT_EQ(st.pr, pos);
   ASSERT_EQ(st.gto, 1);
@@ -130,11 +135,15 @@ static grip_status grip_move(modbus_t *c, int pos, int speed, int force, double 
   *saw_between = 0;
   while (st.obj == 0) {
     ASSERT((st.po - last) * dir >= 0);
-    if (st.po != start.po && st.po != pos) *saw_between = 1;
     last = st.po;
     ASSERT(simproc_now_ms() - t0 < 10000);
     simproc_sleep_ms(2);
+    const double t_sent = simproc_now_ms();
     st = grip_read(c);
+    if (st.obj == 0 && t_sent - t_written >= 5) {
+      ASSERT(st.po != start.po);
+      *saw_between = 1;
+    }
   }
   *elapsed_ms = simproc_now_ms() - t0;
   ASSERT_EQ(st.pr, pos);
@@ -232,7 +241,8 @@ static void test_robot_delays(void) {
   }
   double t_ack = simproc_now_ms() - t0;
   ASSERT(t_ack >= ack_ms);
-  ASSERT_EQ(status, 1); /* busy: the done is 400 ms later */
+  /* busy, when the read that saw the ack came before the done was due (400 ms later) */
+  if (t_ack < ack_ms + done_ms) ASSERT_EQ(status, 1);
   while (status != 2) {
     ASSERT_EQ(status, 1);
     ASSERT_EQ(ack, 1);
@@ -468,7 +478,7 @@ static void test_gripper_activation_and_moves(void) {
   ASSERT_EQ(st.obj, 3);
   ASSERT_EQ(st.po, 255);
   ASSERT_EQ(st.cu, 0);
-  ASSERT(between);
+  if (!between) fprintf(stderr, "note: no read during the close to see the fingers partway\n");
   ASSERT(ms >= stroke_ms - 1);
   ASSERT(ms < stroke_ms + SLACK_MS);
   double close_ms = ms;
@@ -476,7 +486,7 @@ static void test_gripper_activation_and_moves(void) {
   st = grip_move(c, 0, 0, 100, &ms, &between);
   ASSERT_EQ(st.obj, 3);
   ASSERT_EQ(st.po, 0);
-  ASSERT(between);
+  if (!between) fprintf(stderr, "note: no read during the open to see the fingers partway\n");
   ASSERT(ms >= 4 * stroke_ms - 1);
   ASSERT(ms < 4 * stroke_ms + SLACK_MS);
   fprintf(stderr, "activation %.1f ms (%d), close %.1f ms (%d), slow open %.1f ms (%d)\n", t_act,
