@@ -3,7 +3,7 @@
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [geometry]
-#                           [depth_throughput] [fox] [http_idle]
+#                           [depth_throughput] [fox] [http_idle] [load] [soak]
 #   (no names: all of them but fox; train takes about 6 minutes, throughput about 3; grasp several,
 #   most of them in the PyTorch peer)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -80,6 +80,19 @@
 #           requests, p50 / p99 / max ms, twice: with [http] max_connections above N (every
 #           idle connection held) and at the default 1024 (the oldest shed as new ones come).
 #           Target p99 <= 50 ms
+#   load    GET /v1/health (4 clients), POST /v1/scenes/{s}/heatmap (2) and POST
+#           /v1/scenes/{s}/grasps (1), each client a closed loop over one kept-alive
+#           connection (bench_load), for BENCH_LOAD_SECONDS (default 30) while another scene
+#           trains on [train] threads 2; the scene is a scenegen tabletop (30 views, 32-d
+#           features, 2 cm voxels) trained 60 steps with one demo. Per endpoint: requests,
+#           req/s, p50 / p99 / max ms, errors (non-2xx or transport); the training job's
+#           steps/s with and without the load. Targets: zero errors, health p99 <= 50 ms,
+#           the training still running at the end. About a minute
+#   soak    BENCH_SOAK_FRAMES (default 10000) uploads of a 64x48 PNG with a 6x8x16 features
+#           .npy over one kept-alive connection, the scene deleted and created again every
+#           100 (no endpoint deletes one frame), the daemon's VmRSS every 500 uploads
+#           (bench_soak): the series, and the growth from 1000 uploads to the end (target
+#           <= 4096 kB). About a minute and a half
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -94,13 +107,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,93p' "$0" >&2
+  sed -n '2,106p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -585,6 +598,41 @@ bench_http_idle() {
   done
 }
 
+bench_load() {
+  local bin=$build/tests/bench/bench_load out rc=0 line
+  if [ ! -x "$bin" ]; then
+    echo "bench=load error=not_built hint=meson_compile_bench_load pass=no"
+    failed=1; return
+  fi
+  out=$("$bin" "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
+    --seconds "${BENCH_LOAD_SECONDS:-30}") || rc=$?
+  printf '%s\n' "$out" | grep '^bench=load ' || true
+  line=$(printf '%s\n' "$out" | grep '^bench=load_summary ' || true)
+  if [ -z "$line" ]; then
+    echo "bench=load_summary error=bench_load_exit_$rc pass=no"
+    failed=1; return
+  fi
+  echo "$line"
+  [ "$(field pass "$line")" = yes ] || failed=1
+}
+
+bench_soak() {
+  local bin=$build/tests/bench/bench_soak out rc=0 line
+  if [ ! -x "$bin" ]; then
+    echo "bench=soak error=not_built hint=meson_compile_bench_soak pass=no"
+    failed=1; return
+  fi
+  out=$("$bin" "$daemon" --frames "${BENCH_SOAK_FRAMES:-10000}") || rc=$?
+  printf '%s\n' "$out" | grep '^bench=soak_sample ' || true
+  line=$(printf '%s\n' "$out" | grep '^bench=soak ' || true)
+  if [ -z "$line" ]; then
+    echo "bench=soak error=bench_soak_exit_$rc pass=no"
+    failed=1; return
+  fi
+  echo "$line"
+  [ "$(field pass "$line")" = yes ] || failed=1
+}
+
 bench_fox() {
   local fox=${FG_FOX_DIR:-} v out line psnr pass
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
@@ -620,7 +668,9 @@ for b in "${benches[@]}"; do
     depth_throughput) bench_depth_throughput ;;
     fox) bench_fox ;;
     http_idle) bench_http_idle ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle)" >&2; exit 2 ;;
+    load) bench_load ;;
+    soak) bench_soak ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle, load, soak)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

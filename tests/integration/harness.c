@@ -29,6 +29,7 @@ static char g_tmp[PATH_MAX];
 static char g_state[PATH_MAX + 16];
 static char g_conf[PATH_MAX + 32];
 static char g_logpath[PATH_MAX + 16];
+static const char *g_log_level = "debug";
 static volatile pid_t g_pid = -1;
 static int g_port = 0;
 static int g_ok = 0;
@@ -201,6 +202,8 @@ static void describe_status(int status, char *buf, size_t n) {
     snprintf(buf, n, "status 0x%x", status);
 }
 
+void h_set_log_level(const char *level) { g_log_level = level; }
+
 void h_start(void) {
   if (g_pid > 0) FG_TEST_FAIL("h_start: the daemon is already running (pid %d)", (int)g_pid);
   h_mkdirs(g_state);
@@ -213,7 +216,7 @@ void h_start(void) {
   from += mlen;
 
   const char *argv[] = {g_daemon,    "--config", g_conf,  "--state-dir", g_state, "--listen",
-                        "127.0.0.1:0", "--log-level", "debug", NULL};
+                        "127.0.0.1:0", "--log-level", g_log_level, NULL};
   pid_t parent = getpid();
   pid_t pid = fork();
   if (pid < 0) FG_TEST_FAIL("fork: %s", strerror(errno));

@@ -34,10 +34,16 @@ const char *h_daemon_path(void);
 /* Replaces the config file's content (takes effect at the next start or SIGHUP). */
 void h_write_config(const char *text);
 
-/* Starts fieldgripd --config <conf> --state-dir <state> --listen 127.0.0.1:0 --log-level debug
- * with stdout and stderr appended to <tmp>/daemon.log, and waits up to 10 s for the line
- * "listening on http://127.0.0.1:PORT". Fails the test if the daemon exits or never says it. */
+/* Starts fieldgripd --config <conf> --state-dir <state> --listen 127.0.0.1:0 --log-level LEVEL
+ * (h_set_log_level) with stdout and stderr appended to <tmp>/daemon.log, and waits up to 10 s
+ * for the line "listening on http://127.0.0.1:PORT". Fails the test if the daemon exits or
+ * never says it. */
 void h_start(void);
+
+/* The --log-level of the next h_start (default "debug", which logs every request). A static
+ * string or one that outlives the test. Benchmarks pass "info", the daemon's default, so
+ * that they measure what a deployment runs. */
+void h_set_log_level(const char *level);
 
 /* SIGTERM, then waits for the exit and asserts exit status 0. */
 void h_stop(void);
