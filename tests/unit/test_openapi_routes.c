@@ -1,9 +1,10 @@
 /* The documentation matches the server: every route fieldgripd registers (fieldgripd
  * --list-routes) is an operation of proto/openapi.yaml's `paths:`, and every operation there
- * is a route the daemon registers. Fails naming each method and path that is on one side
- * only.
+ * is a route the daemon registers; and README.md walks the whole API: every route is called
+ * by at least one of its curl examples. Fails naming each method and path that is on one
+ * side only, or that no example calls.
  *
- * Usage: test_openapi_routes FIELDGRIPD OPENAPI_YAML */
+ * Usage: test_openapi_routes FIELDGRIPD OPENAPI_YAML README_MD */
 #include "test.h"
 
 #include <stdio.h>
@@ -174,12 +175,105 @@ static void test_parser(void) {
   ASSERT_STREQ(l.ops[2].path, "/b/{id}");
 }
 
+/* ---------------------------------------------------------------- README.md */
+
+/* 1 when path (no query string) fits template: each "{x}" of the template stands for one
+ * or more characters other than '/'. */
+static int path_matches(const char *tmpl, const char *path) {
+  while (*tmpl && *path) {
+    if (*tmpl == '{') {
+      const char *close = strchr(tmpl, '}');
+      if (!close || *path == '/') return 0;
+      while (*path && *path != '/') path++;
+      tmpl = close + 1;
+    } else if (*tmpl++ != *path++) {
+      return 0;
+    }
+  }
+  return *tmpl == 0 && *path == 0;
+}
+
+/* The method and path of one curl command (its continuation lines joined): -X's method,
+ * else POST with -d/-F, else GET; the path of its http:// URL without the query string. */
+static int curl_call(const char *cmd, char *method, size_t mcap, char *path, size_t pcap) {
+  const char *url = strstr(cmd, "http://");
+  if (!url) return 0;
+  const char *p = strchr(url + 7, '/');
+  if (!p) return 0;
+  size_t n = strcspn(p, " '\"?\\");
+  if (n >= pcap) return 0;
+  memcpy(path, p, n);
+  path[n] = 0;
+  const char *x = strstr(cmd, " -X ");
+  if (x) {
+    snprintf(method, mcap, "%.*s", (int)strcspn(x + 4, " "), x + 4);
+  } else {
+    snprintf(method, mcap, "%s", strstr(cmd, " -d ") || strstr(cmd, " -F ") ? "POST" : "GET");
+  }
+  return 1;
+}
+
+/* The curl commands of file's lines (a line ending in a backslash continues on the next),
+ * as operations. */
+static void read_readme(const char *file, op_list *out) {
+  FILE *f = fopen(file, "r");
+  if (!f) FG_TEST_FAIL("cannot open %s", file);
+  static char cmd[1 << 16];
+  char line[4096];
+  size_t len = 0;
+  while (fgets(line, sizeof line, f)) {
+    size_t n = strcspn(line, "\n");
+    line[n] = 0;
+    const int more = n > 0 && line[n - 1] == '\\';
+    if (more) line[--n] = 0;
+    if (len + n + 1 < sizeof cmd) {
+      memcpy(cmd + len, line, n);
+      len += n;
+      cmd[len++] = ' ';
+      cmd[len] = 0;
+    }
+    if (more) continue;
+    char method[16], path[200];
+    const char *c = strstr(cmd, "curl ");
+    if (c && curl_call(c, method, sizeof method, path, sizeof path)) op_add(out, method, path, file);
+    len = 0;
+    cmd[0] = 0;
+  }
+  fclose(f);
+}
+
+static int readme_calls(const op_list *calls, const op *route) {
+  for (int i = 0; i < calls->n; i++)
+    if (strcmp(calls->ops[i].method, route->method) == 0 &&
+        path_matches(route->path, calls->ops[i].path))
+      return 1;
+  return 0;
+}
+
+static void test_readme_parser(void) {
+  ASSERT(path_matches("/v1/scenes/{s}/frames", "/v1/scenes/lego/frames"));
+  ASSERT(path_matches("/v1/jobs/{id}", "/v1/jobs/$JOB"));
+  ASSERT(!path_matches("/v1/scenes/{s}", "/v1/scenes/a/frames"));
+  ASSERT(!path_matches("/v1/scenes/{s}", "/v1/scenes/"));
+  char m[16], p[200];
+  ASSERT(curl_call("curl -s -X DELETE http://127.0.0.1:7070/v1/tasks/t1 ", m, sizeof m, p, sizeof p));
+  ASSERT_STREQ(m, "DELETE");
+  ASSERT_STREQ(p, "/v1/tasks/t1");
+  ASSERT(curl_call("curl -s http://h:1/v1/scenes/a/frames -F image=@x ", m, sizeof m, p, sizeof p));
+  ASSERT_STREQ(m, "POST");
+  ASSERT(curl_call("curl -s 'http://h:1/v1/scenes/a/geometry?kind=points' ", m, sizeof m, p, sizeof p));
+  ASSERT_STREQ(m, "GET");
+  ASSERT_STREQ(p, "/v1/scenes/a/geometry");
+}
+
 int main(int argc, char **argv) {
-  if (argc != 3) FG_TEST_FAIL("usage: %s FIELDGRIPD OPENAPI_YAML", argv[0]);
+  if (argc != 4) FG_TEST_FAIL("usage: %s FIELDGRIPD OPENAPI_YAML README_MD", argv[0]);
   test_parser();
-  static op_list routes, doc;
+  test_readme_parser();
+  static op_list routes, doc, calls;
   read_routes(argv[1], &routes);
   read_openapi(argv[2], &doc);
+  read_readme(argv[3], &calls);
   int missing = 0;
   for (int i = 0; i < routes.n; i++)
     if (!op_find(&doc, &routes.ops[i])) {
@@ -194,11 +288,18 @@ int main(int argc, char **argv) {
       missing++;
     }
   for (int i = 0; i < routes.n; i++)
+    if (!readme_calls(&calls, &routes.ops[i])) {
+      fprintf(stderr, "no curl example in %s calls %s %s\n", argv[3], routes.ops[i].method,
+              routes.ops[i].path);
+      missing++;
+    }
+  for (int i = 0; i < routes.n; i++)
     for (int j = i + 1; j < routes.n; j++)
       if (strcmp(routes.ops[i].method, routes.ops[j].method) == 0 &&
           strcmp(routes.ops[i].path, routes.ops[j].path) == 0)
         FG_TEST_FAIL("route registered twice: %s %s", routes.ops[i].method, routes.ops[i].path);
   ASSERT_EQ(missing, 0);
-  printf("%d routes, all documented, and nothing else documented\n", routes.n);
+  printf("%d routes, all documented and called by README examples (%d), nothing else "
+         "documented\n", routes.n, calls.n);
   return 0;
 }
