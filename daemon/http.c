@@ -4,6 +4,7 @@
 #include "http_conns.h"
 #include "metrics.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/log.h"
 
@@ -313,12 +314,7 @@ static void *ticker_main(void *arg) {
       continue;
     }
     struct timespec until;
-    clock_gettime(CLOCK_REALTIME, &until);
-    until.tv_nsec += FG_HTTP_STREAM_TICK_MS * 1000000L;
-    if (until.tv_nsec >= 1000000000L) {
-      until.tv_sec++;
-      until.tv_nsec -= 1000000000L;
-    }
+    fg_deadline_after_ms(&until, CLOCK_REALTIME, FG_HTTP_STREAM_TICK_MS);
     pthread_cond_timedwait(&h->scond, &h->slock, &until);
   }
   pthread_mutex_unlock(&h->slock);
@@ -753,12 +749,7 @@ static void *sweeper_main(void *arg) {
       for (int r = 0; r < FG_CONN_REASONS; r++)
         if (closed[r]) fg_metrics_count_http_closed((fg_conn_reason)r, closed[r]);
     struct timespec until;
-    clock_gettime(CLOCK_MONOTONIC, &until);
-    until.tv_nsec += SWEEP_MS * 1000000L;
-    if (until.tv_nsec >= 1000000000L) {
-      until.tv_sec++;
-      until.tv_nsec -= 1000000000L;
-    }
+    fg_deadline_after_ms(&until, CLOCK_MONOTONIC, SWEEP_MS);
     pthread_mutex_lock(&h->qlock);
     if (!h->stopping) pthread_cond_timedwait(&h->sweep_cond, &h->qlock, &until);
   }

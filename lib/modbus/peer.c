@@ -7,6 +7,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "core/clock.h"
 #include "core/error.h"
 
 typedef struct job {
@@ -27,16 +28,6 @@ struct fg_mb_peer {
   void *idle_arg;
 };
 
-static void deadline_after(struct timespec *ts, int ms) {
-  clock_gettime(CLOCK_MONOTONIC, ts);
-  ts->tv_sec += ms / 1000;
-  ts->tv_nsec += (long)(ms % 1000) * 1000000L;
-  if (ts->tv_nsec >= 1000000000L) {
-    ts->tv_sec++;
-    ts->tv_nsec -= 1000000000L;
-  }
-}
-
 static void *worker(void *arg) {
   fg_mb_peer *p = arg;
   /* connect at once, so that the peer's state is known right after the start */
@@ -46,7 +37,7 @@ static void *worker(void *arg) {
     if (p->stop) break;
     if (p->count == 0) {
       struct timespec until;
-      deadline_after(&until, p->idle_ms);
+      fg_deadline_after_ms(&until, CLOCK_MONOTONIC, p->idle_ms);
       int rc = 0;
       while (!p->stop && p->count == 0 && rc != ETIMEDOUT)
         rc = pthread_cond_timedwait(&p->cond, &p->lock, &until);
