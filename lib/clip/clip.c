@@ -84,6 +84,8 @@ static void tensor_name(char *name, size_t size, const char *pattern, int block_
  * checks that it holds floats of the expected shape: rows x cols for a matrix (cols 0: a
  * vector of rows). */
 static int find_tensor(const fg_clip *c, const char *fmt, int block_no, fg_st_tensor *t) {
+  /* the name tables hold NULL where one naming has no such tensor; callers skip those */
+  if (!fmt) return fg_fail(FG_EINVAL, "no tensor name for block %d in this naming", block_no);
   char name[256];
   tensor_name(name, sizeof name, fmt, block_no);
   const int rc = fg_st_find(c->st, name, t);
