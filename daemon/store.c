@@ -48,6 +48,7 @@ struct fg_scene {
   fg_field_ref *field;     /* NULL when untrained */
   int partial;
   int64_t checkpoint_bytes;
+  int next_at_start;       /* field.next.fgc was there when the store opened */
   char *checkpoint_error;  /* malloc'd; NULL when none */
   char last_job_id[FG_JOB_ID_MAX];
   char last_job_state[16];
@@ -330,6 +331,7 @@ static void scene_load_field(fg_scene *s) {
   char *next = fg_path_join(s->dir, "field.next.fgc");
   if (!final || !next) goto out;
   int have_final = access(final, F_OK) == 0, have_next = access(next, F_OK) == 0;
+  s->next_at_start = have_next;
   const char *path = have_final ? final : have_next ? next : NULL;
   if (!path) goto out;
   fg_field *f = NULL;
@@ -423,6 +425,13 @@ void fg_scene_keep_partial(fg_scene *s) {
   pthread_mutex_unlock(&s->lock);
   free(final);
   free(next);
+}
+
+int fg_scene_had_next_checkpoint(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  int had = s->next_at_start;
+  pthread_mutex_unlock(&s->lock);
+  return had;
 }
 
 void fg_scene_set_last_job(fg_scene *s, const char *id, const char *state) {
