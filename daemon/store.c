@@ -220,8 +220,40 @@ static int scene_reserve(fg_scene *s, size_t extra) {
   return 0;
 }
 
+/* Removes the frames that the batch manifest at path names (a batch cut short, see
+ * fg_scene_add_frames), then the manifest. */
+static void scene_undo_batch(fg_scene *s, const char *path) {
+  FILE *f = fopen(path, "r");
+  char line[64];
+  int removed = 0;
+  while (f && fgets(line, sizeof line, f)) {
+    line[strcspn(line, "\n")] = '\0';
+    int index;
+    if (!is_frame_name(line, &index)) continue;
+    char *p = fg_path_join(s->frames_dir, line);
+    if (p && unlink(p) == 0) removed++;
+    free(p);
+  }
+  if (f) fclose(f);
+  if (unlink(path) == 0 || errno == ENOENT) {
+    fg_fsync_dir(s->frames_dir);
+    fg_info("scene %s: removed %d frames of an import the daemon did not finish", s->name,
+            removed);
+  }
+}
+
 /* Reads the headers of a scene's frames, removing what an interrupted write left behind. */
 static int scene_load_frames(fg_scene *s) {
+  DIR *bd = opendir(s->frames_dir);
+  if (!bd) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
+  struct dirent *be;
+  while ((be = readdir(bd)) != NULL) {
+    if (strncmp(be->d_name, ".batch-", 7) != 0 || strstr(be->d_name, ".tmp.")) continue;
+    char *p = fg_path_join(s->frames_dir, be->d_name);
+    if (p) scene_undo_batch(s, p);
+    free(p);
+  }
+  closedir(bd);
   DIR *d = opendir(s->frames_dir);
   if (!d) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
   struct { int index; char name[256]; } *found = NULL;
@@ -740,6 +772,15 @@ static int check_feature_dim(const fg_scene *s, const fg_frame *frames, size_t n
   return 0;
 }
 
+/* Writes the manifest of a batch of n frames numbered from first: one frame file name a
+ * line, written atomically (fsutil). */
+static int write_batch_manifest(const char *path, int first, size_t n) {
+  fg_atomic_file af;
+  FG_TRY(fg_atomic_file_open(&af, path));
+  for (size_t i = 0; i < n; i++) fprintf(af.fp, "%06d.fgf\n", first + (int)i);
+  return fg_atomic_file_commit(&af);
+}
+
 int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *first_index) {
   if (n == 0) return fg_fail(FG_EINVAL, "no frames to add");
   pthread_mutex_lock(&s->lock);
@@ -781,6 +822,21 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
   if (rc == 0 && s->deleted) rc = fg_fail(FG_ENOENT, "scene %s was deleted", s->name);
   if (rc == 0) rc = check_feature_dim(s, frames, n); /* a concurrent upload may have set D */
   if (rc == 0) rc = scene_reserve(s, n);
+  /* A batch is renamed into place one file at a time: a manifest naming its files stands
+   * while that goes on, so that a start-up after a kill removes a batch that was cut short
+   * instead of keeping its first frames. One frame's rename is atomic by itself. */
+  char *manifest = NULL;
+  if (rc == 0 && n > 1) {
+    char name[64];
+    snprintf(name, sizeof name, ".batch-%ld-%u", (long)getpid(), batch);
+    manifest = fg_path_join(s->frames_dir, name);
+    rc = manifest ? write_batch_manifest(manifest, s->next_index, n)
+                  : fg_fail(FG_ENOMEM, "out of memory");
+    if (rc != 0) {
+      free(manifest);
+      manifest = NULL;
+    }
+  }
   size_t renamed = 0;
   for (; rc == 0 && renamed < n; renamed++) {
     char name[32];
@@ -799,6 +855,18 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
     }
   }
   if (rc == 0) rc = fg_fsync_dir(s->frames_dir);
+  if (manifest) {
+    /* Gone for good before the batch is acknowledged: a manifest that came back after a
+     * crash would take acknowledged frames with it. On failure the frames go first. */
+    if (rc != 0)
+      for (size_t i = 0; i < n; i++)
+        if (incoming[i]) unlink(incoming[i]);
+    if (unlink(manifest) != 0 && rc == 0)
+      rc = fg_fail(FG_EIO, "cannot remove %s: %s", manifest, strerror(errno));
+    int sync_rc = fg_fsync_dir(s->frames_dir);
+    if (rc == 0) rc = sync_rc;
+    free(manifest);
+  }
   if (rc == 0) {
     *first_index = s->next_index;
     for (size_t i = 0; i < n; i++) {
