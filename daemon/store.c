@@ -506,6 +506,25 @@ static fg_scene *store_find_locked(fg_store *st, const char *name, size_t *pos) 
   return NULL;
 }
 
+/* 1 when a scene folder holds no scene.json and no frame file: what fg_store_create leaves
+ * when it is cut short between creating the folder and writing scene.json. */
+static int is_unfinished_create(const fg_scene *s) {
+  char *json = fg_path_join(s->dir, "scene.json");
+  int has_json = !json || access(json, F_OK) == 0;
+  free(json);
+  if (has_json) return 0;
+  DIR *d = opendir(s->frames_dir);
+  if (!d) return errno == ENOENT;
+  int empty = 1;
+  struct dirent *e;
+  while (empty && (e = readdir(d)) != NULL) {
+    int index;
+    empty = !is_frame_name(e->d_name, &index);
+  }
+  closedir(d);
+  return empty;
+}
+
 int fg_store_open(fg_store **out, const char *state_dir) {
   *out = NULL;
   fg_store *st = calloc(1, sizeof *st);
@@ -534,6 +553,14 @@ int fg_store_open(fg_store **out, const char *state_dir) {
       break;
     }
     fg_fs_sweep_tmp(s->dir);
+    if (is_unfinished_create(s)) {
+      /* No scene.json and no frame: a creation cut short (by a crash, or a full disk that
+       * the cleanup of fg_store_create could not beat); never acknowledged, so removed. */
+      if (fg_rmtree(s->dir) == 0)
+        fg_info("removed %s, the folder of a scene whose creation did not finish", s->dir);
+      scene_free(s);
+      continue;
+    }
     if (read_scene_json(s) != 0 || scene_load_frames(s) != 0) {
       fg_error("scene %s is left out: %s", s->name, fg_error_detail());
       scene_free(s);
@@ -581,12 +608,14 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   s->params = *params;
   s->declared = declared;
   s->created_ms = now_ms();
-  /* A half-created folder from a crash has no scene.json and was skipped at start: reuse it. */
   rc = fg_mkdir_p(s->frames_dir);
   if (rc == 0) rc = write_scene_json(s);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
   if (rc == 0) rc = store_insert(st, s);
   if (rc == 0) s = NULL;
+  /* Not created (a full disk, say): the folder goes too, or the next start would find a
+   * scene folder without its scene.json. */
+  else if (s) fg_rmtree(s->dir);
 out:
   pthread_mutex_unlock(&st->lock);
   scene_free(s);
