@@ -87,6 +87,16 @@ void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info) {
   snprintf(info->last_job_state, sizeof info->last_job_state, "%s", fg_job_state_name(state));
 }
 
+int fg_api_storage_error(fg_resp *resp, int rc, const char *what) {
+  if (rc == FG_ENOSPC)
+    return fg_resp_error(resp, 507, "insufficient_storage", "%s was not stored: the state "
+                         "dir's file system is full; nothing of this request was kept and what "
+                         "was stored before is intact; free space and send it again (%s)",
+                         what, fg_error_detail());
+  return fg_resp_error(resp, 500, "internal_error", "%s was not stored: %s", what,
+                       fg_error_detail());
+}
+
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_store_get(req->app->store, req->params[0]);
   if (!s)

@@ -71,6 +71,12 @@ void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info);
 struct fg_clip_model;
 struct fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp);
 
+/* Answers a failed write to the state dir: 507 insufficient_storage when the disk (or the
+ * quota) is full (rc FG_ENOSPC), telling the client that nothing was stored and to retry once
+ * space is freed; else 500 internal_error. `what` says what was not stored ("the frame"); the
+ * message ends with the detail of the failure. Returns 0. */
+int fg_api_storage_error(fg_resp *resp, int rc, const char *what);
+
 /* The scene named by the first path parameter with a reference, or NULL after answering 404. */
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
 

@@ -131,8 +131,7 @@ static void reply_added(fg_resp *resp, int status, const fg_frame *f, int index)
 static int add_failed(fg_resp *resp, int rc) {
   if (rc == FG_EINVAL) return fg_resp_error(resp, 400, "invalid_features", "%s", fg_error_detail());
   if (rc == FG_ENOENT) return fg_resp_error(resp, 404, "scene_not_found", "%s", fg_error_detail());
-  return fg_resp_error(resp, 500, "internal_error", "cannot store the frame: %s",
-                       fg_error_detail());
+  return fg_api_storage_error(resp, rc, "the frame");
 }
 
 /* ---------------------------------------------------------------- upload */

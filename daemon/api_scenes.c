@@ -58,7 +58,7 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   } else if (rc == FG_EINVAL) {
     fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
   } else if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot create the scene: %s", fg_error_detail());
+    fg_api_storage_error(resp, rc, "the scene");
   } else {
     fg_scene *s = fg_store_get(req->app->store, name);
     fg_scene_info info;

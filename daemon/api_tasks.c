@@ -112,7 +112,7 @@ int fg_api_task_demo_delete(fg_req *req, fg_resp *resp) {
     return fg_resp_error(resp, 404, "demo_not_found", "task '%s' has no demo '%s'; GET "
                          "/v1/tasks/%s lists its demos and their ids", req->params[0],
                          req->params[1], req->params[0]);
-  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  if (rc != 0) return fg_api_storage_error(resp, rc, "the deletion");
   fg_resp_json(resp, 200, json_pack("{s:{s:s, s:i}, s:o}", "deleted", "task", req->params[0],
                                     "demo", (int)id, "task", task_json(t, 1)));
   fg_task_unref(t);
@@ -332,8 +332,7 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
     goto out;
   }
   if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "the demo was not stored: %s",
-                  fg_error_detail());
+    fg_api_storage_error(resp, rc, "the demo");
     goto out;
   }
   const fg_task_demo *nd = &nt->demos[nt->n_demos - 1];

@@ -247,33 +247,44 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   return 0;
 }
 
-/* Writes the job's current state to its scene's last_job.json and the scene's description.
- * A scene deleted meanwhile has no folder: nothing to keep then. */
-static void persist(fg_jobs *jobs, fg_job *j) {
+/* Writes info (a state of job j) to its scene's last_job.json and the scene's description.
+ * committing marks a running job that has saved its result and is about to install it: a
+ * start-up that finds it so tells from the scene's files whether the install happened
+ * (load_last_job). A scene deleted meanwhile has no folder: nothing to keep then. */
+static void persist_info(fg_jobs *jobs, fg_scene *scene, const fg_job_info *info,
+                         int committing) {
   pthread_mutex_lock(&jobs->persist_lock);
-  fg_job_info info;
-  pthread_mutex_lock(&j->lock);
-  info_locked(j, &info);
-  fg_scene *scene = j->scene;
-  pthread_mutex_unlock(&j->lock);
   if (scene) {
-    fg_scene_set_last_job(scene, info.id, fg_job_state_name(info.state));
-    json_t *o = fg_job_info_json(&info);
+    fg_scene_set_last_job(scene, info->id, fg_job_state_name(info->state));
+    json_t *o = fg_job_info_json(info);
     if (o) {
-      json_object_set_new(o, "created_ms", json_integer(info.created_ms));
-      json_object_set_new(o, "started_ms", json_integer(info.started_ms));
-      json_object_set_new(o, "finished_ms", json_integer(info.finished_ms));
+      json_object_set_new(o, "created_ms", json_integer(info->created_ms));
+      json_object_set_new(o, "started_ms", json_integer(info->started_ms));
+      json_object_set_new(o, "finished_ms", json_integer(info->finished_ms));
+      if (committing && info->state == FG_JOB_RUNNING)
+        json_object_set_new(o, "committing", json_true());
     }
     char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) : NULL;
     json_decref(o);
     char *path = fg_path_join(fg_scene_dir(scene), "last_job.json");
     if (text && path && !fg_scene_deleted(scene) &&
         fg_write_file_atomic(path, text, strlen(text)) != 0)
-      fg_warn("job %s: cannot write %s: %s", info.id, path, fg_error_detail());
+      fg_warn("job %s: cannot write %s: %s", info->id, path, fg_error_detail());
     free(path);
     free(text);
   }
   pthread_mutex_unlock(&jobs->persist_lock);
+}
+
+/* Writes the job's current state (see persist_info). */
+static void persist(fg_jobs *jobs, fg_job *j) {
+  fg_job_info info;
+  pthread_mutex_lock(&j->lock);
+  info_locked(j, &info);
+  fg_scene *scene = j->scene;
+  int committing = j->committing;
+  pthread_mutex_unlock(&j->lock);
+  persist_info(jobs, scene, &info, committing);
 }
 
 /* ---------------------------------------------------------------- the registry */
@@ -568,15 +579,31 @@ int fg_job_commit_begin(fg_job *j) {
   int cancelled = j->cancel;
   if (!cancelled) j->committing = 1;
   pthread_mutex_unlock(&j->lock);
-  return cancelled ? FG_ECANCELED : 0;
+  if (cancelled) return FG_ECANCELED;
+  /* On disk before the install: a kill during it leaves a job that the next start can tell
+   * done or not from the scene's files, never one whose field is in but that reads failed. */
+  if (j->jobs) persist(j->jobs, j);
+  return 0;
 }
 
 void fg_job_finish(fg_job *j, fg_job_state state) {
+  /* The final state goes to disk before any client can see it: a job seen done stays done
+   * after a kill. */
+  pthread_mutex_lock(&j->lock);
+  fg_job_info info;
+  info_locked(j, &info);
+  fg_scene *scene = j->scene;
+  pthread_mutex_unlock(&j->lock);
+  info.state = state;
+  info.eta_s = state == FG_JOB_DONE ? 0 : NAN;
+  info.elapsed_s = fg_mono_s() - j->started_mono;
+  info.finished_ms = now_ms();
+  if (j->jobs) persist_info(j->jobs, scene, &info, 0);
   pthread_mutex_lock(&j->lock);
   j->info.state = state;
-  j->info.eta_s = state == FG_JOB_DONE ? 0 : NAN;
-  j->info.elapsed_s = fg_mono_s() - j->started_mono;
-  j->info.finished_ms = now_ms();
+  j->info.eta_s = info.eta_s;
+  j->info.elapsed_s = info.elapsed_s;
+  j->info.finished_ms = info.finished_ms;
   j->info.version++;
   pthread_mutex_unlock(&j->lock);
 }
@@ -664,12 +691,24 @@ static void load_last_job(fg_jobs *jobs, fg_scene *scene) {
     free(path);
     return;
   }
+  const int committing = json_is_true(json_object_get(o, "committing"));
   json_decref(o);
   free(path);
   snprintf(info.scene, sizeof info.scene, "%s", fg_scene_name(scene));
   fg_job *j = job_new();
   if (!j) return;
   int interrupted = !fg_job_state_finished(info.state);
+  if (interrupted && committing && !fg_scene_had_next_checkpoint(scene)) {
+    /* Stopped while it installed its field, after the rename that installs it (the
+     * field.next.fgc it had saved is gone): it is done, and the scene has its field. */
+    fg_info("job %s of scene %s had installed its field when the daemon stopped; it is "
+            "reported done", info.id, info.scene);
+    info.state = FG_JOB_DONE;
+    info.eta_s = 0;
+    if (!info.finished_ms) info.finished_ms = now_ms();
+    interrupted = 0;
+    persist_info(jobs, scene, &info, 0);
+  }
   if (interrupted) {
     fg_info("job %s of scene %s was %s when the daemon stopped; it is reported failed", info.id,
             info.scene, fg_job_state_name(info.state));

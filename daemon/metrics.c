@@ -15,7 +15,7 @@
 /* Status codes the daemon answers with get their own counter; anything else lands in
  * the last slot and is reported as "other". */
 static const int statuses[] = {200, 201, 202, 204, 400, 401, 403, 404, 405,
-                               409, 413, 415, 422, 500, 501, 502, 503, 504};
+                               409, 413, 415, 422, 500, 501, 502, 503, 504, 507};
 #define N_STATUS (sizeof statuses / sizeof statuses[0] + 1)
 
 static const double buckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,

@@ -48,6 +48,7 @@ struct fg_scene {
   fg_field_ref *field;     /* NULL when untrained */
   int partial;
   int64_t checkpoint_bytes;
+  int next_at_start;       /* field.next.fgc was there when the store opened */
   char *checkpoint_error;  /* malloc'd; NULL when none */
   char last_job_id[FG_JOB_ID_MAX];
   char last_job_state[16];
@@ -219,8 +220,40 @@ static int scene_reserve(fg_scene *s, size_t extra) {
   return 0;
 }
 
+/* Removes the frames that the batch manifest at path names (a batch cut short, see
+ * fg_scene_add_frames), then the manifest. */
+static void scene_undo_batch(fg_scene *s, const char *path) {
+  FILE *f = fopen(path, "r");
+  char line[64];
+  int removed = 0;
+  while (f && fgets(line, sizeof line, f)) {
+    line[strcspn(line, "\n")] = '\0';
+    int index;
+    if (!is_frame_name(line, &index)) continue;
+    char *p = fg_path_join(s->frames_dir, line);
+    if (p && unlink(p) == 0) removed++;
+    free(p);
+  }
+  if (f) fclose(f);
+  if (unlink(path) == 0 || errno == ENOENT) {
+    fg_fsync_dir(s->frames_dir);
+    fg_info("scene %s: removed %d frames of an import the daemon did not finish", s->name,
+            removed);
+  }
+}
+
 /* Reads the headers of a scene's frames, removing what an interrupted write left behind. */
 static int scene_load_frames(fg_scene *s) {
+  DIR *bd = opendir(s->frames_dir);
+  if (!bd) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
+  struct dirent *be;
+  while ((be = readdir(bd)) != NULL) {
+    if (strncmp(be->d_name, ".batch-", 7) != 0 || strstr(be->d_name, ".tmp.")) continue;
+    char *p = fg_path_join(s->frames_dir, be->d_name);
+    if (p) scene_undo_batch(s, p);
+    free(p);
+  }
+  closedir(bd);
   DIR *d = opendir(s->frames_dir);
   if (!d) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
   struct { int index; char name[256]; } *found = NULL;
@@ -330,6 +363,7 @@ static void scene_load_field(fg_scene *s) {
   char *next = fg_path_join(s->dir, "field.next.fgc");
   if (!final || !next) goto out;
   int have_final = access(final, F_OK) == 0, have_next = access(next, F_OK) == 0;
+  s->next_at_start = have_next;
   const char *path = have_final ? final : have_next ? next : NULL;
   if (!path) goto out;
   fg_field *f = NULL;
@@ -425,6 +459,13 @@ void fg_scene_keep_partial(fg_scene *s) {
   free(next);
 }
 
+int fg_scene_had_next_checkpoint(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  int had = s->next_at_start;
+  pthread_mutex_unlock(&s->lock);
+  return had;
+}
+
 void fg_scene_set_last_job(fg_scene *s, const char *id, const char *state) {
   pthread_mutex_lock(&s->lock);
   snprintf(s->last_job_id, sizeof s->last_job_id, "%s", id ? id : "");
@@ -465,6 +506,25 @@ static fg_scene *store_find_locked(fg_store *st, const char *name, size_t *pos) 
   return NULL;
 }
 
+/* 1 when a scene folder holds no scene.json and no frame file: what fg_store_create leaves
+ * when it is cut short between creating the folder and writing scene.json. */
+static int is_unfinished_create(const fg_scene *s) {
+  char *json = fg_path_join(s->dir, "scene.json");
+  int has_json = !json || access(json, F_OK) == 0;
+  free(json);
+  if (has_json) return 0;
+  DIR *d = opendir(s->frames_dir);
+  if (!d) return errno == ENOENT;
+  int empty = 1;
+  struct dirent *e;
+  while (empty && (e = readdir(d)) != NULL) {
+    int index;
+    empty = !is_frame_name(e->d_name, &index);
+  }
+  closedir(d);
+  return empty;
+}
+
 int fg_store_open(fg_store **out, const char *state_dir) {
   *out = NULL;
   fg_store *st = calloc(1, sizeof *st);
@@ -493,6 +553,14 @@ int fg_store_open(fg_store **out, const char *state_dir) {
       break;
     }
     fg_fs_sweep_tmp(s->dir);
+    if (is_unfinished_create(s)) {
+      /* No scene.json and no frame: a creation cut short (by a crash, or a full disk that
+       * the cleanup of fg_store_create could not beat); never acknowledged, so removed. */
+      if (fg_rmtree(s->dir) == 0)
+        fg_info("removed %s, the folder of a scene whose creation did not finish", s->dir);
+      scene_free(s);
+      continue;
+    }
     if (read_scene_json(s) != 0 || scene_load_frames(s) != 0) {
       fg_error("scene %s is left out: %s", s->name, fg_error_detail());
       scene_free(s);
@@ -540,12 +608,14 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   s->params = *params;
   s->declared = declared;
   s->created_ms = now_ms();
-  /* A half-created folder from a crash has no scene.json and was skipped at start: reuse it. */
   rc = fg_mkdir_p(s->frames_dir);
   if (rc == 0) rc = write_scene_json(s);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
   if (rc == 0) rc = store_insert(st, s);
   if (rc == 0) s = NULL;
+  /* Not created (a full disk, say): the folder goes too, or the next start would find a
+   * scene folder without its scene.json. */
+  else if (s) fg_rmtree(s->dir);
 out:
   pthread_mutex_unlock(&st->lock);
   scene_free(s);
@@ -731,6 +801,15 @@ static int check_feature_dim(const fg_scene *s, const fg_frame *frames, size_t n
   return 0;
 }
 
+/* Writes the manifest of a batch of n frames numbered from first: one frame file name a
+ * line, written atomically (fsutil). */
+static int write_batch_manifest(const char *path, int first, size_t n) {
+  fg_atomic_file af;
+  FG_TRY(fg_atomic_file_open(&af, path));
+  for (size_t i = 0; i < n; i++) fprintf(af.fp, "%06d.fgf\n", first + (int)i);
+  return fg_atomic_file_commit(&af);
+}
+
 int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *first_index) {
   if (n == 0) return fg_fail(FG_EINVAL, "no frames to add");
   pthread_mutex_lock(&s->lock);
@@ -772,6 +851,21 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
   if (rc == 0 && s->deleted) rc = fg_fail(FG_ENOENT, "scene %s was deleted", s->name);
   if (rc == 0) rc = check_feature_dim(s, frames, n); /* a concurrent upload may have set D */
   if (rc == 0) rc = scene_reserve(s, n);
+  /* A batch is renamed into place one file at a time: a manifest naming its files stands
+   * while that goes on, so that a start-up after a kill removes a batch that was cut short
+   * instead of keeping its first frames. One frame's rename is atomic by itself. */
+  char *manifest = NULL;
+  if (rc == 0 && n > 1) {
+    char name[64];
+    snprintf(name, sizeof name, ".batch-%ld-%u", (long)getpid(), batch);
+    manifest = fg_path_join(s->frames_dir, name);
+    rc = manifest ? write_batch_manifest(manifest, s->next_index, n)
+                  : fg_fail(FG_ENOMEM, "out of memory");
+    if (rc != 0) {
+      free(manifest);
+      manifest = NULL;
+    }
+  }
   size_t renamed = 0;
   for (; rc == 0 && renamed < n; renamed++) {
     char name[32];
@@ -790,6 +884,18 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
     }
   }
   if (rc == 0) rc = fg_fsync_dir(s->frames_dir);
+  if (manifest) {
+    /* Gone for good before the batch is acknowledged: a manifest that came back after a
+     * crash would take acknowledged frames with it. On failure the frames go first. */
+    if (rc != 0)
+      for (size_t i = 0; i < n; i++)
+        if (incoming[i]) unlink(incoming[i]);
+    if (unlink(manifest) != 0 && rc == 0)
+      rc = fg_fail(FG_EIO, "cannot remove %s: %s", manifest, strerror(errno));
+    int sync_rc = fg_fsync_dir(s->frames_dir);
+    if (rc == 0) rc = sync_rc;
+    free(manifest);
+  }
   if (rc == 0) {
     *first_index = s->next_index;
     for (size_t i = 0; i < n; i++) {

@@ -150,6 +150,11 @@ int fg_scene_commit_field(fg_scene *scene, fg_field *field, const char *next_pat
  * The scene goes on reporting partial until a training commits. Logs what it does. */
 void fg_scene_keep_partial(fg_scene *scene);
 
+/* 1 when field.next.fgc was in the scene's folder as the store opened (before the start-up
+ * loaded or removed it). A training that recorded itself committing (jobs.c) and whose
+ * field.next.fgc was gone by then had renamed it over field.fgc: it finished. */
+int fg_scene_had_next_checkpoint(fg_scene *scene);
+
 /* Records the scene's last job for its description (jobs.c keeps it current). */
 void fg_scene_set_last_job(fg_scene *scene, const char *id, const char *state);
 

@@ -621,6 +621,9 @@ int fg_tasks_add_demo(fg_tasks *ts, const char *name, const fg_task_demo_new *d,
   char *dir = task_path(ts, name, NULL);
   rc = dir ? fg_mkdir_p(dir) : fg_fail(FG_ENOMEM, "out of memory");
   free(dir);
+  /* A new task's folder: its entry in tasks/ must be durable before the demo is answered,
+   * or a power cut could take the acknowledged task with it. */
+  if (rc == 0 && !cur) rc = fg_fsync_dir(ts->dir);
   if (rc == 0) rc = write_demo_npy(ts, name, id, d->z, d->n_points, d->dim);
   wrote = rc == 0;
   if (rc == 0) rc = write_task_json(ts, &o->pub);

@@ -21,6 +21,7 @@ const char *fg_strerror(int err) {
   case FG_ETIMEDOUT: return "timed out";
   case FG_EUNAVAIL: return "peer unavailable";
   case FG_EPEER: return "peer reported an error";
+  case FG_ENOSPC: return "no space left on the device";
   default: return "unknown error";
   }
 }

@@ -24,6 +24,7 @@ enum {
   FG_ETIMEDOUT = -11, /* a peer did not answer, or did not finish, in time */
   FG_EUNAVAIL = -12, /* a peer is not connected (refused, reset, unreachable) */
   FG_EPEER = -13,    /* a peer answered with an error (Modbus exception, gripper fault) */
+  FG_ENOSPC = -14,   /* a write failed for want of space: the disk or the quota is full */
 };
 
 /* Returns a static, human-readable name of a FG_E* code; never NULL. */

@@ -22,6 +22,10 @@ char *fg_path_join(const char *dir, const char *name) {
   return p;
 }
 
+int fg_io_error(int errno_value) {
+  return errno_value == ENOSPC || errno_value == EDQUOT ? FG_ENOSPC : FG_EIO;
+}
+
 static char *dir_of(const char *path) {
   const char *slash = strrchr(path, '/');
   if (!slash) return strdup(".");
@@ -35,7 +39,7 @@ int fg_fsync_dir(const char *path) {
   int rc = fsync(fd);
   int e = errno;
   close(fd);
-  if (rc != 0) return fg_fail(FG_EIO, "fsync of folder %s failed: %s", path, strerror(e));
+  if (rc != 0) return fg_fail(fg_io_error(e), "fsync of folder %s failed: %s", path, strerror(e));
   return 0;
 }
 
@@ -56,7 +60,7 @@ int fg_atomic_file_open(fg_atomic_file *af, const char *path) {
     free(af->tmp_path);
     af->tmp_path = NULL;
     fg_atomic_file_abort(af);
-    return fg_fail(FG_EIO, "cannot create %s: %s", path, strerror(e));
+    return fg_fail(fg_io_error(e), "cannot create %s: %s", path, strerror(e));
   }
   af->fp = fdopen(fd, "wb");
   if (!af->fp) {
@@ -78,15 +82,15 @@ void fg_atomic_file_abort(fg_atomic_file *af) {
 int fg_atomic_file_commit(fg_atomic_file *af) {
   int rc = 0;
   if (fflush(af->fp) != 0 || ferror(af->fp))
-    rc = fg_fail(FG_EIO, "write to %s failed: %s", af->final_path, strerror(errno));
+    rc = fg_fail(fg_io_error(errno), "write to %s failed: %s", af->final_path, strerror(errno));
   else if (fsync(fileno(af->fp)) != 0)
-    rc = fg_fail(FG_EIO, "fsync of %s failed: %s", af->final_path, strerror(errno));
+    rc = fg_fail(fg_io_error(errno), "fsync of %s failed: %s", af->final_path, strerror(errno));
   int close_rc = fclose(af->fp);
   af->fp = NULL;
   if (rc == 0 && close_rc != 0)
-    rc = fg_fail(FG_EIO, "close of %s failed: %s", af->final_path, strerror(errno));
+    rc = fg_fail(fg_io_error(errno), "close of %s failed: %s", af->final_path, strerror(errno));
   if (rc == 0 && rename(af->tmp_path, af->final_path) != 0)
-    rc = fg_fail(FG_EIO, "rename to %s failed: %s", af->final_path, strerror(errno));
+    rc = fg_fail(fg_io_error(errno), "rename to %s failed: %s", af->final_path, strerror(errno));
   if (rc == 0) {
     free(af->tmp_path);
     af->tmp_path = NULL; /* renamed: nothing to remove */
@@ -104,7 +108,7 @@ int fg_write_file_atomic(const char *path, const void *buf, size_t len) {
   if (len > 0 && fwrite(buf, 1, len, af.fp) != len) {
     int e = errno;
     fg_atomic_file_abort(&af);
-    return fg_fail(FG_EIO, "write to %s failed: %s", path, strerror(e));
+    return fg_fail(fg_io_error(e), "write to %s failed: %s", path, strerror(e));
   }
   return fg_atomic_file_commit(&af);
 }
@@ -160,7 +164,7 @@ int fg_mkdir_p(const char *path) {
       *s = '\0';
       if (mkdir(p, 0750) != 0 && errno != EEXIST) {
         int e = errno;
-        int rc = fg_fail(FG_EIO, "cannot create folder %s: %s", p, strerror(e));
+        int rc = fg_fail(fg_io_error(e), "cannot create folder %s: %s", p, strerror(e));
         free(p);
         return rc;
       }

@@ -38,6 +38,10 @@ int fg_mkdir_p(const char *path);
 /* Removes a folder and everything below it; a missing path is success. */
 int fg_rmtree(const char *path);
 
+/* The FG_E* code of a failed write's errno: FG_ENOSPC for a full disk or quota (ENOSPC,
+ * EDQUOT), so that callers can tell the client to free space; FG_EIO otherwise. */
+int fg_io_error(int errno_value);
+
 /* fsyncs a folder so that a rename or unlink in it is durable. */
 int fg_fsync_dir(const char *path);
 

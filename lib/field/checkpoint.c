@@ -381,7 +381,7 @@ int fg_checkpoint_save(const fg_field *f, const char *path, int half_tables) {
   free(w.buf);
   if (w.err != 0) {
     fg_atomic_file_abort(&af);
-    return fg_fail(FG_EIO, "writing checkpoint %s failed: %s", path, strerror(w.err));
+    return fg_fail(fg_io_error(w.err), "writing checkpoint %s failed: %s", path, strerror(w.err));
   }
   return fg_atomic_file_commit(&af);
 }

@@ -556,14 +556,14 @@ int fg_frame_save(const fg_frame *f, const char *path) {
        write_le(af.fp, f->depth, depth_bytes(f) / sizeof(float), sizeof(float), &crc) < 0)) {
     int e = errno;
     fg_atomic_file_abort(&af);
-    return fg_fail(FG_EIO, "writing %s failed: %s", path, strerror(e));
+    return fg_fail(fg_io_error(e), "writing %s failed: %s", path, strerror(e));
   }
   uint8_t cb[4];
   put_u32(cb, (uint32_t)crc);
   if (fwrite(cb, 1, 4, af.fp) != 4) {
     int e = errno;
     fg_atomic_file_abort(&af);
-    return fg_fail(FG_EIO, "writing %s failed: %s", path, strerror(e));
+    return fg_fail(fg_io_error(e), "writing %s failed: %s", path, strerror(e));
   }
   return fg_atomic_file_commit(&af);
 }
