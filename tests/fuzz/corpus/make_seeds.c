@@ -1,4 +1,4 @@
-/* Writes the binary seeds of the npy, depth, image and checkpoint fuzz targets with the
+/* Writes the binary seeds of the npy, depth, image, frame and checkpoint fuzz targets with the
  * library's own encoders, so the seeds are files the daemon really writes or accepts. Run
  * once from this folder (the output is committed; the tests never run this):
  *   cc -I../../../lib -I../../../build make_seeds.c ../../../build/lib/libfieldgrip.a \
@@ -7,6 +7,7 @@
 #include "core/error.h"
 #include "field/checkpoint.h"
 #include "field/model.h"
+#include "io/frame.h"
 #include "io/image.h"
 #include "io/npy.h"
 
@@ -62,6 +63,30 @@ int main(void) {
   if (fg_image_write_file("image/rgb_4x3.jpg", frgb, 4, 3, 3) != 0) return 1;
   if (fg_image_write_file("image/rgb_4x3.tif", frgb, 4, 3, 3) != 0) return 1;
   if (fg_image_write_file("image/rgb_4x3.exr", frgb, 4, 3, 3) != 0) return 1;
+
+  /* frames as the state dir keeps them: plain, with f16 features, with depth */
+  fg_image img = {4, 3, frgb};
+  fg_camera cam = {.fl_x = 5, .fl_y = 5, .cx = 2, .cy = 1.5, .w = 4, .h = 3};
+  double T[16] = {1, 0, 0, 0.1, 0, 1, 0, 0.2, 0, 0, 1, 0.3, 0, 0, 0, 1};
+  uint16_t fh[8] = {0x3c00, 0, 0x4000, 0xbc00, 0, 0x3c00, 0x3800, 0x3400};
+  fg_npy feats = {FG_DTYPE_F16, 3, {2, 2, 2}, 8, fh};
+  fg_depth_map dm = {4, 3, depth};
+  fg_ingest_opts opts = {{1, 1, 1}, 0};
+  fg_frame fr;
+  if (fg_frame_prepare_image(&fr, &img, &cam, T, NULL, &opts) != 0 ||
+      (strcpy(fr.source, "plain.png"), fg_frame_save(&fr, "frame/plain.fgf")) != 0)
+    return 1;
+  fg_frame_clear(&fr);
+  if (fg_frame_prepare_image(&fr, &img, &cam, T, &feats, &opts) != 0 ||
+      fg_frame_save(&fr, "frame/features.fgf") != 0)
+    return 1;
+  fg_frame_clear(&fr);
+  if (fg_frame_prepare_image_depth(&fr, &img, &cam, T, NULL, &dm, &opts) != 0 ||
+      fg_frame_save(&fr, "frame/depth.fgf") != 0) {
+    fprintf(stderr, "frame: %s\n", fg_error_detail());
+    return 1;
+  }
+  fg_frame_clear(&fr);
 
   /* the smallest field the checks allow, so the seed stays small */
   double lo[3] = {-0.1, -0.1, 0.0}, hi[3] = {0.1, 0.1, 0.2};
