@@ -29,7 +29,8 @@ export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-halt_on_error=1:print_stacktrace=1}"
 
 work=$(mktemp -d "${TMPDIR:-/tmp}/fg-libfuzzer-XXXXXX") || exit 2
-trap 'rm -rf "$work"' EXIT INT TERM
+trap 'rm -rf "$work"' EXIT
+trap 'exit 130' INT TERM
 failed=0
 for t in "$@"; do
   exe="$build/tests/fuzz/fuzz_$t"
