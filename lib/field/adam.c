@@ -74,7 +74,9 @@ static void adam_range(const fg_adam_config *cfg, float *params, const float *gr
   }
 }
 
-#if defined(__x86_64__) && defined(__GNUC__)
+/* The kernels rely on GCC's target pragma, which clang ignores (it then refuses the
+ * intrinsics); a clang build (the libFuzzer one) takes the portable path. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #include <immintrin.h>
 #pragma GCC push_options
 #pragma GCC target("avx512f")

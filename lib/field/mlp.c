@@ -37,7 +37,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#if defined(__x86_64__) && defined(__GNUC__)
+/* The kernels rely on GCC's target pragma, which clang ignores (it then refuses the
+ * intrinsics); a clang build (the libFuzzer one) takes the portable path. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #include <immintrin.h>
 #define HAVE_AVX512_KERNELS 1
 #else

@@ -36,9 +36,9 @@ static const char *reader_ext(const char *name) {
  * out, leaking it on every such upload, and libpng prints to stderr. CRCs and the compressed
  * data are left to libpng. */
 static int png_check_chunks(const uint8_t *b, size_t len) {
-  size_t off = 8;
+  size_t off = 8; /* past the signature, which the sniffer matched on its first bytes only */
   for (int n = 0;; n++) {
-    if (len - off < 12)
+    if (len < off || len - off < 12) /* len < 8: a signature cut short */
       return fg_fail(FG_EFORMAT, "the PNG data is truncated or corrupt: it ends after %zu bytes, "
                                  "before its IEND chunk",
                      len);
