@@ -141,6 +141,12 @@ static void take(snapshot *s) {
   s->task = get_json("/v1/tasks/t");
 }
 
+static void release(snapshot *s) {
+  json_decref(s->scenes);
+  for (int i = 0; i < 3; i++) json_decref(s->frames[i]);
+  json_decref(s->task);
+}
+
 /* Everything stored before is as it was, and the state dir is consistent. */
 static void check_intact(const snapshot *s, unsigned seed0) {
   json_t *l = scene_list();
@@ -307,6 +313,7 @@ int main(int argc, char **argv) {
   cu_check_clean_start(from);
   cu_check_no_leftovers();
   check_intact(&snap, seed0);
+  release(&snap);
 
   /* Space again: everything works. */
   unfill();
