@@ -1,6 +1,7 @@
 /* POST /v1/embed/text and POST /v1/embed/image: CLIP's text and image embeddings over HTTP,
  * from the model of [clip] (clip_svc.h). Both run on the offload pool. */
 #include "api.h"
+#include "api_decode.h"
 #include "clip_svc.h"
 #include "decoder.h"
 #include "json.h"
@@ -77,29 +78,32 @@ static int collect_texts(json_t *body, const char **texts, int *n, fg_resp *resp
   return 0;
 }
 
+int fg_api_parse_embed_text(json_t *body, fg_api_embed_text_req *r, fg_resp *resp) {
+  const char *key;
+  json_t *val;
+  json_object_foreach(body, key, val) {
+    if (strcmp(key, "text") && strcmp(key, "truncate") && strcmp(key, "normalize"))
+      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; the body takes "
+                           "\"text\" and, optionally, \"truncate\" and \"normalize\" (true "
+                           "or false)", key), -1;
+  }
+  r->truncate = r->normalize = 0;
+  r->n = 0;
+  if (json_flag(body, "truncate", &r->truncate) < 0 ||
+      json_flag(body, "normalize", &r->normalize) < 0)
+    return fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail()), -1;
+  return collect_texts(body, r->texts, &r->n, resp);
+}
+
 int fg_api_embed_text(fg_req *req, fg_resp *resp) {
   fg_clip_model *m = fg_api_clip_model(req, resp);
   if (!m) return 0;
   json_t *body = fg_api_body_object(req, resp);
   float *emb = NULL;
   if (!body) goto out;
-  const char *key;
-  json_t *val;
-  json_object_foreach(body, key, val) {
-    if (strcmp(key, "text") && strcmp(key, "truncate") && strcmp(key, "normalize")) {
-      fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; the body takes \"text\" "
-                    "and, optionally, \"truncate\" and \"normalize\" (true or false)", key);
-      goto out;
-    }
-  }
-  int truncate = 0, normalize = 0;
-  if (json_flag(body, "truncate", &truncate) < 0 || json_flag(body, "normalize", &normalize) < 0) {
-    fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
-    goto out;
-  }
-  const char *texts[FG_CLIP_MAX_TEXTS];
-  int n = 0;
-  if (collect_texts(body, texts, &n, resp) != 0) goto out;
+  fg_api_embed_text_req r;
+  if (fg_api_parse_embed_text(body, &r, resp) != 0) goto out;
+  const int n = r.n, normalize = r.normalize;
 
   const fg_clip_info *info = fg_clip_model_info(m);
   const int E = info->embed_dim;
@@ -109,7 +113,7 @@ int fg_api_embed_text(fg_req *req, fg_resp *resp) {
     goto out;
   }
   int bad = -1;
-  int rc = fg_clip_model_embed_texts(m, texts, n, truncate, normalize, emb, &bad);
+  int rc = fg_clip_model_embed_texts(m, r.texts, n, r.truncate, normalize, emb, &bad);
   if (rc == FG_ERANGE) {
     fg_resp_error(resp, 400, "text_too_long", "text[%d]: %s; shorten it, or send \"truncate\": "
                   "true to embed its first %d tokens", bad, fg_error_detail(),

@@ -1,5 +1,6 @@
 /* Frames: upload one (multipart), import a data set folder, list. */
 #include "api.h"
+#include "api_decode.h"
 #include "decoder.h"
 #include "json.h"
 #include "metrics.h"
@@ -137,7 +138,7 @@ static int add_failed(fg_resp *resp, int rc) {
 /* ---------------------------------------------------------------- upload */
 
 /* Reads the pose and camera of an upload's meta part. */
-static int parse_meta(json_t *meta, double T[16], fg_transforms_frame *camera, fg_resp *resp) {
+int fg_api_parse_meta(json_t *meta, double T[16], fg_transforms_frame *camera, fg_resp *resp) {
   json_t *pose = json_object_get(meta, "transform_matrix");
   const char *what = "transform_matrix";
   if (!pose) {
@@ -165,11 +166,11 @@ static int parse_meta(json_t *meta, double T[16], fg_transforms_frame *camera, f
 }
 
 /* meta's optional depth_scale (metres per unit of an integer depth image). */
-static int parse_depth_scale(json_t *meta, const fg_part *depth_part, const char *source,
-                             double *scale, fg_resp *resp) {
+int fg_api_parse_depth_scale(json_t *meta, int has_depth, const char *source, double *scale,
+                             fg_resp *resp) {
   json_t *v = json_object_get(meta, "depth_scale");
   if (!v) return 0;
-  if (!depth_part)
+  if (!has_depth)
     return fg_resp_error(resp, 400, "invalid_depth", "frame '%s': meta has depth_scale but the "
                          "upload has no 'depth' part", source), -1;
   if (!json_is_number(v) || !(json_number_value(v) > 0.0) || !isfinite(json_number_value(v)))
@@ -214,7 +215,7 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   }
   double T[16];
   fg_transforms_frame camera;
-  if (parse_meta(meta, T, &camera, resp) != 0) goto out;
+  if (fg_api_parse_meta(meta, T, &camera, resp) != 0) goto out;
   fg_npy feats, *featp = NULL;
   if (feat_part) {
     if (fg_npy_parse(feat_part->data, feat_part->len, &feats) != 0) {
@@ -226,7 +227,8 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   }
   const char *source = image->filename ? image->filename : "upload";
   depth_input depth = {.scale = FG_DEPTH_DEFAULT_SCALE};
-  if (parse_depth_scale(meta, depth_part, source, &depth.scale, resp) != 0) goto out;
+  if (fg_api_parse_depth_scale(meta, depth_part != NULL, source, &depth.scale, resp) != 0)
+    goto out;
   if (depth_part) {
     if (depth_part->len == 0) {
       fg_resp_error(resp, 400, "invalid_depth", "frame '%s': the 'depth' part is empty", source);

@@ -8,6 +8,7 @@
  * density is sampled for this request alone, so that a one-off coarse or fine mesh does not
  * evict the cache the heatmaps use. Runs on the offload pool. */
 #include "api.h"
+#include "api_decode.h"
 #include "metrics.h"
 #include "voxcache.h"
 
@@ -24,12 +25,6 @@
 static const char *const geometry_keys[] = {"kind", "threshold", "alpha", "voxel_size"};
 #define N_GEOMETRY_KEYS (sizeof geometry_keys / sizeof geometry_keys[0])
 
-typedef struct geometry_req {
-  int points;        /* kind=points, else mesh */
-  float threshold;   /* voxel alpha in (0, 1) */
-  double voxel_size; /* metres */
-} geometry_req;
-
 /* A whole query-string value as a finite number. */
 static int parse_number(const char *s, double *out) {
   if (!s || !*s) return -1;
@@ -42,14 +37,14 @@ static int parse_number(const char *s, double *out) {
 
 /* Parses the query string against the scene's parameters into *r; answers 400 itself and
  * returns -1 when it is wrong. */
-static int parse_geometry(fg_req *req, const fg_scene_params *params, geometry_req *r,
-                          fg_resp *resp) {
-  const char *key = fg_req_query_unknown(req, geometry_keys, N_GEOMETRY_KEYS);
+int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params *params,
+                          fg_api_geometry_req *r, fg_resp *resp) {
+  const char *key = q->unknown;
   if (key)
     return fg_resp_error(resp, 400, "invalid_request", "unknown query parameter \"%.40s\"; "
                          "geometry takes \"kind\" (mesh or points), \"threshold\" and "
                          "\"voxel_size\"", key), -1;
-  const char *kind = fg_req_query(req, "kind");
+  const char *kind = q->kind;
   if (kind && strcmp(kind, "mesh") != 0 && strcmp(kind, "points") != 0)
     return fg_resp_error(resp, 400, "invalid_request", "\"kind\" must be \"mesh\" (the default: "
                          "a closed triangle mesh of the solid's surface) or \"points\" (the "
@@ -57,7 +52,7 @@ static int parse_geometry(fg_req *req, const fg_scene_params *params, geometry_r
   r->points = kind && strcmp(kind, "points") == 0;
 
   /* "alpha" is the name SPEC.md's endpoint table uses; "threshold" the one documented. */
-  const char *thr = fg_req_query(req, "threshold"), *alias = fg_req_query(req, "alpha");
+  const char *thr = q->threshold, *alias = q->alpha;
   if (thr && alias)
     return fg_resp_error(resp, 400, "invalid_request", "give \"threshold\" or its synonym "
                          "\"alpha\", not both"), -1;
@@ -71,7 +66,7 @@ static int parse_geometry(fg_req *req, const fg_scene_params *params, geometry_r
   r->threshold = (float)a;
 
   r->voxel_size = params->voxel_size;
-  const char *vs = fg_req_query(req, "voxel_size");
+  const char *vs = q->voxel_size;
   double v = 0;
   if (vs && (parse_number(vs, &v) != 0 || !(v > 0.0)))
     return fg_resp_error(resp, 400, "invalid_request", "\"voxel_size\" must be a positive "
@@ -92,8 +87,14 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
   fg_mesh m = {0};
   fg_scene_info info;
   fg_scene_get_info(s, &info);
-  geometry_req r;
-  if (parse_geometry(req, &info.params, &r, resp) != 0) goto out;
+  const fg_api_geometry_query q = {
+    .unknown = fg_req_query_unknown(req, geometry_keys, N_GEOMETRY_KEYS),
+    .kind = fg_req_query(req, "kind"),
+    .threshold = fg_req_query(req, "threshold"),
+    .alpha = fg_req_query(req, "alpha"),
+    .voxel_size = fg_req_query(req, "voxel_size")};
+  fg_api_geometry_req r;
+  if (fg_api_parse_geometry(&q, &info.params, &r, resp) != 0) goto out;
   fg_voxel_grid grid;
   int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
                               r.voxel_size);

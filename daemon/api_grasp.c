@@ -12,6 +12,7 @@
  * The search is lib/grasp's on the grasp field the scene's voxels keep (voxcache.h), built
  * by the first demo or search of a field and shared by every later one. */
 #include "api.h"
+#include "api_decode.h"
 #include "grasp_log.h"
 #include "json.h"
 #include "metrics.h"
@@ -41,13 +42,6 @@ static const char *const grasp_keys[] = {"task", "top_k", "seed", "rotations",
                                          "language_weight"};
 #define N_GRASP_KEYS (sizeof grasp_keys / sizeof grasp_keys[0])
 
-typedef struct grasp_req {
-  const char *task; /* NULL: retrieved by the query */
-  int has_query;
-  int language_weight; /* optimise J_lang (grasp.h) instead of J; needs a query */
-  fg_grasp_options opt; /* lib/grasp's defaults with the request's top_k, rotations, seed */
-} grasp_req;
-
 /* An integer key of body in [lo, hi] into *out (unchanged when absent); answers 400 itself
  * and returns -1 otherwise. */
 static int int_key(json_t *body, const char *key, json_int_t lo, json_int_t hi, json_int_t *out,
@@ -62,7 +56,7 @@ static int int_key(json_t *body, const char *key, json_int_t lo, json_int_t hi, 
   return 0;
 }
 
-static int parse_grasp(json_t *body, grasp_req *r, fg_resp *resp) {
+int fg_api_parse_grasp(json_t *body, fg_api_grasp_req *r, fg_resp *resp) {
   const char *key = fg_query_unknown_key(body, grasp_keys, N_GRASP_KEYS);
   if (key)
     return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a grasp request "
@@ -198,8 +192,8 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   fg_grasp_entry *entries = NULL;
   char *canon = NULL;
   if (!body) goto out;
-  grasp_req r;
-  if (parse_grasp(body, &r, resp) != 0) goto out;
+  fg_api_grasp_req r;
+  if (fg_api_parse_grasp(body, &r, resp) != 0) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   if (r.task) {

@@ -3,6 +3,7 @@
  * .npy grid or a coloured PLY point cloud. Runs on the offload pool: the first heatmap of a
  * field builds its cache (seconds), later ones only score it. */
 #include "api.h"
+#include "api_decode.h"
 #include "json.h"
 #include "metrics.h"
 #include "query.h"
@@ -23,19 +24,10 @@ static const char *const heatmap_keys[] = {"voxel_size", "alpha_threshold", "for
                                            "max_points"};
 #define N_HEATMAP_KEYS (sizeof heatmap_keys / sizeof heatmap_keys[0])
 
-typedef enum { FORMAT_JSON = 0, FORMAT_NPY, FORMAT_PLY } heatmap_format;
-
-typedef struct heatmap_req {
-  heatmap_format format;
-  float alpha_threshold;
-  float min_score; /* -INFINITY: none */
-  size_t max_points; /* 0: none */
-} heatmap_req;
-
 /* Parses the keys of a heatmap request but its query into *r against the scene's parameters;
  * answers 400 itself and returns -1 when they are wrong. */
-static int parse_heatmap(json_t *body, const fg_scene_params *params, heatmap_req *r,
-                         fg_resp *resp) {
+int fg_api_parse_heatmap(json_t *body, const fg_scene_params *params,
+                         fg_api_heatmap_req *r, fg_resp *resp) {
   const char *key = fg_query_unknown_key(body, heatmap_keys, N_HEATMAP_KEYS);
   if (key)
     return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a heatmap takes a "
@@ -49,9 +41,9 @@ static int parse_heatmap(json_t *body, const fg_scene_params *params, heatmap_re
     return fg_resp_error(resp, 400, "invalid_request", "\"format\" must be \"json\" (occupied "
                          "voxels and their scores), \"npy\" (dense float32 [nz, ny, nx], NaN "
                          "where free) or \"ply\" (a point cloud coloured by score)"), -1;
-  r->format = strcmp(format, "npy") == 0 ? FORMAT_NPY
-              : strcmp(format, "ply") == 0 ? FORMAT_PLY
-                                           : FORMAT_JSON;
+  r->format = strcmp(format, "npy") == 0 ? FG_API_HEATMAP_NPY
+              : strcmp(format, "ply") == 0 ? FG_API_HEATMAP_PLY
+                                           : FG_API_HEATMAP_JSON;
   double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
   int rc = fg_json_number(body, "alpha_threshold", &a);
   /* Compared as the float it becomes: 0.001 must pass the library's 1e-3f floor. */
@@ -75,7 +67,7 @@ static int parse_heatmap(json_t *body, const fg_scene_params *params, heatmap_re
                            "integer: the reply keeps that many best-scoring points"), -1;
     r->max_points = (size_t)json_integer_value(mp);
   }
-  if (r->format == FORMAT_NPY && (rc > 0 || r->max_points))
+  if (r->format == FG_API_HEATMAP_NPY && (rc > 0 || r->max_points))
     return fg_resp_error(resp, 400, "invalid_request", "\"min_score\" and \"max_points\" bound "
                          "the point list of \"json\" and \"ply\"; \"npy\" is always the whole "
                          "grid"), -1;
@@ -225,8 +217,8 @@ int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
   if (!body) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
-  heatmap_req r;
-  if (parse_heatmap(body, &info.params, &r, resp) != 0) goto out;
+  fg_api_heatmap_req r;
+  if (fg_api_parse_heatmap(body, &info.params, &r, resp) != 0) goto out;
   fg_voxel_grid grid;
   int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
                               info.params.voxel_size);
@@ -261,8 +253,8 @@ int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
   o.alpha_threshold = r.alpha_threshold;
   o.min_score = r.min_score;
   o.max_points = r.max_points;
-  o.want_dense = r.format == FORMAT_NPY;
-  o.want_points = r.format != FORMAT_NPY;
+  o.want_dense = r.format == FG_API_HEATMAP_NPY;
+  o.want_points = r.format != FG_API_HEATMAP_NPY;
   o.n_threads = threads;
   rc = fg_heatmap_compute(fg_voxels_features(vox), &q, &o, &hm);
   if (rc != 0) {
@@ -275,7 +267,7 @@ int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
   }
   uint8_t *bytes = NULL;
   size_t len = 0;
-  if (r.format == FORMAT_JSON) {
+  if (r.format == FG_API_HEATMAP_JSON) {
     char *text = heatmap_json(&hm, &len);
     if (!text) {
       fg_resp_error(resp, 500, "internal_error", "out of memory writing %zu points",
@@ -284,7 +276,7 @@ int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
     }
     fg_resp_take(resp, 200, "application/json", text, len);
     fg_metrics_count_heatmap(FG_METRICS_HEATMAP_JSON);
-  } else if (r.format == FORMAT_NPY) {
+  } else if (r.format == FG_API_HEATMAP_NPY) {
     if (fg_heatmap_encode_npy(&hm, &bytes, &len) != 0) {
       fg_resp_error(resp, 500, "internal_error", "cannot encode the grid: %s", fg_error_detail());
       goto out;

@@ -2,6 +2,7 @@
  * colour, depth, surface normals or a query's heatmap. Runs on the offload pool; the PNG is
  * encoded by a fieldgrip-decode child (decoder.h). */
 #include "api.h"
+#include "api_decode.h"
 #include "decoder.h"
 #include "json.h"
 #include "metrics.h"
@@ -16,8 +17,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The largest render: FG_API_RENDER_MAX_SIDE pixels on either side. */
-#define FG_API_RENDER_MAX_SIDE 4096
 /* Rays rendered per call of fg_field_render_rays: bounds the memory of one render. */
 #define RENDER_CHUNK 65536
 /* Rays of a heatmap render per call: its (chunk, D) features stay at 8 MB for D = 512. */
@@ -73,17 +72,9 @@ static int collect(json_t *src, const char *where, int top_level, json_t *merged
   return 0;
 }
 
-typedef struct render_req {
-  double T_world_cam[16]; /* OpenGL convention */
-  fg_camera cam;          /* PINHOLE, w and h set */
-  int depth;              /* output depth, else rgb */
-  int normal;             /* output normal, else rgb */
-  int heatmap;            /* output heatmap: the body also holds a query (query.h) */
-} render_req;
-
 /* Parses the body but its query; answers 400 itself and returns -1 when it cannot be
  * rendered. */
-static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
+int fg_api_parse_render(json_t *body, fg_api_render_req *r, fg_resp *resp) {
   json_t *camobj = json_object_get(body, "camera");
   if (camobj && !json_is_object(camobj))
     return fg_resp_error(resp, 400, "invalid_camera", "\"camera\" must be an object: "
@@ -161,7 +152,7 @@ static int parse_render(json_t *body, render_req *r, fg_resp *resp) {
 
 /* Rays of pixels start .. start + m - 1 (row-major) of r's camera: origins o (m,3), unit
  * directions d (m,3) in the world frame, and each ray's cosine to the optical axis (m). */
-static void camera_rays(const render_req *r, int64_t start, int64_t m, float *o, float *d,
+static void camera_rays(const fg_api_render_req *r, int64_t start, int64_t m, float *o, float *d,
                         float *cos_axis) {
   const fg_camera *c = &r->cam;
   const double *T = r->T_world_cam;
@@ -185,7 +176,7 @@ static void camera_rays(const render_req *r, int64_t start, int64_t m, float *o,
  * normals [h][w][3], round(127.5 (n + 1)) of the unit world-frame normal n
  * (fg_field_render_normals with central differences at +-step_m), black (0, 0, 0) where the
  * opacity is below SURFACE_MIN_OPACITY or the density has no gradient. */
-static int render_image(const fg_field *f, const render_req *r, const float bg[3], float step_m,
+static int render_image(const fg_field *f, const fg_api_render_req *r, const float bg[3], float step_m,
                         int n_threads, void *out) {
   const fg_camera *c = &r->cam;
   int64_t n = (int64_t)c->w * c->h;
@@ -241,7 +232,7 @@ static int render_image(const fg_field *f, const render_req *r, const float bg[3
  * the scores over the colour (fg_heatmap_blend, over the image's own score range) into out,
  * uint8 RGB [h][w][3]. Features are rendered HEATMAP_CHUNK rays at a time, so a render's
  * memory stays near 16 bytes a pixel whatever D. */
-static int render_heatmap(const fg_field *f, const render_req *r, const fg_query *q,
+static int render_heatmap(const fg_field *f, const fg_api_render_req *r, const fg_query *q,
                           const float bg[3], int n_threads, uint8_t *out) {
   const fg_camera *c = &r->cam;
   const int D = f->cfg.feature_dim;
@@ -274,8 +265,8 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   void *pixels = NULL;
   fg_query q = {0};
   if (!body) goto out;
-  render_req r;
-  if (parse_render(body, &r, resp) != 0) goto out;
+  fg_api_render_req r;
+  if (fg_api_parse_render(body, &r, resp) != 0) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   /* The query is checked first, against the trained field's D, else the frames'. */

@@ -3,6 +3,7 @@
  * Requests are checked here and run by robot.h; actuating requests may carry an
  * Idempotency-Key (idem.h). */
 #include "api.h"
+#include "api_decode.h"
 #include "idem.h"
 #include "json.h"
 #include "robot.h"
@@ -22,8 +23,8 @@ static const char *const command_names[] = {NULL, "pick", "place", "open", "clos
 
 /* Reads the keys of a command or gripper request into *r. allowed: NULL-terminated key
  * names. Answers 400 itself and returns -1 on a bad request. */
-static int parse_request(json_t *body, const char *const *allowed, fg_robot_request *r,
-                         fg_resp *resp) {
+int fg_api_parse_robot_request(json_t *body, const char *const *allowed, fg_robot_request *r,
+                               fg_resp *resp) {
   memset(r, 0, sizeof *r);
   r->wait = 1;
   const char *key;
@@ -300,7 +301,7 @@ int fg_api_robot_command(fg_req *req, fg_resp *resp) {
   static const char *const keys[] = {"command", "pose", "width", "force", "speed", "dry_run",
                                      "wait", NULL};
   fg_robot_request r;
-  int rc = parse_request(body, keys, &r, resp);
+  int rc = fg_api_parse_robot_request(body, keys, &r, resp);
   json_decref(body);
   if (rc < 0) return 0;
   if (!r.command)
@@ -407,7 +408,7 @@ int fg_api_gripper_action(fg_req *req, fg_resp *resp) {
   if (!body) return 0;
   static const char *const keys[] = {"width", "speed", "force", "dry_run", NULL};
   fg_robot_request r;
-  int rc = parse_request(body, keys, &r, resp);
+  int rc = fg_api_parse_robot_request(body, keys, &r, resp);
   json_decref(body);
   if (rc < 0) return 0;
   return actuate(req, resp, action, &r, run_gripper);

@@ -1,5 +1,6 @@
 /* Scenes: create, list, describe, delete. */
 #include "api.h"
+#include "api_decode.h"
 #include "jobs.h"
 #include "json.h"
 
@@ -24,7 +25,7 @@ int fg_api_scenes_list(fg_req *req, fg_resp *resp) {
 }
 
 /* Reads the optional fields of a scene creation over the SPEC.md tabletop defaults. */
-static int parse_scene_params(json_t *body, fg_scene_params *p) {
+int fg_api_parse_scene_params(json_t *body, fg_scene_params *p) {
   static const fg_scene_params defaults = {
     .workspace_min = {0.10, -0.45, 0.005}, .workspace_max = {0.80, 0.45, 0.35},
     .voxel_size = 0.01, .background = {1, 1, 1}};
@@ -51,7 +52,7 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   int rc = fg_json_string(body, "name", &name);
   if (rc == 0) rc = fg_fail(FG_EINVAL, "\"name\" is required: the scene's name, 1 to 64 of "
                             "A-Z a-z 0-9 _ . -");
-  if (rc > 0) rc = parse_scene_params(body, &p);
+  if (rc > 0) rc = fg_api_parse_scene_params(body, &p);
   if (rc == 0) rc = fg_store_create(req->app->store, name, &p, 0);
   if (rc == FG_EEXIST) {
     fg_resp_error(resp, 409, "scene_exists", "%s", fg_error_detail());

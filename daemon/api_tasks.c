@@ -3,6 +3,7 @@
  * /v1/tasks/{t}/demos/{i}. A demo samples the scene's current field at the task's query
  * points placed by the demo's gripper pose (F3RM's z) and keeps the sample, not the scene. */
 #include "api.h"
+#include "api_decode.h"
 #include "json.h"
 #include "tasks.h"
 #include "voxcache.h"
@@ -126,7 +127,7 @@ static const char *const demo_keys[] = {"scene", "pose", "kind", "width", "appro
 
 /* Reads "query_points" ({"n", "std", "mean"}, each optional: the task's, else the defaults)
  * into d. Answers 400 itself and returns -1 when they are wrong. */
-static int parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
+int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
                               fg_resp *resp) {
   const int from_task = t && t->n_demos > 0;
   d->n_points = from_task ? t->n_points : FG_GRASP_DEFAULT_QUERY_POINTS;
@@ -174,8 +175,8 @@ bad:
 
 /* Reads the demo's keys but its z into d (scene name, pose, kind, width, approach, query
  * points). Answers 400 itself and returns -1 on a bad request. */
-static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_new *d,
-                      fg_resp *resp) {
+int fg_api_parse_demo(json_t *body, const fg_conf *conf, const fg_task *t,
+                      fg_task_demo_new *d, fg_resp *resp) {
   const char *key;
   json_t *v;
   json_object_foreach(body, key, v) {
@@ -201,7 +202,7 @@ static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_
     return fg_resp_error(resp, 400, "invalid_request", "\"kind\" must be \"grasp\" (the "
                          "robot picks at the pose) or \"place\" (it places there)"), -1;
   d->kind = strcmp(kind, "place") == 0 ? FG_TASK_PLACE : FG_TASK_GRASP;
-  const fg_gripper_spec *gripper = fg_gripper_spec_get(req->conf->gripper_model);
+  const fg_gripper_spec *gripper = fg_gripper_spec_get(conf->gripper_model);
   const double stroke = gripper->stroke_m;
   d->width_m = stroke;
   int rc = fg_json_number(body, "width", &d->width_m);
@@ -217,7 +218,7 @@ static int parse_demo(fg_req *req, json_t *body, const fg_task *t, fg_task_demo_
     return fg_resp_error(resp, 400, "invalid_request", "\"approach\" must be the pre-grasp "
                          "distance in metres along the gripper's -z, 0 to 1 (default %g)",
                          FG_TASK_DEFAULT_APPROACH_M), -1;
-  return parse_query_points(body, t, d, resp);
+  return fg_api_parse_query_points(body, t, d, resp);
 }
 
 /* The 409 of a demo that does not fit its task (fg_task_check_demo's detail). */
@@ -243,7 +244,7 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
   float *p = NULL, *z = NULL;
   const fg_task *nt = NULL;
   fg_task_demo_new d = {0};
-  if (parse_demo(req, body, t, &d, resp) != 0) goto out;
+  if (fg_api_parse_demo(body, req->conf, t, &d, resp) != 0) goto out;
   s = fg_store_get(req->app->store, d.scene);
   if (!s) {
     fg_resp_error(resp, 404, "scene_not_found", "no scene named '%s'; GET /v1/scenes lists "

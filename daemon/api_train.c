@@ -1,6 +1,7 @@
 /* Training jobs over HTTP: start a training, list, describe and cancel jobs, and follow one
  * as Server-Sent Events. */
 #include "api.h"
+#include "api_decode.h"
 #include "job_train.h"
 #include "jobs.h"
 #include "json.h"
@@ -63,7 +64,7 @@ static int json_loss_weight(json_t *obj, const char *key, double *out) {
 }
 
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
-static int parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
+int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
   static const char *const keys[] = {"steps",         "seed",         "max_seconds",
                                      "holdout_every", "depth_weight", "distortion_weight"};
   const char *key;
@@ -106,7 +107,7 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
   json_t *body = req->body_len == 0 ? json_object() : fg_api_body_object(req, resp);
   if (!body) goto out;
   fg_job_params p;
-  if (parse_train(body, req->conf, &p) != 0) {
+  if (fg_api_parse_train(body, req->conf, &p) != 0) {
     fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
     goto out;
   }

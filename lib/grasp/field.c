@@ -298,8 +298,12 @@ void fg_grasp_prepared_release(fg_grasp_prepared *p) {
 
 /* Compiled for AVX-512, AVX2 and the baseline and picked at load time: the 64-wide loops are
  * the whole cost. None of the clones contracts to FMA (ISO C11 mode), but the lane count fixes
- * the order of the sums, so results are identical on one machine, not across processors. */
+ * the order of the sums, so results are identical on one machine, not across processors.
+ * GCC only: clang 14 names the resolver of an exported clone "fg_grasp_cost_fast.ifunc", so
+ * its callers in search.c would not link (a clang build is the libFuzzer one). */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 __attribute__((target_clones("avx512f", "avx2", "default")))
+#endif
 double fg_grasp_cost_fast(const fg_grasp_field *gf, const fg_grasp_prepared *p,
                           const double T[16], double d_t[3], double d_w[3], double *cos_out,
                           double *weight_out, fg_grasp_scratch *s) {
