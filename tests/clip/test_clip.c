@@ -317,6 +317,7 @@ static void check_incomplete_models(void) {
       FILE *f = fopen(path, "wb");
       ASSERT(f);
       char *hdr = malloc(1 << 20);
+      ASSERT(hdr);
       size_t hl = 0, off = 0;
       hl += (size_t)sprintf(hdr + hl, "{");
       for (int i = 0; i < n; i++) {
