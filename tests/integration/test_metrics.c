@@ -1,7 +1,8 @@
 /* /metrics in the Prometheus text format: request counters by method, route template and
  * code, the duration histogram, scene/frame gauges and the ingested-frames counter, checked
  * against the exact requests this test made; the process_* families against /proc, the
- * image decoder pool's families, and the kinds of Modbus errors. */
+ * image decoder pool's families, and the kinds of Modbus errors. Also the process itself:
+ * started without OpenMP settings, the daemon runs with a short spin (daemon/main.c). */
 #include <arpa/inet.h>
 #include <dirent.h>
 #include <netinet/in.h>
@@ -255,9 +256,29 @@ static void check_modbus_error_kinds(void) {
   h_resp_free(r);
 }
 
+/* The environment the daemon runs with has GOMP_SPINCOUNT=1000, though it was started
+ * without one. */
+static void check_omp_spin(pid_t pid) {
+  char path[64];
+  snprintf(path, sizeof path, "/proc/%d/environ", (int)pid);
+  FILE *f = fopen(path, "rb");
+  ASSERT(f);
+  char buf[65536];
+  const size_t n = fread(buf, 1, sizeof buf - 1, f);
+  fclose(f);
+  buf[n] = 0;
+  int found = 0;
+  for (size_t i = 0; i < n; i += strlen(buf + i) + 1)
+    if (strcmp(buf + i, "GOMP_SPINCOUNT=1000") == 0) found = 1;
+  ASSERT(found);
+}
+
 int main(int argc, char **argv) {
   h_init(argc, argv);
+  unsetenv("GOMP_SPINCOUNT"); /* the test environment sets it; the daemon must on its own */
+  unsetenv("OMP_WAIT_POLICY");
   h_start();
+  check_omp_spin(h_pid());
 
   const double t_first = h_now_s();
   for (int i = 0; i < 3; i++) {
