@@ -53,6 +53,49 @@ static int png_check_chunks(const uint8_t *b, size_t len) {
   }
 }
 
+/* Walks an OpenEXR file's header(s), attribute by attribute (name, type, 32-bit size,
+ * value), without reading any value. OpenEXR allocates and clears each attribute's declared
+ * size before it reads the value, so a 500-byte file that declares a 1.9 GB string costs
+ * 1.9 GB of memory and seconds of CPU in the decoder before it fails; a declared size past
+ * the end of the data is refused here instead. Multi-part files (version flag 0x1000) hold
+ * one header after another, ended by an empty one. */
+static int exr_check_header(const uint8_t *b, size_t len) {
+  if (len < 8)
+    return fg_fail(FG_EFORMAT, "the OpenEXR data is truncated: %zu bytes, less than its "
+                               "8-byte signature and version", len);
+  const int multipart = (b[5] & 0x10) != 0; /* version flags, bits 8-31: 0x1000 multi-part */
+  size_t off = 8;
+  for (int part = 0;; part++) {
+    if (multipart && part > 0 && off < len && b[off] == 0) return 0; /* the empty header */
+    for (int n = 0;; n++) {
+      if (off >= len)
+        return fg_fail(FG_EFORMAT, "the OpenEXR data is truncated: it ends after %zu bytes, "
+                                   "inside its header", len);
+      if (b[off] == 0) { /* the header's end */
+        off++;
+        break;
+      }
+      const uint8_t *name = b + off;
+      const uint8_t *nul = memchr(name, 0, len - off);
+      const uint8_t *type_nul = nul ? memchr(nul + 1, 0, len - (size_t)(nul + 1 - b)) : NULL;
+      if (!type_nul || len - (size_t)(type_nul + 1 - b) < 4)
+        return fg_fail(FG_EFORMAT, "the OpenEXR data is truncated: header attribute %d at byte "
+                                   "%zu ends before its size", n, off);
+      off = (size_t)(type_nul + 1 - b);
+      const uint32_t size = (uint32_t)b[off] | (uint32_t)b[off + 1] << 8 |
+                            (uint32_t)b[off + 2] << 16 | (uint32_t)b[off + 3] << 24;
+      off += 4;
+      if (size > 0x7fffffffu || size > len - off)
+        return fg_fail(FG_EFORMAT, "the OpenEXR data is truncated or corrupt: header attribute "
+                                   "'%.*s' declares %u bytes but only %zu remain",
+                       (int)(nul - name < 64 ? nul - name : 64), (const char *)name, size,
+                       len - off);
+      off += size;
+    }
+    if (!multipart) return 0;
+  }
+}
+
 /* Clamps to [0, 1] and maps NaN to 0. Written with comparisons rather than fminf/fmaxf, which
  * gcc leaves as libm calls on x86-64 and which dominated the compositing pass. */
 static inline float clamp01(float v) { return !(v > 0.0f) ? 0.0f : v > 1.0f ? 1.0f : v; }
@@ -135,6 +178,7 @@ int fg_image_decode(const void *bytes, size_t len, const float background_rgb[3]
   }
   const char *ext = reader_ext(name);
   if (strcmp(ext, "png") == 0) FG_TRY(png_check_chunks(b, len));
+  if (strcmp(ext, "exr") == 0) FG_TRY(exr_check_header(b, len));
   static const float white[3] = {1, 1, 1};
   if (!background_rgb) background_rgb = white;
   fg_shim_decoded d;
@@ -235,6 +279,7 @@ int fg_depth_decode(const void *bytes, size_t len, double scale, fg_depth_map *o
                               "keep depth; send " DEPTH_FORMATS);
   const char *ext = reader_ext(name);
   if (strcmp(ext, "png") == 0) FG_TRY(png_check_chunks(b, len));
+  if (strcmp(ext, "exr") == 0) FG_TRY(exr_check_header(b, len));
   /* The header first, so that a colour image sent as depth is refused before its pixels are
    * decoded, and so that integer samples other than 16-bit never reach OIIO's conversion to
    * float, which would normalise them. */

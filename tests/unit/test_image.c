@@ -5,6 +5,7 @@
 
 #include "core/error.h"
 #include "core/fsutil.h"
+#include "io/depth.h"
 #include "io/image.h"
 
 #include <stdint.h>
@@ -142,6 +143,20 @@ static void test_exr_linear(void) {
   ASSERT_EQ(img.h, H);
   for (int i = 0; i < W * H * 3; i++) ASSERT_NEAR(img.rgb[i], 0.7354, 5e-4);
   fg_image_release(&img);
+  /* A header attribute that declares more bytes than the file holds is refused before
+   * OpenEXR allocates them (a fuzzed 513-byte file declared a 1.9 GB string), and so is a
+   * file cut inside its header. */
+  size_t at = 8 + strlen(buf + 8) + 1; /* past the signature and the first attribute's name */
+  at += strlen(buf + at) + 1;          /* and its type: its 32-bit size */
+  ASSERT(at + 4 < len);
+  char saved[4];
+  memcpy(saved, buf + at, 4);
+  memcpy(buf + at, "\x13\x00\x00\x72", 4);
+  ASSERT_ERR(fg_image_decode(buf, len, white, &img), FG_EFORMAT, "declares 1912602643 bytes");
+  fg_depth_map dm;
+  ASSERT_ERR(fg_depth_decode(buf, len, 1.0, &dm), FG_EFORMAT, "declares");
+  memcpy(buf + at, saved, 4);
+  ASSERT_ERR(fg_image_decode(buf, at + 2, white, &img), FG_EFORMAT, "truncated");
   free(buf);
   free(path);
 
