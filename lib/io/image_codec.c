@@ -132,10 +132,10 @@ static void samples_to_float(const void *src, int type, size_t n, float *dst) {
 static void row_to_rgb(const float *in, size_t w, int nch, int alpha, int associated, int linear,
                        const float bg[3], float *out) {
   if (nch == 3) {
-    for (size_t i = 0; i < w * 3; i++) out[i] = linear ? srgb_encode(in[i]) : in[i];
+    for (size_t i = 0; i < w * 3; i++) out[i] = linear ? srgb_encode(in[i]) : clamp01(in[i]);
   } else if (nch == 1) {
     for (size_t i = 0; i < w; i++) {
-      float g = linear ? srgb_encode(in[i]) : in[i];
+      float g = linear ? srgb_encode(in[i]) : clamp01(in[i]);
       out[3 * i] = out[3 * i + 1] = out[3 * i + 2] = g;
     }
   } else if (nch == 2 && alpha == 1) {
@@ -191,9 +191,11 @@ int fg_image_decode(const void *bytes, size_t len, const float background_rgb[3]
   size_t w = (size_t)d.w, h = (size_t)d.h, nch = (size_t)d.nch;
   size_t ssize = d.type == FG_SHIM_U8 ? 1 : d.type == FG_SHIM_U16 ? 2 : 4;
   float *rgb = malloc(w * h * 3 * sizeof(float));
-  /* Plain sRGB colour converts straight into the output; anything else goes through one row
-   * of floats, which stays in cache, so the image is still walked once. */
-  int direct = nch == 3 && !d.linear;
+  /* Plain 8- or 16-bit sRGB colour converts straight into the output, its values in [0, 1] by
+   * construction; anything else goes through one row of floats, which stays in cache, so the
+   * image is still walked once. Float samples that are not linear light (signed integers,
+   * which OpenImageIO hands over as floats in [-1, 1]) are clamped there. */
+  int direct = nch == 3 && !d.linear && d.type != FG_SHIM_F32;
   float *row = direct ? NULL : malloc(w * nch * sizeof(float));
   if (!rgb || (!direct && !row)) {
     free(rgb);
