@@ -100,10 +100,26 @@ static void start(void) {
   /* h lives as long as the process: every input talks to it */
 }
 
+/* connect() to the server. A signal (libFuzzer's timer) may interrupt it; the connection
+ * then completes on its own and its outcome is read once the socket is writable. */
+static int connect_server(int fd) {
+  if (connect(fd, (const struct sockaddr *)&server, sizeof server) == 0) return 0;
+  if (errno != EINTR) return -1;
+  struct pollfd p = {.fd = fd, .events = POLLOUT};
+  int n;
+  while ((n = poll(&p, 1, 30000)) < 0 && errno == EINTR) {
+  }
+  int err = 0;
+  socklen_t len = sizeof err;
+  if (n != 1 || getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len) != 0) return -1;
+  errno = err;
+  return err ? -1 : 0;
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   start();
   int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0 || connect(fd, (const struct sockaddr *)&server, sizeof server) != 0) {
+  if (fd < 0 || connect_server(fd) != 0) {
     fprintf(stderr, "fuzz_multipart: cannot connect to the server: %s\n", strerror(errno));
     abort();
   }
