@@ -316,28 +316,29 @@ static void check_incomplete_models(void) {
       char *path = fg_path_join(tmpdir, "broken.safetensors");
       FILE *f = fopen(path, "wb");
       ASSERT(f);
-      char *hdr = malloc(1 << 20);
-      ASSERT(hdr);
+      static char hdr[1 << 20];
       size_t hl = 0, off = 0;
-      hl += (size_t)sprintf(hdr + hl, "{");
+      hl += (size_t)snprintf(hdr + hl, sizeof hdr - hl, "{");
       for (int i = 0; i < n; i++) {
         const clipgen_tensor *t = &ts[i];
         const int hit = strcmp(t->name, victims[v]) == 0;
         if (hit && mode == 0) continue;
         const char *dt = t->is_i64 ? "I64" : (hit && mode == 2 ? "I32" : "F32");
         size_t count = t->count;
-        hl += (size_t)sprintf(hdr + hl, "%s\"%s\":{\"dtype\":\"%s\",\"shape\":[", hl > 1 ? "," : "",
-                              t->name, dt);
+        hl += (size_t)snprintf(hdr + hl, sizeof hdr - hl,
+                               "%s\"%s\":{\"dtype\":\"%s\",\"shape\":[", hl > 1 ? "," : "",
+                               t->name, dt);
         for (int d = 0; d < t->ndim; d++)
-          hl += (size_t)sprintf(hdr + hl, "%s%lld", d ? "," : "",
-                                (long long)(hit && mode == 1 && d == 0 ? t->shape[d] + 1
-                                                                       : t->shape[d]));
+          hl += (size_t)snprintf(hdr + hl, sizeof hdr - hl, "%s%lld", d ? "," : "",
+                                 (long long)(hit && mode == 1 && d == 0 ? t->shape[d] + 1
+                                                                        : t->shape[d]));
         if (hit && mode == 1) count = count / (size_t)t->shape[0] * (size_t)(t->shape[0] + 1);
         const size_t nb = count * (t->is_i64 ? 8 : 4);
-        hl += (size_t)sprintf(hdr + hl, "],\"data_offsets\":[%zu,%zu]}", off, off + nb);
+        hl += (size_t)snprintf(hdr + hl, sizeof hdr - hl, "],\"data_offsets\":[%zu,%zu]}", off,
+                               off + nb);
         off += nb;
       }
-      hl += (size_t)sprintf(hdr + hl, "}");
+      hl += (size_t)snprintf(hdr + hl, sizeof hdr - hl, "}");
       while (hl % 8) hdr[hl++] = ' ';
       const uint64_t hl64 = hl;
       fwrite(&hl64, 8, 1, f);
@@ -346,7 +347,6 @@ static void check_incomplete_models(void) {
       for (size_t k = 0; k < off; k += sizeof zero)
         fwrite(zero, 1, off - k < sizeof zero ? off - k : sizeof zero, f);
       fclose(f);
-      free(hdr);
       fg_clip *c = (fg_clip *)1;
       const int rc = fg_clip_load(&c, path);
       printf("  %s %s: %s\n", mode == 0 ? "without" : (mode == 1 ? "reshaped" : "retyped"),
