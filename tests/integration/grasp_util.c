@@ -35,15 +35,20 @@ void g_scene(const char *name, const char *tf) {
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
   free(body);
-  char *path = h_fmt("/v1/scenes/%s/import", name);
-  body = tf ? h_fmt("{\"path\": \"%s\", \"transforms\": \"%s\"}", g_data, tf)
-            : h_fmt("{\"path\": \"%s\"}", g_data);
-  r = h_post_json(path, body);
+  r = g_import(name, tf);
   ASSERT_STATUS(r, 200);
   ASSERT_EQ(JINT(r->json, "imported"), G_VIEWS);
   h_resp_free(r);
+}
+
+h_resp *g_import(const char *scene, const char *tf) {
+  char *path = h_fmt("/v1/scenes/%s/import", scene);
+  char *body = tf ? h_fmt("{\"path\": \"%s\", \"transforms\": \"%s\"}", g_data, tf)
+                  : h_fmt("{\"path\": \"%s\"}", g_data);
+  h_resp *r = h_post_json(path, body);
   free(body);
   free(path);
+  return r;
 }
 
 void g_train(const char *scene, int steps) {

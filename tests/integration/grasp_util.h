@@ -28,6 +28,10 @@ void g_config(const char *imports, const char *extra);
  * (transforms file tf, NULL for transforms.json). */
 void g_scene(const char *name, const char *tf);
 
+/* POSTs the import of the data set (transforms file tf, NULL for transforms.json) to
+ * scene; no status is asserted. The caller frees the reply. */
+h_resp *g_import(const char *scene, const char *tf);
+
 /* Trains scene for steps and waits until done. */
 void g_train(const char *scene, int steps);
 

@@ -142,20 +142,13 @@ static void *upload_worker(void *arg) {
   return NULL;
 }
 
-static h_resp *import_request(void) {
-  char *body = h_fmt("{\"path\": \"%s\"}", g_dir());
-  h_resp *r = h_post_json("/v1/scenes/imp/import", body);
-  free(body);
-  return r;
-}
-
 static void *import_worker(void *arg) {
   worker *w = arg;
   while (!atomic_load(&w->stop)) {
     import_op *op = &g_imp[g_n_imp++];
     ASSERT(g_n_imp < 64);
     op->state = OP_UNKNOWN;
-    h_resp *r = import_request();
+    h_resp *r = g_import("imp", NULL);
     op->state = op_result(r, 200, "import");
     if (op->state == OP_ACKED) op->first = JINT(r->json, "frames.0");
     h_resp_free(r);
@@ -738,7 +731,7 @@ static void setup(const char *scenegen) {
 
   /* One import, timed, as the reference of what an import holds. */
   double t0 = t_now();
-  h_resp *r = import_request();
+  h_resp *r = g_import("imp", NULL);
   ASSERT_STATUS(r, 200);
   g_import_s = t_now() - t0;
   g_imp[g_n_imp++] = (import_op){OP_ACKED, JINT(r->json, "frames.0")};

@@ -177,13 +177,6 @@ static h_resp *upload_big(unsigned seed) {
   return r;
 }
 
-static h_resp *import_again(void) {
-  char *body = h_fmt("{\"path\": \"%s\"}", g_dir());
-  h_resp *r = h_post_json("/v1/scenes/s/import", body);
-  free(body);
-  return r;
-}
-
 static char *demo_body(void) {
   return g_demo_body_qp("s", "ball", "{\"n\": 16, \"std\": 0.02}", "");
 }
@@ -202,7 +195,7 @@ static void check_refusals(const snapshot *snap, unsigned seed0, long long steps
   r = upload_big(901);
   ASSERT_HTTP_ERROR(r, 507, "insufficient_storage");
   h_resp_free(r);
-  r = import_again();
+  r = g_import("s", NULL);
   ASSERT_HTTP_ERROR(r, 507, "insufficient_storage");
   h_resp_free(r);
   if (!some_room) {
@@ -324,7 +317,7 @@ int main(int argc, char **argv) {
   r = upload_big(903);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
-  r = import_again();
+  r = g_import("s", NULL);
   ASSERT_STATUS(r, 200);
   ASSERT_EQ(JINT(r->json, "imported"), G_VIEWS);
   h_resp_free(r);
