@@ -722,13 +722,16 @@ static void on_connection(void *cls, struct MHD_Connection *conn, void **socket_
     fg_metrics_add_http_connections(-1);
     return;
   }
-  fg_metrics_add_http_connections(1);
   const union MHD_ConnectionInfo *ci =
     MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
-  if (!ci) return;
-  int shed = 0;
-  *socket_context = fg_conns_open(h->conns, ci->connect_fd, mono_now(), &shed);
-  if (shed) fg_metrics_count_http_closed(FG_CONN_SHED, 1);
+  if (ci) {
+    int shed = 0;
+    *socket_context = fg_conns_open(h->conns, ci->connect_fd, mono_now(), &shed);
+    if (shed) fg_metrics_count_http_closed(FG_CONN_SHED, 1);
+  }
+  /* Counted once it is in the table (and uncounted above once it has left), so a scrape
+   * that sees a connection can rely on its place in the shedding order. */
+  fg_metrics_add_http_connections(1);
 }
 
 /* Shuts down connections past their deadlines every SWEEP_MS, under the limits of the
