@@ -11,6 +11,7 @@
 #include "config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "query/geometry.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -134,6 +135,31 @@ int fg_api_scene_voxels(fg_field_ref *ref, const fg_voxel_grid *g, const char *n
             name, built_s, fg_voxel_grid_count(g), g->voxel_size, fg_voxel_features_n_kept(vf),
             (double)fg_voxel_features_bytes(vf) / 1048576.0);
   }
+  return 0;
+}
+
+int fg_api_scene_alpha(fg_field_ref *ref, const fg_voxel_grid *g, const fg_scene_info *info,
+                       int n_threads, fg_voxels **vox, float **own, const float **alpha,
+                       fg_resp *resp) {
+  *vox = NULL;
+  *own = NULL;
+  *alpha = NULL;
+  const fg_field *field = fg_field_ref_field(ref);
+  if (field->cfg.feature_dim > 0 && g->voxel_size == info->params.voxel_size) {
+    if (fg_api_scene_voxels(ref, g, info->name, n_threads, vox, resp) != 0) return -1;
+    *alpha = fg_voxel_features_alpha(fg_voxels_features(*vox));
+    return 0;
+  }
+  float *a = malloc(fg_voxel_grid_count(g) * sizeof *a);
+  const int rc = a ? fg_voxel_alpha(field, g, a, n_threads)
+                   : fg_fail(FG_ENOMEM, "out of memory for %zu voxels", fg_voxel_grid_count(g));
+  if (rc != 0) {
+    free(a);
+    return fg_resp_error(resp, 500, "internal_error", "cannot sample the field of scene '%s': "
+                         "%s", info->name, fg_error_detail()), -1;
+  }
+  *own = a;
+  *alpha = a;
   return 0;
 }
 
