@@ -20,11 +20,17 @@
 const fg_route fg_api_routes[] = {
   {"GET", "/v1/health", "/v1/health", fg_api_health, FG_ROUTE_PUBLIC},
   {"GET", "/metrics", "/metrics", fg_api_metrics, 0},
+  /* The web viewer's page and files: public, so that the page can load and ask for the token
+   * (api_viewer.c). */
+  {"GET", "/", "/", fg_api_viewer_index, FG_ROUTE_PUBLIC | FG_ROUTE_OFFLOAD},
+  {"GET", "/viewer/{}", "/viewer/{file}", fg_api_viewer_file, FG_ROUTE_PUBLIC | FG_ROUTE_OFFLOAD},
   {"GET", "/v1/scenes", "/v1/scenes", fg_api_scenes_list, 0},
   {"POST", "/v1/scenes", "/v1/scenes", fg_api_scenes_create, 0},
   {"GET", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_get, 0},
   {"DELETE", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_delete, 0},
   {"GET", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_list, 0},
+  {"GET", "/v1/scenes/{}/frames/{}/image", "/v1/scenes/{s}/frames/{i}/image",
+   fg_api_frame_image, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_upload,
    FG_ROUTE_MULTIPART | FG_ROUTE_OFFLOAD | FG_ROUTE_LARGE_BODY},
   {"POST", "/v1/scenes/{}/import", "/v1/scenes/{s}/import", fg_api_scene_import,
@@ -35,6 +41,8 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/scenes/{}/heatmap", "/v1/scenes/{s}/heatmap", fg_api_scene_heatmap,
    FG_ROUTE_OFFLOAD},
   {"GET", "/v1/scenes/{}/geometry", "/v1/scenes/{s}/geometry", fg_api_scene_geometry,
+   FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/scenes/{}/points", "/v1/scenes/{s}/points", fg_api_scene_points,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image,
