@@ -267,6 +267,25 @@
     requestAnimationFrame(frame);
   }
 
+  /* Each grasp's rank and score beside its TCP, as HTML over the canvas: text stays sharp
+   * and costs no texture. Moved at every drawn frame, which only happens on a change. */
+  function updateLabels() {
+    const box = $('labels');
+    while (box.children.length > state.grasps.length) box.lastChild.remove();
+    const r = canvas.getBoundingClientRect();
+    state.grasps.forEach((g, i) => {
+      let el = box.children[i];
+      if (!el) el = box.appendChild(document.createElement('div'));
+      const p = project(g.pose.position);
+      el.hidden = !p;
+      if (!p) return;
+      el.textContent = `${i + 1}: ${g.score.toFixed(3)}`;
+      el.style.left = `${p.x - r.left}px`;
+      el.style.top = `${p.y - r.top}px`;
+      el.style.color = i === state.selectedGrasp ? '#ffd24a' : '';
+    });
+  }
+
   /* The page position (CSS pixels) of world point p, or null behind the camera. */
   function project(p) {
     const v = new THREE.Vector3(p[0], p[1], p[2]).project(camera);
@@ -628,6 +647,8 @@
 
   /* The task's demos on this scene as pose axes. */
   async function selectTask(name) {
+    // a task made since the page loaded (by a script, another client): list it first
+    if (name && !state.tasks.some((t) => t.name === name)) await loadTasks();
     $('task-select').value = name;
     empty(groups.demos);
     $('task-info').textContent = '';
@@ -931,6 +952,7 @@
       heatmap: !!state.heat, best: state.heat && state.heat.best,
       bestScore: state.heat && state.heat.bestScore,
       grasps: state.grasps.length, gripper: state.gripper && state.gripper.model,
+      selectedGrasp: state.selectedGrasp >= 0 ? state.grasps[state.selectedGrasp].pose.position : null,
       registers: $('registers').textContent,
       job: state.job && { id: state.job.id, state: state.job.state, step: state.job.step,
         steps: state.job.steps },
