@@ -9,8 +9,9 @@
  *     clicking a frustum shows the frame's photo (GET .../frames/{i}/image) beside the field's
  *     render from that pose (POST .../render);
  *   - the field as one THREE.Points of the solid voxels: GET .../points (the binary FGPC
- *     layout of proto/openapi.yaml); a heatmap (POST .../heatmap, format npy: the dense grid)
- *     recolours the same colour attribute in place, so a query costs no new geometry;
+ *     layout of proto/openapi.yaml); a heatmap (POST .../heatmap, format ply: the occupied
+ *     voxels with the daemon's turbo colours) recolours the same colour attribute in place,
+ *     so a query costs no new geometry;
  *   - tasks, their demos and the top-k grasps as the gripper model's boxes (POST .../grasps
  *     returns the boxes the collision check used), executed in dry run or for real;
  *   - a training job's progress from its Server-Sent Events, read with fetch() so that the
@@ -99,7 +100,8 @@
     try {
       r = await fetch(path, init);
     } catch (e) {
-      throw new ApiError(0, 'network', `${method} ${path}: no answer from fieldgripd (${e.message})`);
+      throw new ApiError(0, 'network',
+        `${method} ${path}: no answer from fieldgripd (${e.message})`);
     }
     if (r.ok) return r;
     let code = 'http_' + r.status, msg = r.statusText || 'failed';
@@ -131,6 +133,7 @@
   }
 
   const enc = encodeURIComponent;
+  const xyz = (p) => p.map((x) => x.toFixed(3)).join(', ');
   const scenePath = () => '/v1/scenes/' + enc(state.scene.name);
 
   /* ---------------------------------------------------------------- token */
@@ -351,7 +354,8 @@
     pos.push(...k[0], ...top, ...top, ...k[1]);
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.Float32BufferAttribute(pos, 3));
-    const l = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: selected ? 0xffd24a : 0x5fa8d3 }));
+    const colour = selected ? 0xffd24a : 0x5fa8d3;
+    const l = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: colour }));
     place(l, f.transform_matrix);
     l.userData.frame = f.frame;
     return l;
@@ -368,56 +372,9 @@
     return place(new THREE.AxesHelper(scale), pose.matrix);
   }
 
-  /* ---------------------------------------------------------------- colours */
-
-  /* Turbo (Google's colormap, as heatmaps use): the published polynomial fit, within a few
-   * levels of the 256-entry table (fg_turbo_rgb) the daemon colours its own heatmaps with. */
-  function turbo(t, out, o) {
-    t = Math.max(0, Math.min(1, t));
-    const r = 0.13572138 + t * (4.61539260 + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943))));
-    const g = 0.09140261 + t * (2.19418839 + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604))));
-    const b = 0.10667330 + t * (12.64194608 + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973))));
-    out[o] = Math.round(255 * Math.max(0, Math.min(1, r)));
-    out[o + 1] = Math.round(255 * Math.max(0, Math.min(1, g)));
-    out[o + 2] = Math.round(255 * Math.max(0, Math.min(1, b)));
-  }
-
   /* ---------------------------------------------------------------- point cloud */
 
-  /* The FGPC body of GET .../points (proto/openapi.yaml): a 64-byte little-endian header,
-   * f32 xyz[count][3], u8 rgba[count][4]. Read through a DataView, so the byte order is the
-   * format's whatever the machine's. */
-  function parseFgpc(buf) {
-    const dv = new DataView(buf);
-    const magic = String.fromCharCode(...new Uint8Array(buf, 0, 4));
-    if (magic !== 'FGPC' || dv.getUint32(4, true) !== 1)
-      throw new Error('GET .../points: not an FGPC version 1 body');
-    const hb = dv.getUint32(8, true), count = dv.getUint32(12, true);
-    if (buf.byteLength !== hb + count * 16)
-      throw new Error(`GET .../points: ${buf.byteLength} bytes for ${count} points`);
-    const cloud = {
-      count, nSolid: dv.getUint32(16, true), voxel: dv.getFloat32(20, true),
-      alpha: dv.getFloat32(24, true),
-      min: [dv.getFloat32(28, true), dv.getFloat32(32, true), dv.getFloat32(36, true)],
-      n: [dv.getUint32(40, true), dv.getUint32(44, true), dv.getUint32(48, true)],
-      xyz: new Float32Array(count * 3),
-      base: new Uint8Array(count * 3),  // the field's colours, kept to undo a heatmap
-      index: new Uint32Array(count),    // each point's flat voxel index, for heatmap grids
-    };
-    for (let i = 0; i < count * 3; i++) cloud.xyz[i] = dv.getFloat32(hb + 4 * i, true);
-    const rgba = new Uint8Array(buf, hb + count * 12, count * 4);
-    const [nx, ny, nz] = cloud.n;
-    for (let i = 0; i < count; i++) {
-      cloud.base.set(rgba.subarray(4 * i, 4 * i + 3), 3 * i);
-      // centres lie at min + (i + 0.5) * voxel: floor recovers i exactly
-      const v = [0, 1, 2].map((a) => Math.floor((cloud.xyz[3 * i + a] - cloud.min[a]) / cloud.voxel));
-      const ix = Math.min(nx - 1, Math.max(0, v[0]));
-      const iy = Math.min(ny - 1, Math.max(0, v[1]));
-      const iz = Math.min(nz - 1, Math.max(0, v[2]));
-      cloud.index[i] = (iz * ny + iy) * nx + ix;
-    }
-    return cloud;
-  }
+  const { parseFgpc, parsePly } = window.fgFormats;
 
   async function loadPoints() {
     const alpha = Number($('alpha').value) || 0.1;
@@ -455,24 +412,6 @@
 
   /* ---------------------------------------------------------------- heatmaps */
 
-  /* A little-endian float32 .npy (format 1.0 or 2.0) into {shape, data}. */
-  function parseNpy(buf) {
-    const dv = new DataView(buf);
-    const bytes = new Uint8Array(buf);
-    if (bytes[0] !== 0x93 || String.fromCharCode(...bytes.subarray(1, 6)) !== 'NUMPY')
-      throw new Error('heatmap: not a .npy body');
-    const major = bytes[6];
-    const hlen = major === 1 ? dv.getUint16(8, true) : dv.getUint32(8, true);
-    const start = major === 1 ? 10 : 12;
-    const header = String.fromCharCode(...bytes.subarray(start, start + hlen));
-    if (!/'descr':\s*'<f4'/.test(header)) throw new Error('heatmap: not a float32 .npy');
-    const shape = (header.match(/'shape':\s*\(([^)]*)\)/)[1].match(/\d+/g) || []).map(Number);
-    const n = shape.reduce((a, b) => a * b, 1), off = start + hlen;
-    const data = new Float32Array(n);
-    for (let i = 0; i < n; i++) data[i] = dv.getFloat32(off + 4 * i, true);
-    return { shape, data };
-  }
-
   /* The query of the form (or a deep link): text or embedding, and negatives. */
   function formQuery() {
     const kind = $('query-kind').value, raw = $('query-input').value.trim();
@@ -490,53 +429,53 @@
     return q;
   }
 
-  /* Scores the cloud's voxels for query q: the dense grid (npy), looked up at each point's
-   * voxel, coloured by turbo between the lowest and highest score shown; the best voxel of
-   * the grid is marked. */
+  /* Scores the cloud's voxels for query q: POST .../heatmap as a PLY point list, whose
+   * colours are the daemon's turbo map between the lowest and highest score listed (the
+   * colour map has one home, lib/query), written over the colour of the cloud's point in the
+   * same voxel. The list is best first: its first voxel is marked. */
   async function runHeatmap(q) {
     state.query = q;
     if (!state.cloud) return;
-    const body = Object.assign({}, q, { format: 'npy', alpha_threshold: state.cloud.alpha });
+    const body = Object.assign({}, q, { format: 'ply', alpha_threshold: state.cloud.alpha });
     const r = await api('POST', `${scenePath()}/heatmap`, body);
-    const { shape, data } = parseNpy(await r.arrayBuffer());
-    const c = state.cloud;
-    if (shape.join() !== [c.n[2], c.n[1], c.n[0]].join())
-      throw new Error(`heatmap grid [${shape}] differs from the points' [${c.n[2]},${c.n[1]},${c.n[0]}]`);
-    let lo = Infinity, hi = -Infinity, best = -1;
-    for (let i = 0; i < data.length; i++) {
-      const s = data[i];
-      if (!(s === s)) continue; // NaN: free space
-      if (s > hi) { hi = s; best = i; }
-      if (s < lo) lo = s;
-    }
+    const list = parsePly(await r.arrayBuffer());
+    const c = state.cloud, [nx, ny, nz] = c.n;
     const colours = points.geometry.attributes.color;
-    const span = hi > lo ? hi - lo : 1;
-    let scored = 0;
-    for (let i = 0; i < c.count; i++) {
-      const s = data[c.index[i]];
-      if (s === s) {
-        turbo((s - lo) / span, colours.array, 3 * i);
-        scored++;
-      } else { // not occupied at the heatmap's threshold: the field's colour, dimmed
-        for (let k = 0; k < 3; k++) colours.array[3 * i + k] = c.base[3 * i + k] >> 2;
+    // voxels that are not listed (none at the cloud's own alpha): the field's colour, dimmed
+    for (let i = 0; i < 3 * c.count; i++) colours.array[i] = c.base[i] >> 2;
+    let lo = Infinity, hi = -Infinity, scored = 0;
+    for (let k = 0; k < list.count; k++) {
+      const v = [0, 1, 2].map((a) => Math.floor((list.xyz[3 * k + a] - c.min[a]) / c.voxel));
+      if (v[0] < 0 || v[1] < 0 || v[2] < 0 || v[0] >= nx || v[1] >= ny || v[2] >= nz) continue;
+      const s = list.score[k];
+      lo = Math.min(lo, s);
+      hi = Math.max(hi, s);
+      // the cloud is in flat-index order (FGPC): find the voxel's point by bisection
+      const flat = (v[2] * ny + v[1]) * nx + v[0];
+      let a = 0, b = c.count;
+      while (a < b) {
+        const m = (a + b) >> 1;
+        if (c.index[m] < flat) a = m + 1; else b = m;
       }
+      if (a === c.count || c.index[a] !== flat) continue; // thinned away
+      colours.array.set(list.rgb.subarray(3 * k, 3 * k + 3), 3 * a);
+      scored++;
     }
     colours.needsUpdate = true;
     empty(groups.marker);
     const heat = { lo, hi, scored, best: null, bestScore: null };
-    if (best >= 0) {
-      const [nx, ny] = c.n;
-      const ix = best % nx, iy = Math.floor(best / nx) % ny, iz = Math.floor(best / (nx * ny));
-      heat.best = [ix, iy, iz].map((i, a) => c.min[a] + (i + 0.5) * c.voxel);
-      heat.bestScore = hi;
-      // a white ring around the best voxel and a post down to it, visible through the cloud
+    if (list.count) {
+      heat.best = Array.from(list.xyz.subarray(0, 3));
+      heat.bestScore = list.score[0];
+      // a white ring around the best voxel and a post up from it, visible through the cloud
       const ring = new THREE.Mesh(new THREE.RingGeometry(2.5 * c.voxel, 3.5 * c.voxel, 32),
         new THREE.MeshBasicMaterial({ color: 0xffffff, side: THREE.DoubleSide, depthTest: false }));
       ring.position.set(...heat.best);
       const post = new THREE.BufferGeometry();
       post.setAttribute('position', new THREE.Float32BufferAttribute([...heat.best,
         heat.best[0], heat.best[1], heat.best[2] + 0.12], 3));
-      const line = new THREE.Line(post, new THREE.LineBasicMaterial({ color: 0xffffff, depthTest: false }));
+      const line = new THREE.Line(post,
+        new THREE.LineBasicMaterial({ color: 0xffffff, depthTest: false }));
       ring.renderOrder = line.renderOrder = 1;
       groups.marker.add(ring, line);
     }
@@ -545,7 +484,7 @@
     $('legend-lo').textContent = isFinite(lo) ? lo.toFixed(3) : '-';
     $('legend-hi').textContent = isFinite(hi) ? hi.toFixed(3) : '-';
     $('query-info').textContent = heat.best
-      ? `best ${heat.best.map((x) => x.toFixed(3)).join(', ')} m, score ${hi.toFixed(3)}; ` +
+      ? `best ${xyz(heat.best)} m, score ${heat.bestScore.toFixed(3)}; ` +
         `${scored} of ${c.count} points scored`
       : 'no occupied voxel at this alpha';
     changed(true);
@@ -628,7 +567,11 @@
     });
     return Promise.all([photo, render]);
   }
-  $('frame-close').onclick = () => { $('frame-view').hidden = true; state.frame = -1; drawFrustums(); };
+  $('frame-close').onclick = () => {
+    $('frame-view').hidden = true;
+    state.frame = -1;
+    drawFrustums();
+  };
 
   /* ---------------------------------------------------------------- tasks and grasps */
 
@@ -680,13 +623,14 @@
     list.textContent = '';
     res.grasps.forEach((g, i) => {
       const li = document.createElement('li');
-      li.textContent = `${g.score.toFixed(3)} ${g.task} at ${g.pose.position.map((x) => x.toFixed(3)).join(', ')}` +
+      li.textContent = `${g.score.toFixed(3)} ${g.task} at ${xyz(g.pose.position)}` +
         (g.collision_free ? '' : ' (collides)');
       li.onclick = () => selectGrasp(i);
       list.appendChild(li);
     });
-    $('task-info').textContent = res.grasps.length ? `task ${res.task}: ${res.grasps.length} grasps` +
-      (res.retrieval ? ' (retrieved by the query)' : '') : `no grasp: ${res.reason}`;
+    $('task-info').textContent = !res.grasps.length ? `no grasp: ${res.reason}`
+      : `task ${res.task}: ${res.grasps.length} grasps` +
+        (res.retrieval ? ' (retrieved by the query)' : '');
     $('grasp-actions').hidden = !res.grasps.length;
     $('registers').textContent = '';
     drawGrasps();
@@ -706,9 +650,11 @@
       const approach = new THREE.BufferGeometry();
       approach.setAttribute('position', new THREE.Float32BufferAttribute(
         [...g.pre_grasp.position, ...g.pose.position], 3));
-      groups.grasps.add(lines, new THREE.Line(approach, new THREE.LineBasicMaterial({ color: colour })));
+      const line = new THREE.Line(approach, new THREE.LineBasicMaterial({ color: colour }));
+      groups.grasps.add(lines, line);
     });
-    [...$('grasp-list').children].forEach((li, i) => li.classList.toggle('selected', i === state.selectedGrasp));
+    [...$('grasp-list').children].forEach((li, i) =>
+      li.classList.toggle('selected', i === state.selectedGrasp));
     changed(true);
   }
 
@@ -747,11 +693,14 @@
     const g = state.grasps[state.selectedGrasp];
     if (!g) return showError('select a grasp first');
     $('execute-question').textContent = `Move the robot to ${g.kind} at ` +
-      `${g.pose.position.map((x) => x.toFixed(3)).join(', ')} (task ${g.task})?`;
+      `${xyz(g.pose.position)} (task ${g.task})?`;
     $('execute-confirm').hidden = false;
   };
   $('execute-no').onclick = () => { $('execute-confirm').hidden = true; };
-  $('execute-yes').onclick = () => { $('execute-confirm').hidden = true; run(() => execute(false)); };
+  $('execute-yes').onclick = () => {
+    $('execute-confirm').hidden = true;
+    run(() => execute(false));
+  };
 
   /* ---------------------------------------------------------------- training */
 
@@ -831,7 +780,8 @@
     }
     $('train-progress').value = job.steps ? job.step / job.steps : 0;
     $('train-info').textContent = `job ${job.id}: ${job.state}, step ${job.step} of ${job.steps}` +
-      (typeof job.eta_s === 'number' && job.state === 'running' ? `, ${Math.round(job.eta_s)} s left` : '');
+      (typeof job.eta_s === 'number' && job.state === 'running'
+        ? `, ${Math.round(job.eta_s)} s left` : '');
     drawPlot();
     changed(false);
   }
@@ -850,7 +800,8 @@
     const vec = (s) => s && s.split(',').map(Number).length === 3 ? s.split(',').map(Number) : null;
     const centre = [0, 1, 2].map((a) => (ws.min[a] + ws.max[a]) / 2);
     const size = Math.max(...[0, 1, 2].map((a) => ws.max[a] - ws.min[a]));
-    const eye = vec(link.get('eye')) || [centre[0] - 0.9 * size, centre[1] - 1.1 * size, centre[2] + 1.0 * size];
+    const eye = vec(link.get('eye')) ||
+      [centre[0] - 0.9 * size, centre[1] - 1.1 * size, centre[2] + 1.0 * size];
     const target = vec(link.get('target')) || centre;
     const fov = Number(link.get('fov'));
     camera.fov = fov > 1 && fov < 170 ? fov : DEFAULT_FOV_DEG;
@@ -952,7 +903,8 @@
       heatmap: !!state.heat, best: state.heat && state.heat.best,
       bestScore: state.heat && state.heat.bestScore,
       grasps: state.grasps.length, gripper: state.gripper && state.gripper.model,
-      selectedGrasp: state.selectedGrasp >= 0 ? state.grasps[state.selectedGrasp].pose.position : null,
+      selectedGrasp: state.selectedGrasp >= 0
+        ? state.grasps[state.selectedGrasp].pose.position : null,
       registers: $('registers').textContent,
       job: state.job && { id: state.job.id, state: state.job.state, step: state.job.step,
         steps: state.job.steps },

@@ -176,13 +176,13 @@ static shot screenshot(const char *save_as) {
   return s;
 }
 
-/* A heatmap's hot colour: within a few levels of turbo's upper quarter (t >= 0.75), which the
- * page paints the best-scoring voxels with (its polynomial turbo is within a few levels of
- * the table). */
+/* A heatmap's hot colour: turbo's upper quarter (t >= 0.75), the daemon's colours of the
+ * best-scoring voxels, which the page draws as they are (within a level or two of
+ * rounding). */
 static int is_hot(const uint8_t *px) {
   for (int i = 192; i < 256; i++) {
     const uint8_t *t = fg_turbo_rgb[i];
-    if (abs(px[0] - t[0]) <= 12 && abs(px[1] - t[1]) <= 12 && abs(px[2] - t[2]) <= 12) return 1;
+    if (abs(px[0] - t[0]) <= 2 && abs(px[1] - t[1]) <= 2 && abs(px[2] - t[2]) <= 2) return 1;
   }
   return 0;
 }
