@@ -406,7 +406,7 @@
     empty(groups.marker);
     $('points-info').textContent = `${cloud.count} points` +
       (cloud.count < cloud.nSolid ? ` (of ${cloud.nSolid} solid voxels)` : '') +
-      ` at ${(cloud.voxel * 100).toFixed(1)} cm, alpha >= ${cloud.alpha.toFixed(3)}`;
+      ` at ${(cloud.voxel * 100).toFixed(1)} cm, alpha >= ${+cloud.alpha.toPrecision(3)}`;
     changed(true);
   }
 
@@ -878,6 +878,7 @@
         $('query-input').value = link.get('embedding');
       }
       if (link.get('negatives')) $('negatives').value = link.get('negatives');
+      if (link.get('alpha')) $('alpha').value = link.get('alpha');
       state.query = formQuery();
       await openScene(name, true);
       if (link.get('task')) {
@@ -924,6 +925,27 @@
     findGrasps: () => run(findGrasps).then(status),
     selectGrasp: (i) => { selectGrasp(i); return status(); },
     dryRun: () => run(() => execute(true)).then(status),
+    /* Turns the view once around in n drawn frames and resolves with the mean time per
+     * frame (ms) and the points drawn: how fast this machine draws the cloud. */
+    benchmark(n) {
+      n = n || 60;
+      return new Promise((resolve) => {
+        let k = 0, t0 = 0;
+        const step = (t) => {
+          if (k === 1) t0 = t; // the first frame's timestamp starts the clock
+          if (k === n + 1) {
+            const count = state.cloud ? state.cloud.count : 0;
+            resolve({ frames: n, msPerFrame: (t - t0) / n, points: count });
+            return;
+          }
+          orbit.az += 2 * Math.PI / n;
+          orbitApply();
+          k++;
+          requestAnimationFrame(step);
+        };
+        requestAnimationFrame(step);
+      });
+    },
     /* Resolves with status() once pred() holds (checked at every change, not polled);
      * rejects with the status after timeoutMs. */
     waitFor(pred, timeoutMs) {
