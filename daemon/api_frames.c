@@ -318,7 +318,8 @@ int fg_api_frame_image(fg_req *req, fg_resp *resp) {
   if (!px) {
     rc = fg_fail(FG_ENOMEM, "out of memory for a %dx%d image", f.cam.w, f.cam.h);
   } else {
-    for (size_t i = 0; i < n; i++) px[i] = (uint8_t)(((uint32_t)f.rgb[i] * 255u + 32767u) / 65535u);
+    for (size_t i = 0; i < n; i++)
+      px[i] = (uint8_t)(((uint32_t)f.rgb[i] * 255u + 32767u) / 65535u); /* 16 to 8 bits */
     rc = fg_decoder_encode_png(req->app->decoder, px, f.cam.w, f.cam.h, 3, 8, &png, &png_len);
   }
   free(px);

@@ -48,7 +48,8 @@ static void default_dir_find(void) {
   if (snprintf(dir, sizeof dir, "%s/../viewer", exe) >= (int)sizeof dir) return;
   snprintf(index, sizeof index, "%s/index.html", dir);
   char real[PATH_MAX];
-  if (access(index, R_OK) == 0 && realpath(dir, real)) snprintf(g_default_dir, sizeof g_default_dir, "%s", real);
+  if (access(index, R_OK) == 0 && realpath(dir, real))
+    snprintf(g_default_dir, sizeof g_default_dir, "%s", real);
 }
 
 /* The folder the viewer's files are served from. */

@@ -297,7 +297,7 @@
     return { x: r.left + (v.x + 1) / 2 * r.width, y: r.top + (1 - v.y) / 2 * r.height };
   }
 
-  /* ---------------------------------------------------------------- geometry helpers */
+  /* ---------------------------------------------------------------- geometry */
 
   const m4 = (rows) => new THREE.Matrix4().set(...rows[0], ...rows[1], ...rows[2], ...rows[3]);
 

@@ -3,7 +3,7 @@
  * JSON commands from fd 3 and writes replies and events to fd 4, each message ended by a NUL
  * byte), so there is no port, no WebSocket handshake and nothing to race for.
  *
- * Like the harness, every helper asserts instead of returning an error, except cdp_start,
+ * Like the harness, every function asserts instead of returning an error, except cdp_start,
  * whose failure the test turns into a skip (exit 77: Chromium cannot run here). The browser
  * runs in its own process group, which an atexit hook kills, so no browser process outlives
  * the test. */

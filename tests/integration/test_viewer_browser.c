@@ -54,7 +54,7 @@ static const double EYE[3] = {0.45, -0.75, 0.6}, TARGET[3] = {0.45, 0.0, 0.03};
 
 static char *g_session;
 
-/* ---------------------------------------------------------------- page helpers */
+/* ---------------------------------------------------------------- the page */
 
 static json_t *eval(const char *expr, double timeout_s) {
   return cdp_eval(g_session, expr, timeout_s);
