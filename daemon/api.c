@@ -11,6 +11,7 @@
 #include "config.h"
 #include "core/error.h"
 #include "core/log.h"
+#include "query/geometry.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -19,11 +20,17 @@
 const fg_route fg_api_routes[] = {
   {"GET", "/v1/health", "/v1/health", fg_api_health, FG_ROUTE_PUBLIC},
   {"GET", "/metrics", "/metrics", fg_api_metrics, 0},
+  /* The web viewer's page and files: public, so that the page can load and ask for the token
+   * (api_viewer.c). */
+  {"GET", "/", "/", fg_api_viewer_index, FG_ROUTE_PUBLIC | FG_ROUTE_OFFLOAD},
+  {"GET", "/viewer/{}", "/viewer/{file}", fg_api_viewer_file, FG_ROUTE_PUBLIC | FG_ROUTE_OFFLOAD},
   {"GET", "/v1/scenes", "/v1/scenes", fg_api_scenes_list, 0},
   {"POST", "/v1/scenes", "/v1/scenes", fg_api_scenes_create, 0},
   {"GET", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_get, 0},
   {"DELETE", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_delete, 0},
   {"GET", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_list, 0},
+  {"GET", "/v1/scenes/{}/frames/{}/image", "/v1/scenes/{s}/frames/{i}/image",
+   fg_api_frame_image, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_upload,
    FG_ROUTE_MULTIPART | FG_ROUTE_OFFLOAD | FG_ROUTE_LARGE_BODY},
   {"POST", "/v1/scenes/{}/import", "/v1/scenes/{s}/import", fg_api_scene_import,
@@ -34,6 +41,8 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/scenes/{}/heatmap", "/v1/scenes/{s}/heatmap", fg_api_scene_heatmap,
    FG_ROUTE_OFFLOAD},
   {"GET", "/v1/scenes/{}/geometry", "/v1/scenes/{s}/geometry", fg_api_scene_geometry,
+   FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/scenes/{}/points", "/v1/scenes/{s}/points", fg_api_scene_points,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image,
@@ -134,6 +143,31 @@ int fg_api_scene_voxels(fg_field_ref *ref, const fg_voxel_grid *g, const char *n
             name, built_s, fg_voxel_grid_count(g), g->voxel_size, fg_voxel_features_n_kept(vf),
             (double)fg_voxel_features_bytes(vf) / 1048576.0);
   }
+  return 0;
+}
+
+int fg_api_scene_alpha(fg_field_ref *ref, const fg_voxel_grid *g, const fg_scene_info *info,
+                       int n_threads, fg_voxels **vox, float **own, const float **alpha,
+                       fg_resp *resp) {
+  *vox = NULL;
+  *own = NULL;
+  *alpha = NULL;
+  const fg_field *field = fg_field_ref_field(ref);
+  if (field->cfg.feature_dim > 0 && g->voxel_size == info->params.voxel_size) {
+    if (fg_api_scene_voxels(ref, g, info->name, n_threads, vox, resp) != 0) return -1;
+    *alpha = fg_voxel_features_alpha(fg_voxels_features(*vox));
+    return 0;
+  }
+  float *a = malloc(fg_voxel_grid_count(g) * sizeof *a);
+  const int rc = a ? fg_voxel_alpha(field, g, a, n_threads)
+                   : fg_fail(FG_ENOMEM, "out of memory for %zu voxels", fg_voxel_grid_count(g));
+  if (rc != 0) {
+    free(a);
+    return fg_resp_error(resp, 500, "internal_error", "cannot sample the field of scene '%s': "
+                         "%s", info->name, fg_error_detail()), -1;
+  }
+  *own = a;
+  *alpha = a;
   return 0;
 }
 

@@ -22,6 +22,7 @@ int fg_api_scene_get(fg_req *req, fg_resp *resp);
 int fg_api_scene_delete(fg_req *req, fg_resp *resp);
 int fg_api_frames_upload(fg_req *req, fg_resp *resp);
 int fg_api_frames_list(fg_req *req, fg_resp *resp);
+int fg_api_frame_image(fg_req *req, fg_resp *resp);
 int fg_api_scene_import(fg_req *req, fg_resp *resp);
 int fg_api_train_start(fg_req *req, fg_resp *resp);
 int fg_api_jobs_list(fg_req *req, fg_resp *resp);
@@ -31,6 +32,9 @@ int fg_api_job_events(fg_req *req, fg_resp *resp);
 int fg_api_scene_render(fg_req *req, fg_resp *resp);
 int fg_api_scene_heatmap(fg_req *req, fg_resp *resp);
 int fg_api_scene_geometry(fg_req *req, fg_resp *resp);
+int fg_api_scene_points(fg_req *req, fg_resp *resp);
+int fg_api_viewer_index(fg_req *req, fg_resp *resp);
+int fg_api_viewer_file(fg_req *req, fg_resp *resp);
 int fg_api_embed_text(fg_req *req, fg_resp *resp);
 int fg_api_embed_image(fg_req *req, fg_resp *resp);
 int fg_api_robot_command(fg_req *req, fg_resp *resp);
@@ -92,6 +96,17 @@ struct fg_voxels;
 struct fg_voxel_grid;
 int fg_api_scene_voxels(fg_field_ref *ref, const struct fg_voxel_grid *g, const char *name,
                         int n_threads, struct fg_voxels **out, fg_resp *resp);
+
+/* The voxel opacities alpha (nz, ny, nx) of ref's field on grid g, for the geometry and the
+ * point cloud: from the field's voxel cache (fg_api_scene_voxels) when g is the scene's own
+ * grid (the voxel size of info) and the field has features (only then is there a cache);
+ * else sampled for this request alone, so that a one-off grid does not evict the cache that
+ * heatmaps use. On success *alpha points into *vox (the cache's, fg_voxels_release) or *own
+ * (malloc'd, free), whichever the call set (the other is NULL), and 0 is returned; else -1
+ * after answering 500. */
+int fg_api_scene_alpha(fg_field_ref *ref, const struct fg_voxel_grid *g,
+                       const fg_scene_info *info, int n_threads, struct fg_voxels **vox,
+                       float **own, const float **alpha, fg_resp *resp);
 
 /* 0 when query q (query.h) can score field f of scene `name`; else answers 409 no_features (a
  * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was

@@ -73,6 +73,26 @@ typedef struct fg_api_geometry_req {
 int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params *params,
                           fg_api_geometry_req *r, fg_resp *resp);
 
+/* GET /v1/scenes/{s}/points's query string, as the handler looked it up (each value NULL
+ * when absent; unknown as for geometry). */
+typedef struct fg_api_points_query {
+  const char *unknown, *alpha, *voxel_size, *max_points;
+} fg_api_points_query;
+
+/* The most points one reply carries (64 MiB of FGPC): max_points is 1..this. */
+#define FG_API_POINTS_MAX ((size_t)4 << 20)
+#define FG_API_POINTS_DEFAULT 200000
+
+typedef struct fg_api_points_req {
+  float alpha;       /* solid voxels have alpha >= this, in (0, 1) */
+  double voxel_size; /* metres, > 0 */
+  size_t max_points; /* 1..FG_API_POINTS_MAX */
+} fg_api_points_req;
+
+/* The points query q against the scene's params into *r. 0, or -1 after answering 400. */
+int fg_api_parse_points(const fg_api_points_query *q, const fg_scene_params *params,
+                        fg_api_points_req *r, fg_resp *resp);
+
 typedef struct fg_api_render_req {
   double T_world_cam[16]; /* OpenGL convention */
   fg_camera cam;          /* PINHOLE, w and h set, at most FG_API_RENDER_MAX_SIDE */

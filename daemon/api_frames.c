@@ -1,4 +1,4 @@
-/* Frames: upload one (multipart), import a data set folder, list. */
+/* Frames: upload one (multipart), import a data set folder, list, and a frame's image. */
 #include "api.h"
 #include "api_decode.h"
 #include "decoder.h"
@@ -280,6 +280,54 @@ int fg_api_frames_list(fg_req *req, fg_resp *resp) {
   free(frames);
   free(indices);
   fg_resp_json(resp, 200, json_pack("{s:o}", "frames", arr));
+  return 0;
+}
+
+/* ---------------------------------------------------------------- image */
+
+/* GET /v1/scenes/{s}/frames/{i}/image: the frame's stored image (undistorted and downscaled
+ * as training sees it, sRGB) as an 8-bit RGB PNG, encoded in a decoder child like renders,
+ * so that a viewer can show a photo beside the field's render from the same camera. */
+int fg_api_frame_image(fg_req *req, fg_resp *resp) {
+  const char *num = req->params[1];
+  char *end;
+  errno = 0;
+  const long number = strtol(num, &end, 10);
+  if (num[0] < '0' || num[0] > '9' || *end || errno == ERANGE || number > INT_MAX)
+    return fg_resp_error(resp, 400, "invalid_request", "the frame number must be a "
+                         "non-negative integer as GET /v1/scenes/%s/frames lists them, got "
+                         "\"%.40s\"", req->params[0], num);
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  fg_frame f;
+  int rc = fg_scene_load_frame(s, (int)number, &f);
+  if (rc == FG_ENOENT) {
+    fg_resp_error(resp, 404, "frame_not_found", "scene '%s' has no frame %ld; GET "
+                  "/v1/scenes/%s/frames lists them", fg_scene_name(s), number, fg_scene_name(s));
+    fg_scene_unref(s);
+    return 0;
+  }
+  fg_scene_unref(s);
+  if (rc != 0)
+    return fg_resp_error(resp, 500, "internal_error", "cannot read the frame: %s",
+                         fg_error_detail());
+  const size_t n = (size_t)f.cam.w * (size_t)f.cam.h * 3;
+  uint8_t *px = malloc(n ? n : 1);
+  uint8_t *png = NULL;
+  size_t png_len = 0;
+  if (!px) {
+    rc = fg_fail(FG_ENOMEM, "out of memory for a %dx%d image", f.cam.w, f.cam.h);
+  } else {
+    for (size_t i = 0; i < n; i++)
+      px[i] = (uint8_t)(((uint32_t)f.rgb[i] * 255u + 32767u) / 65535u); /* 16 to 8 bits */
+    rc = fg_decoder_encode_png(req->app->decoder, px, f.cam.w, f.cam.h, 3, 8, &png, &png_len);
+  }
+  free(px);
+  fg_frame_clear(&f);
+  if (rc != 0)
+    return fg_resp_error(resp, 500, "internal_error", "cannot encode the PNG: %s",
+                         fg_error_detail());
+  fg_resp_take(resp, 200, "image/png", (char *)png, png_len);
   return 0;
 }
 

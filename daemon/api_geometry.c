@@ -25,16 +25,6 @@
 static const char *const geometry_keys[] = {"kind", "threshold", "alpha", "voxel_size"};
 #define N_GEOMETRY_KEYS (sizeof geometry_keys / sizeof geometry_keys[0])
 
-/* A whole query-string value as a finite number. */
-static int parse_number(const char *s, double *out) {
-  if (!s || !*s) return -1;
-  char *end;
-  const double v = strtod(s, &end);
-  if (*end || !isfinite(v)) return -1;
-  *out = v;
-  return 0;
-}
-
 /* Parses the query string against the scene's parameters into *r; answers 400 itself and
  * returns -1 when it is wrong. */
 int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params *params,
@@ -58,7 +48,7 @@ int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params 
                          "\"alpha\", not both"), -1;
   if (!thr) thr = alias;
   double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
-  if (thr && (parse_number(thr, &a) != 0 || !(a > 0.0 && a < 1.0)))
+  if (thr && (fg_query_number(thr, &a) != 0 || !(a > 0.0 && a < 1.0)))
     return fg_resp_error(resp, 400, "invalid_request", "\"threshold\" must be a number in (0, 1) "
                          "(default %g): a voxel is solid when its opacity alpha = 1 - "
                          "exp(-sigma * voxel_size) reaches it; got \"%.40s\"",
@@ -68,7 +58,7 @@ int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params 
   r->voxel_size = params->voxel_size;
   const char *vs = q->voxel_size;
   double v = 0;
-  if (vs && (parse_number(vs, &v) != 0 || !(v > 0.0)))
+  if (vs && (fg_query_number(vs, &v) != 0 || !(v > 0.0)))
     return fg_resp_error(resp, 400, "invalid_request", "\"voxel_size\" must be a positive "
                          "number of metres (default the scene's, %g m), got \"%.40s\"",
                          params->voxel_size, vs), -1;
@@ -114,21 +104,9 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
   const int threads = fg_conf_threads(req->conf);
 
   const float *alpha;
-  const int cached = field->cfg.feature_dim > 0 && r.voxel_size == info.params.voxel_size;
-  if (cached) {
-    if (fg_api_scene_voxels(ref, &grid, info.name, threads, &vox, resp) != 0) goto out;
-    alpha = fg_voxel_features_alpha(fg_voxels_features(vox));
-  } else {
-    own_alpha = malloc(fg_voxel_grid_count(&grid) * sizeof *own_alpha);
-    rc = own_alpha ? fg_voxel_alpha(field, &grid, own_alpha, threads)
-                   : fg_fail(FG_ENOMEM, "out of memory for %zu voxels", fg_voxel_grid_count(&grid));
-    if (rc != 0) {
-      fg_resp_error(resp, 500, "internal_error", "cannot sample the field of scene '%s': %s",
-                    info.name, fg_error_detail());
-      goto out;
-    }
-    alpha = own_alpha;
-  }
+  if (fg_api_scene_alpha(ref, &grid, &info, threads, &vox, &own_alpha, &alpha, resp) != 0)
+    goto out;
+  const int cached = vox != NULL;
 
   rc = r.points ? fg_mesh_points(&grid, alpha, r.threshold, &m)
                 : fg_mesh_marching_cubes(&grid, alpha, r.threshold, &m);

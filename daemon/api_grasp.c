@@ -28,6 +28,7 @@
 #include "core/pose.h"
 #include "core/rng.h"
 #include "grasp/grasp.h"
+#include "grasp/gripper.h"
 
 #include <inttypes.h>
 #include <stdio.h>
@@ -171,6 +172,23 @@ static json_t *grasp_json(const fg_grasp_entry *e, const fg_grasp_result_pose *p
                    fg_json_pose(p->T_world_gripper), "pre_grasp", fg_json_pose(T_world_pre),
                    "score", p->score, "task", t->name, "kind", fg_task_kind_name(t->kind),
                    "width", e->width_m, "collision_free", p->collision_free);
+}
+
+/* The gripper the grasps were checked with: the [gripper] model's boxes (palm, finger at -y,
+ * finger at +y) at the grasps' width, in the gripper frame, so that a client draws exactly
+ * what the collision check saw. */
+static json_t *gripper_json(fg_gripper_model model, double width_m) {
+  fg_gripper_box b[FG_GRIPPER_N_BOXES];
+  if (fg_gripper_boxes(model, width_m, b) != 0) return json_null();
+  static const char *const names[FG_GRIPPER_N_BOXES] = {"palm", "finger_minus_y",
+                                                        "finger_plus_y"};
+  json_t *boxes = json_array();
+  for (int i = 0; i < FG_GRIPPER_N_BOXES; i++)
+    json_array_append_new(boxes, json_pack("{s:s, s:o, s:o}", "name", names[i], "centre",
+                                           fg_json_from_vec(b[i].centre_m, 3), "half_size",
+                                           fg_json_from_vec(b[i].half_m, 3)));
+  return json_pack("{s:s, s:f, s:o}", "model", fg_gripper_spec_get(model)->name, "width",
+                   width_m, "boxes", boxes);
 }
 
 /* ---------------------------------------------------------------- POST .../grasps */
@@ -342,6 +360,7 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
                                          ret[i].score));
     json_object_set_new(reply, "retrieval", a);
   }
+  if (reply) json_object_set_new(reply, "gripper", gripper_json(o->gripper, o->width_m));
   if (reply && res.n == 0) json_object_set_new(reply, "reason", json_string(res.reason));
   snprintf(resp->header, sizeof resp->header, "X-Took-Ms: %.1f", (fg_mono_s() - t0) * 1e3);
   fg_resp_json(resp, 200, reply);

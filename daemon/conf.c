@@ -57,7 +57,8 @@ static const char *const section_names[SEC_COUNT] = {
 
 enum {
   K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB, K_TOKEN_FILE, K_MAX_JSON_KB, K_MAX_CONNECTIONS,
-  K_HEADER_TIMEOUT_S, K_IDLE_TIMEOUT_S, K_MIN_BODY_KB_PER_S, K_MAX_QUEUED_REQUESTS
+  K_HEADER_TIMEOUT_S, K_IDLE_TIMEOUT_S, K_MIN_BODY_KB_PER_S, K_MAX_QUEUED_REQUESTS,
+  K_VIEWER_DIR, K_THREE_JS
 };
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
@@ -78,7 +79,8 @@ static const char *const http_keys[] = {"listen",           "token",
                                         "max_upload_mb",    "token_file",
                                         "max_json_kb",      "max_connections",
                                         "header_timeout_s", "idle_timeout_s",
-                                        "min_body_kb_per_s", "max_queued_requests", NULL};
+                                        "min_body_kb_per_s", "max_queued_requests",
+                                        "viewer_dir",       "three_js", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
@@ -510,6 +512,7 @@ fg_conf *fg_conf_defaults(void) {
   c->idle_timeout_s = 60;
   c->min_body_bytes_per_s = (size_t)8 << 10;
   c->max_queued_requests = 64;
+  c->three_js = strdup(FG_CONF_DEFAULT_THREE_JS);
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
   c->train_steps = 2000;
   c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
@@ -519,7 +522,7 @@ fg_conf *fg_conf_defaults(void) {
   c->gripper_model = FG_GRIPPER_PANDA;
   int ok = modbus_defaults(&c->robot, 1);
   ok &= modbus_defaults(&c->gripper_modbus, 9);
-  if (!ok || !c->listen || !c->state_dir) {
+  if (!ok || !c->listen || !c->state_dir || !c->three_js) {
     fg_conf_free(c);
     return NULL;
   }
@@ -793,6 +796,14 @@ static int conf_handler(void *user, const char *section, const char *name, const
     }
     switch (k) {
     case K_TOKEN_FILE: return set_token_file(st, name, v);
+    /* Empty: the built-in place, so the example file can list the keys without values. */
+    case K_VIEWER_DIR:
+      if (v[0]) return set_path(st, name, &c->viewer_dir, v);
+      free(c->viewer_dir);
+      c->viewer_dir = NULL;
+      return 1;
+    case K_THREE_JS:
+      return set_path(st, name, &c->three_js, v[0] ? v : FG_CONF_DEFAULT_THREE_JS);
     case K_MAX_UPLOAD_MB:
       if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
       c->max_upload_bytes = (size_t)x << 20;
@@ -1014,6 +1025,8 @@ void fg_conf_free(fg_conf *conf) {
   free(conf->listen);
   fg_secret_free(conf->token);
   free(conf->token_file);
+  free(conf->viewer_dir);
+  free(conf->three_js);
   free(conf->state_dir);
   free_dirs(conf->import_dirs, conf->n_import_dirs);
   free(conf->clip_weights);

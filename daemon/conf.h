@@ -18,6 +18,8 @@
 #define FG_CONF_DEFAULT_STATE_DIR "/var/lib/fieldgrip"
 #define FG_CONF_DEFAULT_LISTEN "127.0.0.1:7070"
 #define FG_SCENE_NAME_MAX 64
+/* Debian's libjs-three: three.js r111's global build. */
+#define FG_CONF_DEFAULT_THREE_JS "/usr/share/javascript/three/three.min.js"
 
 typedef enum { FG_TRANSPORT_NONE = 0, FG_TRANSPORT_TCP, FG_TRANSPORT_RTU } fg_transport;
 typedef enum { FG_ENCODING_INT16 = 0, FG_ENCODING_FLOAT32 } fg_encoding;
@@ -62,6 +64,10 @@ typedef struct fg_conf {
   int idle_timeout_s;    /* 1..86400, default 60: kept alive without a next request, or silent */
   size_t min_body_bytes_per_s; /* from min_body_kb_per_s (0..1048576, default 8); 0: none */
   int max_queued_requests; /* 1..100000, default 64: long work waiting for a thread */
+  char *viewer_dir;      /* the web viewer's files (absolute); NULL: the built-in place
+                          * (daemon/api_viewer.c) */
+  char *three_js;        /* three.min.js for the viewer (absolute); default
+                          * FG_CONF_DEFAULT_THREE_JS */
   /* [state] */
   char *state_dir;
   char **import_dirs;    /* absolute paths */

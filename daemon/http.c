@@ -10,6 +10,7 @@
 
 #include <microhttpd.h>
 
+#include <math.h>
 #include <netdb.h>
 #include <pthread.h>
 #include <stdarg.h>
@@ -166,6 +167,15 @@ const char *fg_req_query_unknown(const fg_req *req, const char *const *known, si
   MHD_get_connection_values((struct MHD_Connection *)req->mhd_conn, MHD_GET_ARGUMENT_KIND,
                             find_unknown, &u);
   return u.first;
+}
+
+int fg_query_number(const char *value, double *out) {
+  if (!value || !*value) return -1;
+  char *end;
+  const double v = strtod(value, &end);
+  if (*end || !isfinite(v)) return -1;
+  *out = v;
+  return 0;
 }
 
 const fg_part *fg_req_part(const fg_req *req, const char *name) {

@@ -111,6 +111,10 @@ const char *fg_req_query(const fg_req *req, const char *name);
  * the request. */
 const char *fg_req_query_unknown(const fg_req *req, const char *const *known, size_t n);
 
+/* A whole query-string value (as fg_req_query returns it) as a finite number: 0 and *out,
+ * or -1 when value is NULL, empty, not entirely a number, or not finite. */
+int fg_query_number(const char *value, double *out);
+
 /* Finds a multipart part by name; NULL if absent. */
 const fg_part *fg_req_part(const fg_req *req, const char *name);
 

@@ -945,6 +945,31 @@ void fg_scene_frames_free(fg_frame *frames, size_t n) {
   free(frames);
 }
 
+/* Loads frame file number `number` of s whole into *out, the error naming the frame. */
+static int load_frame_file(fg_scene *s, int number, fg_frame *out) {
+  char name[32];
+  snprintf(name, sizeof name, "%06d.fgf", number);
+  char *path = fg_path_join(s->frames_dir, name);
+  int rc = path ? fg_frame_load(path, out) : fg_fail(FG_ENOMEM, "out of memory");
+  if (rc != 0 && path) {
+    char detail[512];
+    snprintf(detail, sizeof detail, "%s", fg_error_detail());
+    rc = fg_fail(rc, "frame %d (%s): %s", number, path, detail);
+  }
+  free(path);
+  return rc;
+}
+
+int fg_scene_load_frame(fg_scene *s, int number, fg_frame *out) {
+  memset(out, 0, sizeof *out);
+  pthread_mutex_lock(&s->lock);
+  int found = 0;
+  for (size_t i = 0; i < s->n_frames && !found; i++) found = s->indices[i] == number;
+  pthread_mutex_unlock(&s->lock);
+  if (!found) return fg_fail(FG_ENOENT, "scene '%s' has no frame %d", s->name, number);
+  return load_frame_file(s, number, out);
+}
+
 int fg_scene_load_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *n,
                          int (*stop)(void *), void *stop_ud) {
   *frames = NULL;
@@ -967,16 +992,7 @@ int fg_scene_load_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *
       rc = fg_fail(FG_ECANCELED, "stopped while loading frames");
       break;
     }
-    char name[32];
-    snprintf(name, sizeof name, "%06d.fgf", ix[i]);
-    char *path = fg_path_join(s->frames_dir, name);
-    rc = path ? fg_frame_load(path, &f[i]) : fg_fail(FG_ENOMEM, "out of memory");
-    if (rc != 0 && path) {
-      char detail[512];
-      snprintf(detail, sizeof detail, "%s", fg_error_detail());
-      rc = fg_fail(rc, "frame %d (%s): %s", ix[i], path, detail);
-    }
-    free(path);
+    rc = load_frame_file(s, ix[i], &f[i]);
   }
   if (rc != 0) {
     free(ix);

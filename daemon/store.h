@@ -128,6 +128,11 @@ int fg_scene_load_frames(fg_scene *scene, fg_frame **frames, int **indices, size
                          int (*stop)(void *), void *stop_ud);
 void fg_scene_frames_free(fg_frame *frames, size_t n);
 
+/* Loads frame number `number` whole (pixels, features, depth; CRC checked) into *out, which
+ * the caller then owns (fg_frame_clear); on failure *out holds nothing. FG_ENOENT when the
+ * scene has no frame of that number, else the errors of fg_frame_load, with a detail. */
+int fg_scene_load_frame(fg_scene *scene, int number, fg_frame *out);
+
 /* ---- the trained field ---- */
 
 /* The scene's field with a reference the caller drops with fg_field_ref_release; NULL when

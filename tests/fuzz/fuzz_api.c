@@ -1,8 +1,8 @@
 /* Fuzz target for the request decoders of every endpoint (daemon/api_decode.h). The input is
  * a request body: it goes through the body parser with its limits (fg_json_parse), and when
  * that yields an object (what the handlers pass on, via fg_api_body_object) it is fed to
- * every decoder in turn, as scene creation, training, heatmap, geometry (its string members
- * as the query string), render, grasp, robot command, gripper action, demo (for a new task
+ * every decoder in turn, as scene creation, training, heatmap, geometry and points (its
+ * string members as the query string), render, grasp, robot command, gripper action, demo (for a new task
  * and for one with demos), upload meta and text embedding body. Each decoder either
  * succeeds, and then what it decoded is finite and within the ranges the handlers rely on,
  * or fails with FG_EINVAL or a 4xx answer with a message. */
@@ -97,6 +97,21 @@ static void heatmap_geometry(json_t *body, const fg_scene_params *params) {
   rc = fg_api_parse_geometry(&q, params, &g, &resp);
   if (rc == 0 && (!(g.threshold > 0 && g.threshold < 1) || !(g.voxel_size > 0) ||
                   !isfinite(g.voxel_size)))
+    abort();
+  check_resp(&resp, rc);
+
+  fg_api_points_query pq = {0};
+  json_object_foreach(body, key, v) {
+    const char *s = json_is_string(v) ? json_string_value(v) : "";
+    if (strcmp(key, "alpha") == 0) pq.alpha = s;
+    else if (strcmp(key, "voxel_size") == 0) pq.voxel_size = s;
+    else if (strcmp(key, "max_points") == 0) pq.max_points = s;
+    else if (!pq.unknown && json_is_string(v)) pq.unknown = key;
+  }
+  fg_api_points_req p;
+  rc = fg_api_parse_points(&pq, params, &p, &resp);
+  if (rc == 0 && (!(p.alpha > 0 && p.alpha < 1) || !(p.voxel_size > 0) ||
+                  !isfinite(p.voxel_size) || p.max_points < 1 || p.max_points > FG_API_POINTS_MAX))
     abort();
   check_resp(&resp, rc);
 }

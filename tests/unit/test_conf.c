@@ -73,6 +73,8 @@ static void check_defaults(const fg_conf *c) {
   ASSERT_EQ(c->idle_timeout_s, 60);
   ASSERT_EQ(c->min_body_bytes_per_s, 8u << 10);
   ASSERT_EQ(c->max_queued_requests, 64);
+  ASSERT(c->viewer_dir == NULL);
+  ASSERT_STREQ(c->three_js, "/usr/share/javascript/three/three.min.js");
   ASSERT_STREQ(c->state_dir, "/var/lib/fieldgrip");
   ASSERT_EQ(c->n_import_dirs, 0);
   ASSERT(c->clip_weights == NULL);
@@ -349,6 +351,9 @@ static void test_paths(void) {
   snprintf(sub, sizeof sub, "%s/etc", tmp_root);
   ASSERT_EQ(mkdir(sub, 0700), 0);
   char *path = write_file("etc/x.conf",
+                          "[http]\n"
+                          "viewer_dir = web/\n"
+                          "three_js = ../js/three.min.js\n"
                           "[state]\n"
                           "dir = state/./here/\n"
                           "import_dirs = scans:/srv//abs/:../other::/missing/later/../mnt:\n"
@@ -383,8 +388,18 @@ static void test_paths(void) {
   snprintf(want, sizeof want, "%s/share/vocab.txt.gz", tmp_root);
   ASSERT_STREQ(c->clip_vocab, want);
   ASSERT_EQ(c->clip_threads, 3);
+  snprintf(want, sizeof want, "%s/etc/web", tmp_root);
+  ASSERT_STREQ(c->viewer_dir, want);
+  snprintf(want, sizeof want, "%s/js/three.min.js", tmp_root);
+  ASSERT_STREQ(c->three_js, want);
   fg_conf_free(c);
   free(path);
+
+  /* empty viewer keys: the built-in places */
+  c = load_ok("[http]\nviewer_dir =\nthree_js =\n");
+  ASSERT(c->viewer_dir == NULL);
+  ASSERT_STREQ(c->three_js, FG_CONF_DEFAULT_THREE_JS);
+  fg_conf_free(c);
 
   /* a later import_dirs line would be a duplicate; an empty one means none */
   c = load_ok("[state]\nimport_dirs =\n");
@@ -721,6 +736,8 @@ static void test_shipped(void) {
   ASSERT_EQ(c->idle_timeout_s, d->idle_timeout_s);
   ASSERT_EQ(c->min_body_bytes_per_s, d->min_body_bytes_per_s);
   ASSERT_EQ(c->max_queued_requests, d->max_queued_requests);
+  ASSERT(c->viewer_dir == NULL && d->viewer_dir == NULL);
+  ASSERT_STREQ(c->three_js, d->three_js);
   fg_conf_free(c);
   fg_conf_free(d);
   snprintf(path, sizeof path, "%s/config/demo.conf", src);
