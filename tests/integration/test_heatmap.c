@@ -31,23 +31,7 @@
 #define DIM 32
 #define PATCH 8 /* feature cells of 8 pixels: the ball covers a few of them in most views */
 
-/* Under AddressSanitizer a training step is ten times slower: the test then trains a few
- * steps only, lowers the occupancy threshold so the sparse field still has voxels, and
- * checks the replies' form but not where the heatmaps point. */
-#if defined(__SANITIZE_ADDRESS__)
-#define SANITIZED 1
-#define TRAIN_BODY "{\"steps\": 12}"
-#define BASE_KEYS "\"alpha_threshold\": 0.001"
-#define ALL_KEYS "\"max_points\": 3000" /* not every voxel: JSON parsing is slow there too */
-#define RENDER_SCALE 4 /* renders of a quarter of the view's size: rays march the whole
-                          occupancy grid of a barely trained field */
-#else
-#define SANITIZED 0
 #define TRAIN_BODY "{\"steps\": 250}"
-#define BASE_KEYS ""
-#define ALL_KEYS ""
-#define RENDER_SCALE 1
-#endif
 
 static json_t *g_gt;     /* gt.json */
 static json_t *g_frames; /* transforms.json */
@@ -73,9 +57,7 @@ static h_resp *heatmap(const char *scene, const char *body) {
 /* A json heatmap of class name's embedding with extra keys (may be ""); asserts 200. */
 static h_resp *class_heatmap(const char *name, const char *extra) {
   char *e = class_embedding(name);
-  const char *base = strstr(extra, "alpha_threshold") ? "" : BASE_KEYS;
-  char *body = h_fmt("{\"embedding\": %s%s%s%s%s}", e, base[0] ? ", " : "", base,
-                     extra[0] ? ", " : "", extra);
+  char *body = h_fmt("{\"embedding\": %s%s%s}", e, extra[0] ? ", " : "", extra);
   h_resp *r = heatmap("sg", body);
   if (r->status != 200) fprintf(stderr, "heatmap %s: %s\n", body, r->body);
   ASSERT_STATUS(r, 200);
@@ -106,7 +88,7 @@ static void test_objects(void) {
            JNUM(best, "0"), JNUM(best, "1"), JNUM(best, "2"), JNUM(r->json, "best.score"),
            JINT(r->json, "occupied"));
     /* Inside the object's box, give or take one voxel. */
-    for (int a = 0; a < 3 && !SANITIZED; a++) {
+    for (int a = 0; a < 3; a++) {
       char pa[16];
       snprintf(pa, sizeof pa, "%d", a);
       double p = JNUM(best, pa);
@@ -120,14 +102,13 @@ static void test_objects(void) {
 }
 
 static void test_json_bounds(void) {
-  h_resp *all = class_heatmap("mug", ALL_KEYS);
+  h_resp *all = class_heatmap("mug", "");
   json_t *pts = JGET(all->json, "points");
   size_t n = json_array_size(pts);
   long long occupied = JINT(all->json, "occupied");
   ASSERT(n > 10);
   ASSERT_EQ((long long)n, JINT(all->json, "returned"));
-  if (SANITIZED) ASSERT((long long)n <= occupied);
-  else ASSERT_EQ((long long)n, occupied);
+  ASSERT_EQ((long long)n, occupied);
   ASSERT_EQ(JINT(all->json, "grid.shape.0"), 40); /* z: -0.05 .. 0.35 */
   ASSERT_EQ(JINT(all->json, "grid.shape.1"), 90);
   ASSERT_EQ(JINT(all->json, "grid.shape.2"), 70);
@@ -163,7 +144,7 @@ static void test_json_bounds(void) {
   ASSERT(json_array_size(cp) >= surely && json_array_size(cp) <= maybe);
   for (size_t i = 0; i < json_array_size(cp); i++)
     ASSERT(JNUM(json_array_get(cp, i), "3") >= cut - 1e-6);
-  ASSERT(SANITIZED || json_array_size(cp) < n);
+  ASSERT(json_array_size(cp) < n);
   ASSERT_EQ(JINT(r->json, "occupied"), occupied);
   h_resp_free(r);
 
@@ -176,7 +157,7 @@ static void test_json_bounds(void) {
   h_resp_free(r);
 
   /* The same query, the same bytes. */
-  r = class_heatmap("mug", ALL_KEYS);
+  r = class_heatmap("mug", "");
   ASSERT_EQ(r->len, all->len);
   ASSERT(memcmp(r->body, all->body, r->len) == 0);
   h_resp_free(r);
@@ -188,8 +169,7 @@ static void test_json_bounds(void) {
 
   /* Negatives (the other classes): scores in [0, 1], the best still on the mug. */
   char *bowl = class_embedding("bowl"), *box = class_embedding("box");
-  extra = h_fmt("\"negative_embeddings\": [%s, %s], \"temperature\": 0.1%s%s", bowl, box,
-                ALL_KEYS[0] ? ", " : "", ALL_KEYS);
+  extra = h_fmt("\"negative_embeddings\": [%s, %s], \"temperature\": 0.1", bowl, box);
   r = class_heatmap("mug", extra);
   cp = JGET(r->json, "points");
   for (size_t i = 0; i < json_array_size(cp); i++) {
@@ -199,8 +179,7 @@ static void test_json_bounds(void) {
   json_t *mug = json_array_get(JGET(g_gt, "objects"), 0);
   ASSERT_STREQ(JSTR(mug, "name"), "mug");
   double px = JNUM(r->json, "best.position.0");
-  ASSERT(SANITIZED ||
-         (px >= JNUM(mug, "aabb.min.0") - 0.01 && px <= JNUM(mug, "aabb.max.0") + 0.01));
+  ASSERT((px >= JNUM(mug, "aabb.min.0") - 0.01 && px <= JNUM(mug, "aabb.max.0") + 0.01));
   h_resp_free(r);
   free(extra);
   free(bowl);
@@ -357,12 +336,10 @@ static void test_render(void) {
   ASSERT(best_count > 200);
   json_t *fr = json_array_get(JGET(g_frames, "frames"), (size_t)best_view);
   char *m = json_dumps(JGET(fr, "transform_matrix"), JSON_COMPACT | JSON_REAL_PRECISION(17));
-  const int rw = W / RENDER_SCALE, rh = H / RENDER_SCALE;
-  const double sc = 1.0 / RENDER_SCALE;
+  const int rw = W, rh = H;
   char *cam = h_fmt("{\"transform_matrix\": %s, \"fl_x\": %.17g, \"fl_y\": %.17g, \"cx\": %.17g, "
-                    "\"cy\": %.17g, \"w\": %d, \"h\": %d}", m, JNUM(g_frames, "fl_x") * sc,
-                    JNUM(g_frames, "fl_y") * sc, JNUM(g_frames, "cx") * sc,
-                    JNUM(g_frames, "cy") * sc, rw, rh);
+                    "\"cy\": %.17g, \"w\": %d, \"h\": %d}", m, JNUM(g_frames, "fl_x"),
+                    JNUM(g_frames, "fl_y"), JNUM(g_frames, "cx"), JNUM(g_frames, "cy"), rw, rh);
   char *e = class_embedding("mug");
   char *body = h_fmt("{\"camera\": %s, \"output\": \"heatmap\", \"embedding\": %s}", cam, e);
   h_resp *hr = t_render("sg", body);
@@ -384,14 +361,14 @@ static void test_render(void) {
     changed += memcmp(heat + 3 * i, plain + 3 * i, 3) != 0;
     if (t >= 230) {
       hot++;
-      hot_on_mug += RENDER_SCALE == 1 && best_mask[i] == 2;
+      hot_on_mug += best_mask[i] == 2;
     }
   }
   printf("render of view %d: %zu mug pixels, %zu hot, %zu of them on the mug\n", best_view,
          best_count, hot, hot_on_mug);
-  ASSERT(SANITIZED || changed > (size_t)rw * rh / 4);
-  ASSERT(SANITIZED || hot >= 5);
-  ASSERT(SANITIZED || hot_on_mug * 10 >= hot * 7);
+  ASSERT(changed > (size_t)rw * rh / 4);
+  ASSERT(hot >= 5);
+  ASSERT(hot_on_mug * 10 >= hot * 7);
 
   /* The errors of a query render. */
   free(body);
