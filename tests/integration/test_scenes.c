@@ -204,7 +204,7 @@ static void test_unknown(void) {
   ASSERT_HTTP_ERROR(r, 404, "scene_not_found");
   h_resp_free(r);
 
-  static const char *const unknown[] = {"/", "/v1", "/v1/", "/v1/nope", "/v2/scenes",
+  static const char *const unknown[] = {"/nope", "/v1", "/v1/", "/v1/nope", "/v2/scenes",
                                         "/v1/scenes/tabletop/nope", "/v1/healthz",
                                         "/v1/scenes/tabletop/frames/0/x"};
   for (size_t i = 0; i < sizeof unknown / sizeof unknown[0]; i++) {
