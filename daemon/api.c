@@ -146,29 +146,51 @@ int fg_api_scene_voxels(fg_field_ref *ref, const fg_voxel_grid *g, const char *n
   return 0;
 }
 
-int fg_api_scene_alpha(fg_field_ref *ref, const fg_voxel_grid *g, const fg_scene_info *info,
-                       int n_threads, fg_voxels **vox, float **own, const float **alpha,
-                       fg_resp *resp) {
-  *vox = NULL;
-  *own = NULL;
-  *alpha = NULL;
-  const fg_field *field = fg_field_ref_field(ref);
+int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, int n_threads,
+                     fg_api_solid *out, fg_resp *resp) {
+  memset(out, 0, sizeof *out);
+  int rc = fg_voxel_grid_init(&out->grid, info->params.workspace_min,
+                              info->params.workspace_max, voxel_size);
+  if (rc == FG_ERANGE)
+    return fg_resp_error(resp, 400, "grid_too_large", "scene '%s': its workspace at voxel_size "
+                         "%g m has more than %zu voxels (%s); ask with a larger "
+                         "\"voxel_size\"", info->name, voxel_size, FG_QUERY_MAX_VOXELS,
+                         fg_error_detail()), -1;
+  if (rc != 0)
+    return fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info->name,
+                         fg_error_detail()), -1;
+  out->ref = fg_api_scene_field(s, info, resp);
+  if (!out->ref) return -1;
+  const fg_voxel_grid *g = &out->grid;
+  const fg_field *field = fg_field_ref_field(out->ref);
   if (field->cfg.feature_dim > 0 && g->voxel_size == info->params.voxel_size) {
-    if (fg_api_scene_voxels(ref, g, info->name, n_threads, vox, resp) != 0) return -1;
-    *alpha = fg_voxel_features_alpha(fg_voxels_features(*vox));
+    if (fg_api_scene_voxels(out->ref, g, info->name, n_threads, &out->vox, resp) != 0) {
+      fg_api_solid_release(out);
+      return -1;
+    }
+    out->alpha = fg_voxel_features_alpha(fg_voxels_features(out->vox));
     return 0;
   }
-  float *a = malloc(fg_voxel_grid_count(g) * sizeof *a);
-  const int rc = a ? fg_voxel_alpha(field, g, a, n_threads)
-                   : fg_fail(FG_ENOMEM, "out of memory for %zu voxels", fg_voxel_grid_count(g));
+  out->own = malloc(fg_voxel_grid_count(g) * sizeof *out->own);
+  rc = out->own ? fg_voxel_alpha(field, g, out->own, n_threads)
+                : fg_fail(FG_ENOMEM, "out of memory for %zu voxels", fg_voxel_grid_count(g));
   if (rc != 0) {
-    free(a);
+    fg_api_solid_release(out);
     return fg_resp_error(resp, 500, "internal_error", "cannot sample the field of scene '%s': "
                          "%s", info->name, fg_error_detail()), -1;
   }
-  *own = a;
-  *alpha = a;
+  out->alpha = out->own;
   return 0;
+}
+
+void fg_api_solid_release(fg_api_solid *sv) {
+  free(sv->own);
+  fg_voxels_release(sv->vox);
+  fg_field_ref_release(sv->ref);
+  sv->own = NULL;
+  sv->vox = NULL;
+  sv->ref = NULL;
+  sv->alpha = NULL;
 }
 
 int fg_api_query_fits(const fg_field *f, const fg_query *q, const char *name, fg_resp *resp) {

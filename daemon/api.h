@@ -8,6 +8,7 @@
 
 #include "app.h"
 #include "http.h"
+#include "query/heatmap.h"
 
 /* The route table. */
 extern const fg_route fg_api_routes[];
@@ -97,16 +98,27 @@ struct fg_voxel_grid;
 int fg_api_scene_voxels(fg_field_ref *ref, const struct fg_voxel_grid *g, const char *name,
                         int n_threads, struct fg_voxels **out, fg_resp *resp);
 
-/* The voxel opacities alpha (nz, ny, nx) of ref's field on grid g, for the geometry and the
- * point cloud: from the field's voxel cache (fg_api_scene_voxels) when g is the scene's own
- * grid (the voxel size of info) and the field has features (only then is there a cache);
- * else sampled for this request alone, so that a one-off grid does not evict the cache that
- * heatmaps use. On success *alpha points into *vox (the cache's, fg_voxels_release) or *own
- * (malloc'd, free), whichever the call set (the other is NULL), and 0 is returned; else -1
- * after answering 500. */
-int fg_api_scene_alpha(fg_field_ref *ref, const struct fg_voxel_grid *g,
-                       const fg_scene_info *info, int n_threads, struct fg_voxels **vox,
-                       float **own, const float **alpha, fg_resp *resp);
+/* A scene's trained field with its voxel opacities on a grid of its workspace: what the
+ * geometry and the point cloud are made of. */
+typedef struct fg_api_solid {
+  fg_voxel_grid grid;    /* the workspace at the request's voxel size */
+  fg_field_ref *ref;     /* the field; a handler may release it early (and set it NULL) */
+  struct fg_voxels *vox; /* the voxel cache's features, when alpha is theirs; else NULL */
+  float *own;            /* alpha sampled for this request alone; else NULL */
+  const float *alpha;    /* (nz, ny, nx) opacities, vox's or own */
+} fg_api_solid;
+
+/* Fills *out for scene s (info: its state now) at voxel_size metres. The opacities come from
+ * the field's voxel cache (fg_api_scene_voxels) when the grid is the scene's own (the voxel
+ * size of info) and the field has features (only then is there a cache); else they are
+ * sampled for this request alone, so that a one-off grid does not evict the cache that
+ * heatmaps use. 0 on success (release with fg_api_solid_release); else -1 after answering
+ * 400 grid_too_large, 409 not_trained or 500, with *out holding nothing. */
+int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, int n_threads,
+                     fg_api_solid *out, fg_resp *resp);
+
+/* Releases what *sv holds (each part may be NULL already). */
+void fg_api_solid_release(fg_api_solid *sv);
 
 /* 0 when query q (query.h) can score field f of scene `name`; else answers 409 no_features (a
  * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was

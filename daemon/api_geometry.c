@@ -71,9 +71,7 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
   const double t0 = fg_mono_s();
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
-  fg_field_ref *ref = NULL;
-  fg_voxels *vox = NULL;
-  float *own_alpha = NULL;
+  fg_api_solid sv = {0};
   fg_mesh m = {0};
   fg_scene_info info;
   fg_scene_get_info(s, &info);
@@ -85,46 +83,30 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
     .voxel_size = fg_req_query(req, "voxel_size")};
   fg_api_geometry_req r;
   if (fg_api_parse_geometry(&q, &info.params, &r, resp) != 0) goto out;
-  fg_voxel_grid grid;
-  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
-                              r.voxel_size);
-  if (rc == FG_ERANGE) {
-    fg_resp_error(resp, 400, "grid_too_large", "scene '%s': its workspace at voxel_size %g m has "
-                  "more than %zu voxels (%s); ask with a larger \"voxel_size\"", info.name,
-                  r.voxel_size, FG_QUERY_MAX_VOXELS, fg_error_detail());
-    goto out;
-  }
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info.name, fg_error_detail());
-    goto out;
-  }
-  ref = fg_api_scene_field(s, &info, resp);
-  if (!ref) goto out;
-  const fg_field *field = fg_field_ref_field(ref);
   const int threads = fg_conf_threads(req->conf);
+  if (fg_api_solid_get(s, &info, r.voxel_size, threads, &sv, resp) != 0) goto out;
+  const fg_voxel_grid *grid = &sv.grid;
+  const int cached = sv.vox != NULL;
 
-  const float *alpha;
-  if (fg_api_scene_alpha(ref, &grid, &info, threads, &vox, &own_alpha, &alpha, resp) != 0)
-    goto out;
-  const int cached = vox != NULL;
-
-  rc = r.points ? fg_mesh_points(&grid, alpha, r.threshold, &m)
-                : fg_mesh_marching_cubes(&grid, alpha, r.threshold, &m);
+  int rc = r.points ? fg_mesh_points(grid, sv.alpha, r.threshold, &m)
+                    : fg_mesh_marching_cubes(grid, sv.alpha, r.threshold, &m);
   /* Colours are taken half a voxel inside the surface, where the field was trained on it. */
-  if (rc == 0) rc = fg_mesh_colour(&m, field, (float)(0.5 * grid.voxel_size), threads);
+  if (rc == 0)
+    rc = fg_mesh_colour(&m, fg_field_ref_field(sv.ref), (float)(0.5 * grid->voxel_size),
+                        threads);
   if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "cannot make the geometry of scene '%s': %s",
                   info.name, fg_error_detail());
     goto out;
   }
   /* Nothing below reads the field: let a new training's field replace it meanwhile. */
-  fg_field_ref_release(ref);
-  ref = NULL;
+  fg_field_ref_release(sv.ref);
+  sv.ref = NULL;
 
   char comment[192];
   snprintf(comment, sizeof comment, "fieldgrip scene %s %s: voxel_size %.9g m, alpha threshold "
            "%.6g, world frame, metres", info.name, r.points ? "points" : "mesh",
-           grid.voxel_size, (double)r.threshold);
+           grid->voxel_size, (double)r.threshold);
   uint8_t *bytes = NULL;
   size_t len = 0;
   if (fg_mesh_encode_ply(&m, comment, &bytes, &len) != 0) {
@@ -135,14 +117,12 @@ int fg_api_scene_geometry(fg_req *req, fg_resp *resp) {
   snprintf(resp->header, sizeof resp->header, "X-Vertex-Count: %zu\r\nX-Face-Count: %zu",
            m.n_vertices, m.n_faces);
   fg_info("scene %s: geometry (%s, %g m, alpha >= %g%s): %zu vertices, %zu faces, %zu bytes "
-          "in %.0f ms", info.name, r.points ? "points" : "mesh", grid.voxel_size,
+          "in %.0f ms", info.name, r.points ? "points" : "mesh", grid->voxel_size,
           (double)r.threshold, cached ? ", cached voxels" : "", m.n_vertices, m.n_faces, len,
           (fg_mono_s() - t0) * 1e3);
 out:
   fg_mesh_release(&m);
-  free(own_alpha);
-  fg_voxels_release(vox);
-  fg_field_ref_release(ref);
+  fg_api_solid_release(&sv);
   fg_scene_unref(s);
   return 0;
 }

@@ -3,7 +3,7 @@
  * per point, which a browser uploads to the GPU as they are, without parsing text or PLY.
  *
  * The solid voxels are those of GET .../geometry?kind=points at the same threshold: the same
- * opacities (fg_api_scene_alpha: the field's voxel cache on the scene's own grid, else sampled
+ * opacities (fg_api_solid_get: the field's voxel cache on the scene's own grid, else sampled
  * for the request), the same centres (fg_mesh_points) and colours (fg_mesh_colour). Past
  * max_points they are thinned deterministically: the k-th point kept is solid voxel
  * floor(k * n_solid / max_points) in flat-index order, an even spread over the workspace, the
@@ -149,9 +149,8 @@ int fg_api_scene_points(fg_req *req, fg_resp *resp) {
   const double t0 = fg_mono_s();
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
-  fg_field_ref *ref = NULL;
-  fg_voxels *vox = NULL;
-  float *own_alpha = NULL, *kept_alpha = NULL;
+  fg_api_solid sv = {0};
+  float *kept_alpha = NULL;
   fg_mesh m = {0};
   fg_scene_info info;
   fg_scene_get_info(s, &info);
@@ -162,33 +161,18 @@ int fg_api_scene_points(fg_req *req, fg_resp *resp) {
     .max_points = fg_req_query(req, "max_points")};
   fg_api_points_req r;
   if (fg_api_parse_points(&q, &info.params, &r, resp) != 0) goto out;
-  fg_voxel_grid grid;
-  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
-                              r.voxel_size);
-  if (rc == FG_ERANGE) {
-    fg_resp_error(resp, 400, "grid_too_large", "scene '%s': its workspace at voxel_size %g m has "
-                  "more than %zu voxels (%s); ask with a larger \"voxel_size\"", info.name,
-                  r.voxel_size, FG_QUERY_MAX_VOXELS, fg_error_detail());
-    goto out;
-  }
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info.name, fg_error_detail());
-    goto out;
-  }
-  ref = fg_api_scene_field(s, &info, resp);
-  if (!ref) goto out;
   const int threads = fg_conf_threads(req->conf);
-  const float *alpha;
-  if (fg_api_scene_alpha(ref, &grid, &info, threads, &vox, &own_alpha, &alpha, resp) != 0)
-    goto out;
-  rc = fg_mesh_points(&grid, alpha, r.alpha, &m);
+  if (fg_api_solid_get(s, &info, r.voxel_size, threads, &sv, resp) != 0) goto out;
+  const fg_voxel_grid *grid = &sv.grid;
+  int rc = fg_mesh_points(grid, sv.alpha, r.alpha, &m);
   const size_t n_solid = m.n_vertices;
   if (rc == 0 && !(kept_alpha = malloc((n_solid ? n_solid : 1) * sizeof *kept_alpha)))
     rc = fg_fail(FG_ENOMEM, "out of memory for %zu points", n_solid);
   if (rc == 0) {
-    points_thin(&m, alpha, fg_voxel_grid_count(&grid), r.alpha, r.max_points, kept_alpha);
+    points_thin(&m, sv.alpha, fg_voxel_grid_count(grid), r.alpha, r.max_points, kept_alpha);
     /* Colours of the points left only: a thinned cloud costs what it shows. */
-    rc = fg_mesh_colour(&m, fg_field_ref_field(ref), (float)(0.5 * grid.voxel_size), threads);
+    rc = fg_mesh_colour(&m, fg_field_ref_field(sv.ref), (float)(0.5 * grid->voxel_size),
+                        threads);
   }
   if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "cannot make the points of scene '%s': %s",
@@ -196,11 +180,11 @@ int fg_api_scene_points(fg_req *req, fg_resp *resp) {
     goto out;
   }
   /* Nothing below reads the field: let a new training's field replace it meanwhile. */
-  fg_field_ref_release(ref);
-  ref = NULL;
+  fg_field_ref_release(sv.ref);
+  sv.ref = NULL;
 
   size_t len = 0;
-  uint8_t *body = fgpc_encode(&grid, &m, kept_alpha, n_solid, r.alpha, &len);
+  uint8_t *body = fgpc_encode(grid, &m, kept_alpha, n_solid, r.alpha, &len);
   if (!body) {
     fg_resp_error(resp, 500, "internal_error", "out of memory for %zu points", m.n_vertices);
     goto out;
@@ -209,14 +193,12 @@ int fg_api_scene_points(fg_req *req, fg_resp *resp) {
   snprintf(resp->header, sizeof resp->header, "X-Point-Count: %zu\r\nX-Solid-Count: %zu",
            m.n_vertices, n_solid);
   fg_info("scene %s: points (%g m, alpha >= %g%s): %zu of %zu solid voxels, %zu bytes in "
-          "%.0f ms", info.name, grid.voxel_size, (double)r.alpha, vox ? ", cached voxels" : "",
+          "%.0f ms", info.name, grid->voxel_size, (double)r.alpha, sv.vox ? ", cached voxels" : "",
           m.n_vertices, n_solid, len, (fg_mono_s() - t0) * 1e3);
 out:
   fg_mesh_release(&m);
   free(kept_alpha);
-  free(own_alpha);
-  fg_voxels_release(vox);
-  fg_field_ref_release(ref);
+  fg_api_solid_release(&sv);
   fg_scene_unref(s);
   return 0;
 }
