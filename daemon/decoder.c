@@ -178,6 +178,10 @@ static int spawn_child(fg_decoder *d, child **out) {
   c->to_fd = in[1];
   c->from_fd = outp[0];
   c->busy = 1;
+  /* Busy from now: the reaper may look at it before the waiting checkout takes it, and a
+   * busy_since of 0 read as 60 s overrun killed children that had just started. */
+  c->busy_since = fg_mono_s();
+  c->last_used = c->busy_since;
   fg_debug("image decoder %s started as pid %d", program, (int)pid);
   *out = c;
   return 0;

@@ -18,6 +18,7 @@
 
 #include <errno.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <signal.h>
 #include <stdint.h>
 #include <sys/resource.h>
@@ -333,6 +334,40 @@ static void test_concurrent(void) {
   fg_image_release(&img);
   fg_decoder_free(d);
   fg_image_release(&expect);
+  free(png);
+}
+
+/* The reaper runs while children start: a child just started is busy from its start, never
+ * an overrun of the busy limit (a start time of 0 once read as 60 s made the reaper kill
+ * children before their first image). */
+typedef struct reaper {
+  fg_decoder *d;
+  atomic_int stop;
+} reaper;
+
+static void *reaper_main(void *arg) {
+  reaper *r = arg;
+  while (!atomic_load(&r->stop)) fg_decoder_reap_idle(r->d);
+  return NULL;
+}
+
+static void test_reap_while_starting(void) {
+  uint8_t *png;
+  size_t len;
+  make_rgba_png(&png, &len);
+  for (int i = 0; i < 20; i++) {
+    reaper r = {0};
+    ASSERT_OK(fg_decoder_new(&r.d, program, 1, 30));
+    pthread_t th;
+    ASSERT_EQ(pthread_create(&th, NULL, reaper_main, &r), 0);
+    fg_image img;
+    const int rc = fg_decoder_decode(r.d, png, len, NULL, &img);
+    atomic_store(&r.stop, 1);
+    pthread_join(th, NULL);
+    if (rc != 0) FG_TEST_FAIL("start %d: %s", i, fg_error_detail());
+    fg_image_release(&img);
+    fg_decoder_free(r.d);
+  }
   free(png);
 }
 
@@ -748,6 +783,7 @@ int main(int argc, char **argv) {
   test_crash_and_kill();
   test_concurrent();
   test_reap_idle();
+  test_reap_while_starting();
   test_busy_limit();
   test_free_leaves_nothing();
   test_missing_program();
