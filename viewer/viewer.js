@@ -47,6 +47,7 @@
     job: null,         // the last job event's data
     progressEvents: 0,
     loadedMs: null,    // from navigation start to the first point cloud drawn
+    heatmapMs: null,   // from navigation start to the first heatmap drawn
     version: 0,        // bumped by every change the 3D view shows
     drawnVersion: -1,  // the version the last frame drew
   };
@@ -265,6 +266,7 @@
       updateLabels();
       state.drawnVersion = drawing;
       if (state.loadedMs === null && state.cloud && points) state.loadedMs = performance.now();
+      if (state.heatmapMs === null && state.heat) state.heatmapMs = performance.now();
       changed(false);
     }
     requestAnimationFrame(frame);
@@ -911,6 +913,7 @@
         steps: state.job.steps },
       progressEvents: state.progressEvents,
       drawn: state.drawnVersion === state.version, loadedMs: state.loadedMs,
+      heatmapMs: state.heatmapMs,
       canvas: { left: r.left, top: r.top, width: r.width, height: r.height },
       camera: { position: camera.position.toArray(), target: orbit.target.toArray(),
         fov: camera.fov, aspect: camera.aspect },

@@ -3,7 +3,7 @@
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [geometry]
-#                           [depth_throughput] [fox] [http_idle] [load] [soak]
+#                           [depth_throughput] [fox] [http_idle] [load] [soak] [viewer]
 #   (no names: all of them but fox; train takes about 6 minutes, throughput about 3; grasp several,
 #   most of them in the PyTorch peer)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -93,6 +93,13 @@
 #           100 (no endpoint deletes one frame), the daemon's VmRSS every 500 uploads
 #           (bench_soak): the series, and the growth from 1000 uploads to the end (target
 #           <= 4096 kB). About a minute and a half
+#   viewer  the web viewer in Debian's headless Chromium with software WebGL (bench_viewer; about
+#           two minutes): from navigation to the first frame with the point cloud and with a
+#           deep link's heatmap on a scenegen tabletop at 1 cm, the first load after training
+#           (the daemon builds its caches), BENCH_VIEWER_LOADS (default 5) with the browser's
+#           cache disabled and as many with it on (median, max); then the frame rate while
+#           the view turns with 200,000 points of a 5 mm scene. Targets: cold heatmap
+#           median <= 2000 ms, >= 30 fps (headless Chromium paces frames at 60 Hz)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -107,13 +114,13 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,106p' "$0" >&2
+  sed -n '2,112p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -633,6 +640,24 @@ bench_soak() {
   [ "$(field pass "$line")" = yes ] || failed=1
 }
 
+bench_viewer() {
+  local bin=$build/tests/bench/bench_viewer out rc=0 line
+  if [ ! -x "$bin" ]; then
+    echo "bench=viewer error=not_built hint=meson_compile_bench_viewer pass=no"
+    failed=1; return
+  fi
+  out=$("$bin" "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
+    --loads "${BENCH_VIEWER_LOADS:-5}") || rc=$?
+  printf '%s\n' "$out" | grep -E '^bench=viewer_(load|fps) ' || true
+  line=$(printf '%s\n' "$out" | grep '^bench=viewer ' || true)
+  if [ -z "$line" ]; then
+    echo "bench=viewer error=bench_viewer_exit_$rc pass=no"
+    failed=1; return
+  fi
+  echo "$line"
+  [ "$(field pass "$line")" = yes ] || failed=1
+}
+
 bench_fox() {
   local fox=${FG_FOX_DIR:-} v out line psnr pass
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
@@ -670,7 +695,8 @@ for b in "${benches[@]}"; do
     http_idle) bench_http_idle ;;
     load) bench_load ;;
     soak) bench_soak ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle, load, soak)" >&2; exit 2 ;;
+    viewer) bench_viewer ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle, load, soak, viewer)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

@@ -330,8 +330,12 @@ static json_t *test_reload(void) {
   json_t *s = wait_page("s.phase === 'ready' && s.busy === 0 && s.heatmap && s.drawn", 120);
   const double secs = t_now() - t0;
   printf("reload: %lld points drawn with the heatmap %.2f s after navigating (page clock: "
-         "%.0f ms to the first cloud)\n", JINT(s, "points"), secs, JNUM(s, "loadedMs"));
-  ASSERT(secs < 30); /* a hang guard: 2 s is the goal on an idle machine */
+         "%.0f ms to the first cloud, %.0f ms to the heatmap)\n", JINT(s, "points"), secs,
+         JNUM(s, "loadedMs"), JNUM(s, "heatmapMs"));
+  /* the page's own clock of its load: the heatmap comes with or after the cloud */
+  ASSERT(JNUM(s, "loadedMs") > 0);
+  ASSERT(JNUM(s, "heatmapMs") >= JNUM(s, "loadedMs"));
+  ASSERT(secs < 30); /* a hang guard; the load's speed is tests/bench's (run.sh viewer) */
   return s;
 }
 
