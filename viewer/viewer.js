@@ -162,8 +162,23 @@
 
   /* ---------------------------------------------------------------- 3D view */
 
+  /* The name of the browser's WebGL renderer, as a throwaway context reports it. */
+  function glRendererName() {
+    const gl = document.createElement('canvas').getContext('webgl');
+    if (!gl) return '';
+    const info = gl.getExtension('WEBGL_debug_renderer_info');
+    const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    const lose = gl.getExtension('WEBGL_lose_context');
+    if (lose) lose.loseContext();
+    return name;
+  }
+  // Multisampling costs a renderer that draws on the CPU (SwiftShader, llvmpipe: a browser
+  // without a GPU) half its frame rate on a large cloud; a GPU does it for little.
+  const glName = glRendererName();
+  const softwareGl = /swiftshader|llvmpipe|softpipe|software/i.test(glName);
+
   const canvas = $('canvas');
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: !softwareGl });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   renderer.setClearColor(0x1e1f24);
   const scene3 = new THREE.Scene();
@@ -914,6 +929,7 @@
       progressEvents: state.progressEvents,
       drawn: state.drawnVersion === state.version, loadedMs: state.loadedMs,
       heatmapMs: state.heatmapMs,
+      gl: glName, antialias: !softwareGl,
       canvas: { left: r.left, top: r.top, width: r.width, height: r.height },
       camera: { position: camera.position.toArray(), target: orbit.target.toArray(),
         fov: camera.fov, aspect: camera.aspect },

@@ -21,7 +21,8 @@
  *
  * Frame rate: a deep link to fine at alpha 0.01 with max points --points (default 200,000),
  * then fgViewer.benchmark(--frames) (default 120): the view turned once around, a frame drawn
- * per animation frame; ms per frame and frames per second. Target: >= 30 fps with the
+ * per animation frame; ms per frame and frames per second, and the page's WebGL renderer
+ * and whether it multisamples (not on a software renderer). Target: >= 30 fps with the
  * points drawn. Headless Chromium paces animation frames at 60 Hz, so 60 fps is the most it
  * reports. SwiftShader draws on the CPU, so the figure is a floor for a machine with a GPU,
  * not a measure of one.
@@ -29,7 +30,7 @@
  * Output, space-separated key=value pairs:
  *   bench=viewer_load kind=first|cold|warm loads=N cloud_ms_p50=... cloud_ms_max=...
  *     heatmap_ms_p50=... heatmap_ms_max=... points=...
- *   bench=viewer_fps points=... frames=... ms_per_frame=... fps=...
+ *   bench=viewer_fps points=... frames=... ms_per_frame=... fps=... antialias=yes|no gl=...
  *   bench=viewer cold_heatmap_ms_p50=... target_max_ms=2000 fps=... target_min_fps=30
  *     pass=yes|no
  * Exit status 0 when both targets are met; 77 (and a bench=viewer error= line) when
@@ -162,6 +163,11 @@ int main(int argc, char **argv) {
 
   char *fine = h_fmt("http://127.0.0.1:%d/?scene=fine&alpha=0.01", h_port());
   json_t *st = load(fine, "s.phase === 'ready' && s.busy === 0 && s.points > 0 && s.drawn");
+  char gl[256];
+  snprintf(gl, sizeof gl, "%s", JSTR(st, "gl"));
+  for (char *c = gl; *c; c++)
+    if (*c == ' ' || *c == '=') *c = '_';
+  const int antialias = json_is_true(JGET(st, "antialias"));
   json_decref(st);
   /* the page's own control: max points, then reload the cloud */
   char *set = h_fmt("(() => { const m = document.getElementById('max-points'); m.value = '%d';"
@@ -179,8 +185,8 @@ int main(int argc, char **argv) {
   const double ms = JNUM(b, "msPerFrame"), fps = 1000.0 / ms;
   const long long drawn = JINT(b, "points");
   json_decref(b);
-  printf("bench=viewer_fps points=%lld frames=%d ms_per_frame=%.2f fps=%.1f\n", drawn,
-         n_frames, ms, fps);
+  printf("bench=viewer_fps points=%lld frames=%d ms_per_frame=%.2f fps=%.1f antialias=%s gl=%s\n",
+         drawn, n_frames, ms, fps, antialias ? "yes" : "no", gl);
   const int pass = cold <= TARGET_LOAD_MS && fps >= TARGET_FPS && drawn >= n_points;
   printf("bench=viewer cold_heatmap_ms_p50=%.0f target_max_ms=%.0f fps=%.1f points=%lld "
          "target_min_fps=%.0f pass=%s\n", cold, TARGET_LOAD_MS, fps, drawn, TARGET_FPS,
