@@ -11,19 +11,29 @@
 #include <string.h>
 #include <unistd.h>
 
-/* Writes data to DIR/name, DIR being a private folder made on the first call (removed at
- * exit); returns the file's path (static storage) or aborts, since a target that cannot write
- * its input would only hide failures. */
+static char fuzz_file_dir[256];
+static char fuzz_file_path[512];
+
+/* At a normal exit (libFuzzer's -max_total_time, -runs): the file and its folder go. A crash
+ * leaves them; run-libfuzzer.sh points TMPDIR into its own work folder, which it removes. */
+static void fuzz_file_cleanup(void) {
+  if (fuzz_file_path[0]) unlink(fuzz_file_path);
+  rmdir(fuzz_file_dir);
+}
+
+/* Writes data to DIR/name, DIR being a private folder made on the first call under $TMPDIR
+ * (removed at a normal exit); returns the file's path (static storage) or aborts, since a
+ * target that cannot write its input would only hide failures. One name per process. */
 static const char *fuzz_file_write(const char *name, const uint8_t *data, size_t size) {
-  static char dir[256];
-  static char path[512];
-  if (!dir[0]) {
+  if (!fuzz_file_dir[0]) {
     const char *tmp = getenv("TMPDIR");
-    snprintf(dir, sizeof dir, "%s/fg-fuzz-XXXXXX", tmp && tmp[0] ? tmp : "/tmp");
-    if (!mkdtemp(dir)) abort();
+    snprintf(fuzz_file_dir, sizeof fuzz_file_dir, "%s/fg-fuzz-XXXXXX",
+             tmp && tmp[0] ? tmp : "/tmp");
+    if (!mkdtemp(fuzz_file_dir)) abort();
+    atexit(fuzz_file_cleanup);
   }
-  snprintf(path, sizeof path, "%s/%s", dir, name);
-  int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+  snprintf(fuzz_file_path, sizeof fuzz_file_path, "%s/%s", fuzz_file_dir, name);
+  int fd = open(fuzz_file_path, O_WRONLY | O_CREAT | O_TRUNC, 0600);
   if (fd < 0) abort();
   size_t off = 0;
   while (off < size) {
@@ -32,7 +42,7 @@ static const char *fuzz_file_write(const char *name, const uint8_t *data, size_t
     off += (size_t)w;
   }
   close(fd);
-  return path;
+  return fuzz_file_path;
 }
 
 #endif

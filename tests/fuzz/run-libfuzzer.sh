@@ -47,7 +47,9 @@ for t in "$@"; do
   # The daemon bounds that by its decoder processes' RLIMIT_AS, so only more is a finding.
   rss=2048
   case $t in image | depth) rss=4096 ;; esac
-  (cd "$dir" && "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb="$rss" \
+  # TMPDIR: the files a target writes its inputs to (fuzz_file.h) stay in $work, even
+  # after a crash
+  (cd "$dir" && TMPDIR="$dir" "$exe" -max_total_time="$seconds" -timeout=10 -rss_limit_mb="$rss" \
     -print_final_stats=1 -artifact_prefix="$dir/artifacts/" corpus >log 2>&1)
   rc=$?
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$dir/log" | tail -n 1)
