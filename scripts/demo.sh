@@ -383,6 +383,14 @@ jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
 
 say "Done: the loop ran through"
 echo "scans, heatmaps and logs: $out"
+# The same in the web viewer: the scan as points, the mug's heatmap, the box task's grasps
+if [ "$clip" -eq 1 ]; then
+  link_query="text=a+mug"
+else
+  link_query="embedding=$(jq -r '.classes[] | select(.name == "mug") | .embedding
+      | map(. * 10000 | round / 10000 | tostring) | join(",")' "$out/scan0/gt.json")"
+fi
+echo "in a browser: $api/?scene=tabletop&$link_query&task=box${token:+   (it asks for the token)}"
 if [ "$stay" -eq 0 ]; then
   exit 0
 fi

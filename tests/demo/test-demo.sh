@@ -82,6 +82,16 @@ grep -qF "$ply" "$out_log" && grep -qF "$png" "$out_log" || fail "the heatmap fi
 grep -aq '^element vertex [1-9]' "$ply" || fail "$ply has no vertices"
 [ "$(head -c 8 "$png" | od -An -tx1 | tr -d ' \n')" = 89504e470d0a1a0a ] || fail "$png is not a PNG"
 
+# the viewer's deep link to the same scene, question and task
+link=$(sed -n 's/^in a browser: \([^ ]*\).*/\1/p' "$out_log")
+[[ $link == "http://127.0.0.1:$http_port/?scene=tabletop&embedding="*"&task=box" ]] ||
+  fail "no viewer link to the mug's embedding: '$link'"
+emb=${link#*embedding=}
+emb=${emb%%&*}
+[ "$(tr ',' '\n' <<<"$emb" | grep -Ec '^-?[0-9.e-]+$')" = \
+  "$(jq '.classes[] | select(.name == "mug") | .embedding | length' "$tmp/out/scan0/gt.json")" ] ||
+  fail "the viewer link's embedding is not the mug's: $emb"
+
 # both processes were stopped: nothing listens on either port any more
 for p in "$http_port" "$modbus_port"; do
   if (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then fail "something still listens on $p"; fi
@@ -102,4 +112,7 @@ grep -q "/v1/scenes/tabletop/heatmap .*-d '{\"text\": \"a mug\"" "$out_log" || f
 grep -q '"features":null' "$out_log" || fail "[clip]: frames were uploaded with features"
 if grep -q 'features=@' "$out_log"; then fail "[clip]: frames were uploaded with features"; fi
 grep -q '"state":"done","stage":"finished"' "$out_log" || fail "[clip]: the pick did not finish"
+grep -q "^in a browser: http://127.0.0.1:$http_port/?scene=tabletop&text=a+mug&task=box" "$out_log" ||
+  fail "[clip]: no viewer link with the text"
+
 echo "ok: with [clip] in $((SECONDS - start)) s"
