@@ -111,6 +111,10 @@ int fg_conf_parse_listen(const char *listen, char **host, int *port);
  * FG_EINVAL with a detail otherwise. */
 int fg_scene_name_validate(const char *name);
 
+/* Sets a [scene NAME] section's built-in values (SPEC.md's tabletop workspace at 1 cm voxels,
+ * white background); the name is left empty. */
+void fg_conf_scene_defaults(fg_conf_scene *s);
+
 /* Finds a [scene NAME] by name; NULL if absent. */
 const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name);
 
