@@ -1,0 +1,53 @@
+/* What store.c and store_frames.c share and nothing else sees: the scene and store objects.
+ * Everything the rest of the daemon needs goes through store.h. */
+#ifndef FG_DAEMON_STORE_PRIV_H
+#define FG_DAEMON_STORE_PRIV_H
+
+#include "conf.h"
+#include "store.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdint.h>
+
+struct fg_scene {
+  fg_store *store;
+  char name[FG_SCENE_NAME_MAX + 1];
+  char *dir;        /* <state>/scenes/<name> */
+  char *frames_dir; /* <dir>/frames */
+  atomic_int refs;
+  pthread_mutex_t lock; /* guards everything below */
+  fg_scene_params params;
+  int declared;
+  int64_t created_ms;
+  fg_frame *frames; /* headers only, sorted by number */
+  int *indices;
+  size_t n_frames, cap;
+  int next_index;
+  int feature_dim;
+  int deleted;
+  /* the trained field */
+  fg_field_ref *field;     /* NULL when untrained */
+  int partial;
+  int64_t checkpoint_bytes;
+  int next_at_start;       /* field.next.fgc was there when the store opened */
+  char *checkpoint_error;  /* malloc'd; NULL when none */
+  char last_job_id[FG_JOB_ID_MAX];
+  char last_job_state[16];
+};
+
+struct fg_store {
+  char *scenes_dir;
+  pthread_mutex_t lock; /* guards the scene array */
+  fg_scene **scenes;
+  size_t n, cap;
+};
+
+/* 1 when n is a frame file's name (NNNNNN.fgf, at least six digits), its number in *index. */
+int fg_frame_file_name(const char *n, int *index);
+
+/* Reads the headers of a scene's frames into it when the store opens, removing what an
+ * interrupted write left behind (unfinished files, the frames of a batch cut short). */
+int fg_scene_frames_read(fg_scene *s);
+
+#endif
