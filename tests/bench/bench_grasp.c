@@ -54,6 +54,7 @@
 #include <jansson.h>
 
 #include "benchmem.h"
+#include "benchstat.h"
 #include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
@@ -220,17 +221,6 @@ static void dump_inputs(const char *dir, const fg_voxel_features *vf, const floa
 
 /* ---------------------------------------------------------------- main */
 
-static int cmp_double(const void *a, const void *b) {
-  const double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
-
-/* The median of v (n >= 1), which it sorts. */
-static double median(double *v, int n) {
-  qsort(v, (size_t)n, sizeof *v, cmp_double);
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 static int object_index(const sg_gt *gt, const char *name) {
   for (int k = 0; k < gt->n_objects; k++)
     if (strcmp(gt->objects[k].name, name) == 0) return k;
@@ -366,7 +356,7 @@ int main(int argc, char **argv) {
     }
   const long hwm1_kb = bench_status_kb("VmHWM:");
   const double extra_mb = (double)(hwm1_kb - base_kb) / 1024.0;
-  const double p50 = median(secs, n_req), p50_field = median(secs_field, n_req);
+  const double p50 = bench_median(secs, n_req), p50_field = bench_median(secs_field, n_req);
   const double lo = secs[0], hi = secs[n_req - 1];
   const size_t lookups = st.evaluations * N_QUERY * 8;
   /* each lookup reads one row of 64 floats of the grasp field */

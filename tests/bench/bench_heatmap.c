@@ -12,6 +12,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "benchstat.h"
 #include "core/error.h"
 #include "field/model.h"
 #include "query/heatmap.h"
@@ -20,11 +21,6 @@ static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
 }
 
 static void die(const char *what, int rc) {
@@ -50,7 +46,7 @@ static void time_heatmaps(const fg_voxel_features *vf, const fg_query *q, float 
     n_points = hm.n_points;
     fg_heatmap_release(&hm);
   }
-  qsort(ms, (size_t)runs, sizeof *ms, cmp_double);
+  qsort(ms, (size_t)runs, sizeof *ms, bench_cmp_double);
   printf("%s_p50_ms=%.3f\n%s_p90_ms=%.3f\n%s_points=%zu\n", key, ms[runs / 2], key,
          ms[(runs * 9) / 10], key, n_points);
   free(ms);

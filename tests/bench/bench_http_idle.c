@@ -7,6 +7,8 @@
  * from connect() to the end of the answer. Prints one line:
  *   bench=http_idle idle=N open=... shed=... requests=... p50_ms=... p99_ms=... max_ms=...
  * (run.sh adds the target). Raises its own open-files limit to the hard one. */
+#include "benchstat.h"
+
 #include <errno.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -77,11 +79,6 @@ static double metric(const char *series) {
   return -1;
 }
 
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
-}
-
 int main(int argc, char **argv) {
   if (argc < 2 || sscanf(argv[1], "http://127.0.0.1:%d", &g_port) != 1) {
     fprintf(stderr, "usage: bench_http_idle http://127.0.0.1:PORT [N [REQUESTS]]\n");
@@ -127,7 +124,7 @@ int main(int argc, char **argv) {
       return 1;
     }
   }
-  qsort(lat, (size_t)reqs, sizeof *lat, cmp_double);
+  qsort(lat, (size_t)reqs, sizeof *lat, bench_cmp_double);
   /* Read again after the requests: each one past the cap shed an idle connection too. */
   open = metric("fieldgrip_http_connections") - 1;
   shed = metric("fieldgrip_http_connections_closed_total{reason=\"shed\"}");

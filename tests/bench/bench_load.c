@@ -28,6 +28,7 @@
  *     target_max_health_p99_ms=50 pass=yes|no
  * (train_steps_per_s_without_load: the job's pace over 5 s just before the load.)
  * The exit status is 0 when both targets are met, 1 otherwise. */
+#include "benchstat.h"
 #include "grasp_util.h"
 
 #include <curl/curl.h>
@@ -95,11 +96,6 @@ static void *client_main(void *arg) {
   curl_slist_free_all(hdr);
   curl_easy_cleanup(h);
   return NULL;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return x < y ? -1 : x > y;
 }
 
 /* The q-quantile of sorted v[n] (nearest rank). */
@@ -224,7 +220,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bench_load: %s: %ld errors, the first %s\n", ep_name[e], cl[k].errors,
                 cl[k].first_error);
     }
-    qsort(v, n, sizeof *v, cmp_double);
+    qsort(v, n, sizeof *v, bench_cmp_double);
     const double p99 = quantile(v, n, 0.99) * 1e3;
     printf("bench=load endpoint=%s clients=%d requests=%zu requests_per_s=%.1f p50_ms=%.2f "
            "p99_ms=%.2f max_ms=%.2f errors=%ld\n",

@@ -36,6 +36,8 @@
  * The exit status is 1 when a check failed or a command went wrong (the figures are printed
  * all the same), 2 on bad arguments or an unusable daemon.
  * Usage: bench_robot BASE_URL SIM_LOG [N [N_NOWAIT]]   (defaults 1000 and 200) */
+#include "benchstat.h"
+
 #include <curl/curl.h>
 #include <jansson.h>
 #include <math.h>
@@ -85,15 +87,10 @@ static double now_ms(void) {
   return (double)ts.tv_sec * 1e3 + 1e-6 * (double)ts.tv_nsec;
 }
 
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
-
 /* The nearest-rank percentile q (0..1] of v[0..n-1], sorting v in place; NAN when n is 0. */
 static double percentile(double *v, int n, double q) {
   if (n <= 0) return NAN;
-  qsort(v, (size_t)n, sizeof *v, cmp_double);
+  qsort(v, (size_t)n, sizeof *v, bench_cmp_double);
   int k = (int)ceil(q * n) - 1;
   if (k < 0) k = 0;
   if (k >= n) k = n - 1;

@@ -37,6 +37,7 @@
  * Chromium cannot start. */
 #include <math.h>
 
+#include "benchstat.h"
 #include "cdp.h"
 #include "grasp_util.h"
 
@@ -65,30 +66,6 @@ static json_t *load(const char *url, const char *cond) {
   return s;
 }
 
-/* Scene name over scenegen's tabletop at voxel metres, the data set imported. */
-static void scene(const char *name, double voxel) {
-  char *body = h_fmt("{\"name\": \"%s\", \"workspace\": {\"min\": [0.1, -0.45, -0.05], "
-                     "\"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": %g}", name, voxel);
-  h_resp *r = h_post_json("/v1/scenes", body);
-  ASSERT_STATUS(r, 201);
-  h_resp_free(r);
-  free(body);
-  r = g_import(name, NULL);
-  ASSERT_STATUS(r, 200);
-  h_resp_free(r);
-}
-
-static int cmp_double(const void *a, const void *b) {
-  const double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
-
-/* The median of n values (sorts them). */
-static double median(double *v, int n) {
-  qsort(v, (size_t)n, sizeof *v, cmp_double);
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 #define LOADED "s.phase === 'ready' && s.busy === 0 && s.heatmap && s.drawn"
 
 /* n loads of url; prints their line; returns the heatmap median. */
@@ -105,7 +82,7 @@ static double loads(const char *kind, const char *url, int n) {
     hmax = fmax(hmax, heat[i]);
     json_decref(s);
   }
-  const double c50 = median(cloud, n), h50 = median(heat, n);
+  const double c50 = bench_median(cloud, n), h50 = bench_median(heat, n);
   printf("bench=viewer_load kind=%s loads=%d cloud_ms_p50=%.0f cloud_ms_max=%.0f "
          "heatmap_ms_p50=%.0f heatmap_ms_max=%.0f points=%lld\n", kind, n, c50, cmax, h50, hmax,
          points);
@@ -141,8 +118,8 @@ int main(int argc, char **argv) {
   g_config(imports, NULL);
   h_set_log_level("info");
   h_start();
-  scene("sg", 0.01);
-  scene("fine", 0.005);
+  g_scene_at("sg", NULL, 0.01);
+  g_scene_at("fine", NULL, 0.005);
   g_train("sg", steps);
   g_train("fine", steps);
 

@@ -28,9 +28,11 @@ void g_config(const char *imports, const char *extra) {
   free(conf);
 }
 
-void g_scene(const char *name, const char *tf) {
+void g_scene(const char *name, const char *tf) { g_scene_at(name, tf, 0.02); }
+
+void g_scene_at(const char *name, const char *tf, double voxel) {
   char *body = h_fmt("{\"name\": \"%s\", \"workspace\": {\"min\": [0.1, -0.45, -0.05], "
-                     "\"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": 0.02}", name);
+                     "\"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": %g}", name, voxel);
   h_resp *r = h_post_json("/v1/scenes", body);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);

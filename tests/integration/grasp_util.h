@@ -27,6 +27,8 @@ void g_config(const char *imports, const char *extra);
 /* Creates scene name over scenegen's tabletop at 2 cm voxels and imports the data set
  * (transforms file tf, NULL for transforms.json). */
 void g_scene(const char *name, const char *tf);
+/* The same at voxel metres. */
+void g_scene_at(const char *name, const char *tf, double voxel);
 
 /* POSTs the import of the data set (transforms file tf, NULL for transforms.json) to
  * scene; no status is asserted. The caller frees the reply. */
