@@ -605,57 +605,40 @@ bench_http_idle() {
   done
 }
 
-bench_load() {
-  local bin=$build/tests/bench/bench_load out rc=0 line
+# Runs a benchmark program that checks its own target: NAME (bench_NAME), the pattern of its
+# detail lines, the key of its summary line, then its arguments. Prints the details and the
+# summary (which carries pass=); a missing summary is a failure.
+run_self_checked() {
+  local name=$1 details=$2 summary=$3 out rc=0 line
+  local bin=$build/tests/bench/bench_$name
+  shift 3
   if [ ! -x "$bin" ]; then
-    echo "bench=load error=not_built hint=meson_compile_bench_load pass=no"
+    echo "bench=$summary error=not_built hint=meson_compile_bench_$name pass=no"
     failed=1; return
   fi
-  out=$("$bin" "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
-    --seconds "${BENCH_LOAD_SECONDS:-30}") || rc=$?
-  printf '%s\n' "$out" | grep '^bench=load ' || true
-  line=$(printf '%s\n' "$out" | grep '^bench=load_summary ' || true)
+  out=$("$bin" "$@") || rc=$?
+  printf '%s\n' "$out" | grep -E "^bench=($details) " || true
+  line=$(printf '%s\n' "$out" | grep "^bench=$summary " || true)
   if [ -z "$line" ]; then
-    echo "bench=load_summary error=bench_load_exit_$rc pass=no"
+    echo "bench=$summary error=bench_${name}_exit_$rc pass=no"
     failed=1; return
   fi
   echo "$line"
   [ "$(field pass "$line")" = yes ] || failed=1
+}
+
+bench_load() {
+  run_self_checked load load load_summary "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
+    --seconds "${BENCH_LOAD_SECONDS:-30}"
 }
 
 bench_soak() {
-  local bin=$build/tests/bench/bench_soak out rc=0 line
-  if [ ! -x "$bin" ]; then
-    echo "bench=soak error=not_built hint=meson_compile_bench_soak pass=no"
-    failed=1; return
-  fi
-  out=$("$bin" "$daemon" --frames "${BENCH_SOAK_FRAMES:-10000}") || rc=$?
-  printf '%s\n' "$out" | grep '^bench=soak_sample ' || true
-  line=$(printf '%s\n' "$out" | grep '^bench=soak ' || true)
-  if [ -z "$line" ]; then
-    echo "bench=soak error=bench_soak_exit_$rc pass=no"
-    failed=1; return
-  fi
-  echo "$line"
-  [ "$(field pass "$line")" = yes ] || failed=1
+  run_self_checked soak soak_sample soak "$daemon" --frames "${BENCH_SOAK_FRAMES:-10000}"
 }
 
 bench_viewer() {
-  local bin=$build/tests/bench/bench_viewer out rc=0 line
-  if [ ! -x "$bin" ]; then
-    echo "bench=viewer error=not_built hint=meson_compile_bench_viewer pass=no"
-    failed=1; return
-  fi
-  out=$("$bin" "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
-    --loads "${BENCH_VIEWER_LOADS:-5}") || rc=$?
-  printf '%s\n' "$out" | grep -E '^bench=viewer_(load|fps) ' || true
-  line=$(printf '%s\n' "$out" | grep '^bench=viewer ' || true)
-  if [ -z "$line" ]; then
-    echo "bench=viewer error=bench_viewer_exit_$rc pass=no"
-    failed=1; return
-  fi
-  echo "$line"
-  [ "$(field pass "$line")" = yes ] || failed=1
+  run_self_checked viewer 'viewer_load|viewer_fps' viewer "$daemon" \
+    "$build/tests/scenegen/fieldgrip-scenegen" --loads "${BENCH_VIEWER_LOADS:-5}"
 }
 
 bench_fox() {
