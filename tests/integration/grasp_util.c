@@ -55,9 +55,7 @@ h_resp *g_import(const char *scene, const char *tf) {
 
 void g_train(const char *scene, int steps) {
   char *body = h_fmt("{\"steps\": %d}", steps);
-  char *id = t_train(scene, body);
-  json_decref(t_wait_job(id, "done", 600));
-  free(id);
+  t_train_done(scene, body, 600);
   free(body);
 }
 

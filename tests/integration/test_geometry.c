@@ -363,14 +363,11 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   const double t0 = t_now();
-  char *imports = h_fmt("%s/imports", h_tmpdir());
-  g_dir = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_dir, VIEWS, W, H, DIM, PATCH);
+  g_dir = t_dataset(argv[2], VIEWS, W, H, DIM, PATCH);
   char *tf_path = h_fmt("%s/transforms.json", g_dir);
   json_error_t jerr;
   g_frames = json_load_file(tf_path, 0, &jerr);
   ASSERT(g_frames != NULL);
-  t_write_config(imports);
   h_start();
   t_scene_from_dataset("sg", g_dir, VIEWS);
 
@@ -381,9 +378,7 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   expect_error("nope", "", 404, "scene_not_found");
 
-  char *id = t_train("sg", TRAIN_BODY);
-  json_decref(t_wait_job(id, "done", 900));
-  free(id);
+  t_train_done("sg", TRAIN_BODY, 900);
   const double t_trained = t_now();
   test_mesh();
   test_points();
@@ -396,7 +391,6 @@ int main(int argc, char **argv) {
   json_decref(g_frames);
   free(tf_path);
   free(g_dir);
-  free(imports);
   h_done();
   return 0;
 }

@@ -429,15 +429,12 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   double t0 = t_now();
-  char *imports = h_fmt("%s/imports", h_tmpdir());
-  g_dir = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_dir, VIEWS, W, H, DIM, PATCH);
+  g_dir = t_dataset(argv[2], VIEWS, W, H, DIM, PATCH);
   char *gt_path = h_fmt("%s/gt.json", g_dir), *tf_path = h_fmt("%s/transforms.json", g_dir);
   json_error_t jerr;
   g_gt = json_load_file(gt_path, 0, &jerr);
   g_frames = json_load_file(tf_path, 0, &jerr);
   ASSERT(g_gt && g_frames);
-  t_write_config(imports);
   h_start();
   t_scene_from_dataset("sg", g_dir, VIEWS);
   t_scene_from_dataset("other", g_dir, VIEWS);
@@ -455,9 +452,7 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   expect_error("huge", body, 400, "grid_too_large");
 
-  char *id = t_train("sg", TRAIN_BODY);
-  json_decref(t_wait_job(id, "done", 900));
-  free(id);
+  t_train_done("sg", TRAIN_BODY, 900);
   double t_trained = t_now();
   json_t *sj = t_scene_json("sg");
   ASSERT(json_is_false(JGET(sj, "voxel_cache.built")));
@@ -487,7 +482,7 @@ int main(int argc, char **argv) {
   double t_queried = t_now();
 
   /* While another scene trains, heatmaps and health answer. */
-  id = t_train("other", "{\"steps\": 1000000}");
+  char *id = t_train("other", "{\"steps\": 1000000}");
   t_wait_running(id, 1, 600);
   double ta = t_now();
   r = heatmap("sg", body);
@@ -511,9 +506,7 @@ int main(int argc, char **argv) {
   free(id);
 
   /* A new field drops the cache; the next heatmap builds it again. */
-  id = t_train("sg", "{\"steps\": 2}");
-  json_decref(t_wait_job(id, "done", 600));
-  free(id);
+  t_train_done("sg", "{\"steps\": 2}", 600);
   sj = t_scene_json("sg");
   ASSERT(json_is_false(JGET(sj, "voxel_cache.built")));
   json_decref(sj);
@@ -537,7 +530,6 @@ int main(int argc, char **argv) {
   free(gt_path);
   free(tf_path);
   free(g_dir);
-  free(imports);
   h_done();
   return 0;
 }

@@ -199,10 +199,7 @@ static char *field_path(void) { return h_fmt("%s/scenes/sg/field.fgc", h_state_d
 int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
-  char *imports = h_fmt("%s/imports", h_tmpdir());
-  char *sg = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], sg, 12, 64, 48, 8, 0);
-  t_write_config(imports);
+  char *sg = t_dataset(argv[2], 12, 64, 48, 8, 0);
   static const double eye[3] = {0.45, -0.75, 0.55}, target[3] = {0.45, 0, 0.05};
   g_camera = t_camera(eye, target, 60, 64, 48);
   h_start();
@@ -214,16 +211,14 @@ int main(int argc, char **argv) {
   ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "/v1/scenes/sg/train");
   h_resp_free(r);
 
-  char *id = t_train("sg", "{\"steps\": 8, \"holdout_every\": 4}");
-  json_decref(t_wait_job(id, "done", 600));
-  free(id);
+  t_train_done("sg", "{\"steps\": 8, \"holdout_every\": 4}", 600);
   test_formats();
   test_errors();
 
   /* While a new training runs, renders use the field they had; a cancelled training leaves
    * it as it was. */
   h_resp *before = reference_render();
-  id = t_train("sg", "{\"steps\": 1000000}");
+  char *id = t_train("sg", "{\"steps\": 1000000}");
   t_wait_running(id, 1, 600);
   r = reference_render();
   assert_same_bytes(r, before);
@@ -280,9 +275,7 @@ int main(int argc, char **argv) {
   ASSERT(h_log_count("the trained field does not load") >= 1);
   /* The file is left for inspection; training again replaces it. */
   ASSERT_EQ(stat(fp, &st), 0);
-  id = t_train("sg", "{\"steps\": 2}");
-  json_decref(t_wait_job(id, "done", 600));
-  free(id);
+  t_train_done("sg", "{\"steps\": 2}", 600);
   r = h_get("/v1/scenes/sg");
   ASSERT(json_is_true(JGET(r->json, "trained")));
   ASSERT(json_is_null(JGET(r->json, "checkpoint_error")));
@@ -295,7 +288,6 @@ int main(int argc, char **argv) {
   free(fp);
   free(g_camera);
   free(sg);
-  free(imports);
   h_done();
   return 0;
 }

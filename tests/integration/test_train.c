@@ -521,10 +521,7 @@ static void test_restart(void) {
 int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
-  char *imports = h_fmt("%s/imports", h_tmpdir());
-  g_sg = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_sg, 12, 64, 48, 8, 0);
-  t_write_config(imports);
+  g_sg = t_dataset(argv[2], 12, 64, 48, 8, 0);
   h_start();
   t_scene_from_dataset("sg", g_sg, 12);
   t_scene_from_dataset("sg2", g_sg, 12);
@@ -550,7 +547,6 @@ int main(int argc, char **argv) {
   h_stop();
   free(g_first_job);
   free(g_sg);
-  free(imports);
   h_done();
   return 0;
 }

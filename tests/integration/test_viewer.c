@@ -295,7 +295,8 @@ static void test_frame_image(void) {
 
 /* ---------------------------------------------------------------- token and settings */
 
-static void test_token_and_settings(const char *imports) {
+static void test_token_and_settings(void) {
+  char *imports = h_fmt("%s/imports", h_tmpdir()); /* t_dataset's */
   /* A viewer folder of our own, and a three.js that is not there. */
   char *dir = h_fmt("%s/myviewer", h_tmpdir());
   h_mkdirs(dir);
@@ -354,6 +355,7 @@ static void test_token_and_settings(const char *imports) {
   free(conf);
   free(index);
   free(dir);
+  free(imports);
 }
 
 /* ---------------------------------------------------------------- main */
@@ -362,10 +364,7 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
   const double t0 = t_now();
-  char *imports = h_fmt("%s/imports", h_tmpdir());
-  g_dir = h_fmt("%s/sg", imports);
-  t_scenegen(argv[2], g_dir, VIEWS, W, H, DIM, PATCH);
-  t_write_config(imports);
+  g_dir = t_dataset(argv[2], VIEWS, W, H, DIM, PATCH);
   h_start();
   test_static();
   t_scene_from_dataset("sg", g_dir, VIEWS);
@@ -376,17 +375,14 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   test_frame_image();
 
-  char *id = t_train("sg", TRAIN_BODY);
-  json_decref(t_wait_job(id, "done", 900));
-  free(id);
+  t_train_done("sg", TRAIN_BODY, 900);
   const double t_trained = t_now();
   test_points();
-  test_token_and_settings(imports);
+  test_token_and_settings();
   printf("setup and training %.1f s, checks %.1f s\n", t_trained - t0, t_now() - t_trained);
 
   h_stop();
   free(g_dir);
-  free(imports);
   h_done();
   return 0;
 }

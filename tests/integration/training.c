@@ -58,6 +58,15 @@ void t_write_config(const char *imports) {
   free(conf);
 }
 
+char *t_dataset(const char *scenegen, int views, int w, int h, int dim, int patch) {
+  char *imports = h_fmt("%s/imports", h_tmpdir());
+  char *dir = h_fmt("%s/sg", imports);
+  t_scenegen(scenegen, dir, views, w, h, dim, patch);
+  t_write_config(imports);
+  free(imports);
+  return dir;
+}
+
 void t_scene_from_dataset(const char *name, const char *dir, int n) {
   /* scenegen's table top is z = 0 around (0.45, 0); the objects stand on it. */
   char *body = h_fmt("{\"name\": \"%s\", \"workspace\": {\"min\": [0.1, -0.45, -0.05], "
@@ -98,6 +107,12 @@ json_t *t_job(const char *id) {
   h_resp_free(r);
   free(path);
   return j;
+}
+
+void t_train_done(const char *scene, const char *body, double timeout_s) {
+  char *id = t_train(scene, body);
+  json_decref(t_wait_job(id, "done", timeout_s));
+  free(id);
 }
 
 json_t *t_wait_job(const char *id, const char *state, double timeout_s) {

@@ -22,6 +22,10 @@ json_t *t_scene_json(const char *name);
 /* Writes a configuration with import_dirs = imports, [train] threads = 2, steps = 20. */
 void t_write_config(const char *imports);
 
+/* Makes the data set <tmp>/imports/sg with t_scenegen and writes the configuration
+ * (t_write_config over <tmp>/imports); returns the data set's folder (caller frees). */
+char *t_dataset(const char *scenegen, int views, int w, int h, int dim, int patch);
+
 /* Creates scene name over scenegen's tabletop workspace and imports the data set in dir;
  * asserts n frames came in. */
 void t_scene_from_dataset(const char *name, const char *dir, int n);
@@ -36,6 +40,9 @@ json_t *t_job(const char *id);
 /* Polls the job until it has finished (done, failed or cancelled) and asserts that it ended
  * in state; returns it (caller decrefs). A hang guard of timeout_s, not a timing assertion. */
 json_t *t_wait_job(const char *id, const char *state, double timeout_s);
+
+/* t_train, then t_wait_job until it is done; the job is not kept. */
+void t_train_done(const char *scene, const char *body, double timeout_s);
 
 /* Polls until the job runs and has taken at least min_step steps. */
 void t_wait_running(const char *id, int min_step, double timeout_s);
