@@ -216,6 +216,9 @@ static void test_health_during_import(void) {
   ASSERT_EQ(im.imported, 100);
   free(im.body);
 
+  /* The daemon logs a request once its response has been sent, which may be a moment after
+   * the client has read it: wait for the import's line (a state, not a time). */
+  ASSERT(h_wait_log(" POST /v1/scenes/lego/import -> ", 1, 120));
   char *log = h_log();
   span import = {0};
   ASSERT_EQ(log_requests(log, "POST /v1/scenes/lego/import", take_span, &import), 1);
