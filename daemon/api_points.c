@@ -50,8 +50,9 @@ int fg_api_parse_points(const fg_api_points_query *q, const fg_scene_params *par
     return fg_resp_error(resp, 400, "invalid_request", "unknown query parameter \"%.40s\"; "
                          "points takes \"alpha\", \"voxel_size\" and \"max_points\"",
                          q->unknown), -1;
+  /* Checked as the float it is kept as: "1e-300" would round to 0, every voxel solid. */
   double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
-  if (q->alpha && (fg_query_number(q->alpha, &a) != 0 || !(a > 0.0 && a < 1.0)))
+  if (q->alpha && (fg_query_number(q->alpha, &a) != 0 || !((float)a > 0.0f && (float)a < 1.0f)))
     return fg_resp_error(resp, 400, "invalid_request", "\"alpha\" must be a number in (0, 1) "
                          "(default %g): a voxel is solid when its opacity 1 - exp(-sigma * "
                          "voxel_size) reaches it; got \"%.40s\"",

@@ -235,6 +235,7 @@ static void test_errors(void) {
   static const char *const bad[] = {
       "foo=1", "kind=surface", "kind=", "kind=MESH", "threshold=0", "threshold=1",
       "threshold=-0.1", "threshold=1.5", "threshold=abc", "threshold=nan", "threshold=",
+      "threshold=1e-300", "alpha=0.99999999999", /* 0 and 1 as the float they are kept as */
       "threshold=0.2&alpha=0.2", "alpha=2", "voxel_size=0", "voxel_size=-0.01",
       "voxel_size=abc", "voxel_size=inf", "voxel_size=", "kind=points&extra=1"};
   for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)

@@ -236,6 +236,7 @@ static void test_points(void) {
 
   static const char *const bad[] = {
       "foo=1", "alpha=0", "alpha=1", "alpha=-0.5", "alpha=abc", "alpha=", "alpha=nan",
+      "alpha=1e-300", "alpha=0.99999999999", /* 0 and 1 as the float they are kept as */
       "voxel_size=0", "voxel_size=-0.01", "voxel_size=abc", "voxel_size=inf", "max_points=0",
       "max_points=1.5", "max_points=-3", "max_points=abc", "max_points=99999999",
       "max_points=", "alpha=0.2&extra=1"};
