@@ -47,7 +47,7 @@ int fg_api_parse_geometry(const fg_api_geometry_query *q, const fg_scene_params 
     return fg_resp_error(resp, 400, "invalid_request", "give \"threshold\" or its synonym "
                          "\"alpha\", not both"), -1;
   if (!thr) thr = alias;
-  /* Checked as the float it is kept as: "1e-300" would round to 0, every voxel solid. */
+  /* Checked as the float it is kept as: "1e-300" rounds to 0, which the library refuses. */
   double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
   if (thr && (fg_query_number(thr, &a) != 0 || !((float)a > 0.0f && (float)a < 1.0f)))
     return fg_resp_error(resp, 400, "invalid_request", "\"threshold\" must be a number in (0, 1) "

@@ -50,7 +50,7 @@ int fg_api_parse_points(const fg_api_points_query *q, const fg_scene_params *par
     return fg_resp_error(resp, 400, "invalid_request", "unknown query parameter \"%.40s\"; "
                          "points takes \"alpha\", \"voxel_size\" and \"max_points\"",
                          q->unknown), -1;
-  /* Checked as the float it is kept as: "1e-300" would round to 0, every voxel solid. */
+  /* Checked as the float it is kept as: "1e-300" rounds to 0, which the library refuses. */
   double a = FG_QUERY_DEFAULT_ALPHA_THRESHOLD;
   if (q->alpha && (fg_query_number(q->alpha, &a) != 0 || !((float)a > 0.0f && (float)a < 1.0f)))
     return fg_resp_error(resp, 400, "invalid_request", "\"alpha\" must be a number in (0, 1) "
