@@ -786,6 +786,7 @@ static size_t cap_for_fds(size_t want) {
   return fit;
 }
 
+__attribute__((format(printf, 2, 0)))
 static void on_mhd_log(void *cls, const char *fmt, va_list ap) {
   char buf[512];
   vsnprintf(buf, sizeof buf, fmt, ap);
