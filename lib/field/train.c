@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "core/arena.h"
+#include "core/blas.h"
 #include "core/error.h"
 #include "core/half.h"
 #include "field/adam.h"
@@ -428,8 +429,10 @@ static void forward_features(fg_trainer *t, int32_t R_f, int32_t S_f) {
   fg_render_forward(R_f, t->off, t->cnt, t->sigma, t->rgb, t->dts, t->ts, t->h, 64, t->bg, 1,
                     T_MIN, t->frgb, NULL, NULL, t->hc,
                     t->used_f, nt);
+  const int blas = fg_blas_single_begin();
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, R_f, t->D, 64, 1.0f, t->hc, 64,
               fg_field_group(f, FG_FIELD_FEAT_OUT, NULL), 64, 0.0f, t->fpred, t->D);
+  fg_blas_single_end(blas);
 }
 
 /* Back-propagates the feature loss d_fpred (R_f,D) into the feature branch's gradients (not
@@ -439,10 +442,12 @@ static void backward_features(fg_trainer *t, int32_t R_f, int32_t S_f) {
   const int nt = t->opts.n_threads, D = t->D;
   float *g_out = t->grad + f->group_offset[FG_FIELD_FEAT_OUT];
   /* dW_out (D,64) += d_fpred^T hc;  d_hc (R_f,64) = d_fpred W_out. */
+  const int blas = fg_blas_single_begin();
   cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, D, 64, R_f, 1.0f, t->d_fpred, D, t->hc, 64,
               1.0f, g_out, 64);
   cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, R_f, 64, D, 1.0f, t->d_fpred, D,
               fg_field_group(f, FG_FIELD_FEAT_OUT, NULL), 64, 0.0f, t->d_hc, 64);
+  fg_blas_single_end(blas);
   fg_render_backward(R_f, t->off, t->cnt, t->used_f, t->sigma, t->rgb, t->dts, t->ts, t->h, 64,
                      t->bg, 1, t->zero_rgb, NULL, NULL, t->d_hc, t->d_sigma_f, t->d_rgb_f, t->d_h,
                      nt);
