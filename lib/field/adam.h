@@ -52,6 +52,24 @@ int fg_adam_config_check(const fg_adam_config *cfg);
 void fg_adam_step(const fg_adam_config *cfg, float *params, const float *grads, float *m,
                   float *v, size_t n, int step, int n_threads);
 
+/* The loops behind fg_adam_step, which runs the widest one this CPU supports. They give the
+ * same bits (no FMA, the reference's order of operations); x86-64 GCC builds have the two
+ * vector loops, others only the scalar one. */
+typedef enum fg_adam_kernel {
+  FG_ADAM_AUTO = -1,
+  FG_ADAM_SCALAR = 0,
+  FG_ADAM_AVX2,
+  FG_ADAM_AVX512,
+} fg_adam_kernel;
+
+/* 1 if this build and CPU can run loop k, else 0 (also for FG_ADAM_AUTO). */
+int fg_adam_kernel_supported(fg_adam_kernel k);
+
+/* fg_adam_step with loop k (for tests and benchmarks); k must be supported. */
+void fg_adam_step_kernel(fg_adam_kernel k, const fg_adam_config *cfg, float *params,
+                         const float *grads, float *m, float *v, size_t n, int step,
+                         int n_threads);
+
 /* Scalar reference of fg_adam_step (one thread, plain loop). For tests. */
 void fg_adam_step_ref(const fg_adam_config *cfg, float *params, const float *grads, float *m,
                       float *v, size_t n, int step);

@@ -14,7 +14,8 @@
  *   bench=mlp threads=2 kernel=avx512 openblas_core=Haswell sgemm2048_gflops=216 \
  *     density_fwd_rows_s=... density_fwd_gflops=... density_fwdbwd_rows_s=... ...
  * keys <net>_<pass>_{rows_s,gflops} for the automatic path and <net>_<pass>_blas_... for the
- * OpenBLAS path, then adam_params_s (fg_adam_step over 2^24 parameters, parameters/s). */
+ * OpenBLAS path, then adam_params_s (fg_adam_step over 2^24 parameters, parameters/s) and
+ * adam_<loop>_params_s for each of its loops this CPU runs (scalar, avx2, avx512). */
 #include "field/adam.h"
 #include "field/mlp.h"
 
@@ -101,8 +102,9 @@ static void bench_net(const char *name, const fg_mlp_config *cfg, int B, int thr
   free(W), free(dW), free(in), free(dout), free(acts), free(out), free(din), free(scratch);
 }
 
-/* Adam over 2^24 parameters (a 16-level 2^19 x 2 hash grid's worth): parameters per second. */
-static double adam_params_s(int threads) {
+/* Adam over 2^24 parameters (a 16-level 2^19 x 2 hash grid's worth) with loop k
+ * (FG_ADAM_AUTO: fg_adam_step's pick): parameters per second. */
+static double adam_params_s(fg_adam_kernel k, int threads) {
   const size_t n = (size_t)1 << 24;
   float *p = random_f(n, 1e-4f, 6), *g = random_f(n, 1e-3f, 7);
   float *m = xmalloc_f(n), *v = xmalloc_f(n);
@@ -112,7 +114,8 @@ static double adam_params_s(int threads) {
   double best = 1e30;
   for (int t = 1; t <= 6; t++) {
     const double t0 = now_s();
-    fg_adam_step(&cfg, p, g, m, v, n, t, threads);
+    if (k == FG_ADAM_AUTO) fg_adam_step(&cfg, p, g, m, v, n, t, threads);
+    else fg_adam_step_kernel(k, &cfg, p, g, m, v, n, t, threads);
     const double dt = now_s() - t0;
     if (t > 1 && dt < best) best = dt;
   }
@@ -140,6 +143,11 @@ int main(int argc, char **argv) {
     bench_net("feature", &feature, 1 << 16, threads, suffix);
   }
   fg_mlp_set_kernel(0);
-  printf(" adam_params_s=%.0f\n", adam_params_s(threads));
+  printf(" adam_params_s=%.0f", adam_params_s(FG_ADAM_AUTO, threads));
+  const char *const loops[] = {"scalar", "avx2", "avx512"};
+  for (int k = FG_ADAM_SCALAR; k <= FG_ADAM_AVX512; k++)
+    if (fg_adam_kernel_supported(k))
+      printf(" adam_%s_params_s=%.0f", loops[k], adam_params_s(k, threads));
+  printf("\n");
   return 0;
 }
