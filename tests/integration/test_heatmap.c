@@ -12,7 +12,9 @@
  *   - every bad input gives its JSON error;
  *   - the heatmap render of a training view has the camera's size and its hottest pixels on
  *     the queried object (scenegen's mask), the score recovered per pixel against the plain
- *     render through the turbo table.
+ *     render through the turbo table;
+ *   - the geometry endpoint and normal renders of the same trained scene
+ *     (geometry_checks.c): the training, a minute or more on 2 cores, serves both.
  *
  * argv[1]: fieldgripd, argv[2]: fieldgrip-scenegen. */
 #include <math.h>
@@ -22,6 +24,7 @@
 #include "core/error.h"
 #include "io/image.h"
 #include "io/npy.h"
+#include "geometry_checks.h"
 #include "query/heatmap.h"
 #include "training.h"
 
@@ -446,6 +449,7 @@ int main(int argc, char **argv) {
   ASSERT_HTTP_ERROR(r, 409, "not_trained");
   ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "POST /v1/scenes/sg/train");
   h_resp_free(r);
+  geometry_checks_untrained();
   r = h_post_json("/v1/scenes", "{\"name\": \"huge\", \"workspace\": {\"min\": [-2, -2, -2], "
                   "\"max\": [2, 2, 2]}, \"voxel_size\": 0.01}");
   ASSERT_STATUS(r, 201);
@@ -480,6 +484,8 @@ int main(int argc, char **argv) {
   ASSERT(h_metric("fieldgrip_heatmaps_total{format=\"ply\"}") >= 1);
   ASSERT(h_metric("fieldgrip_heatmaps_total{format=\"render\"}") >= 2);
   double t_queried = t_now();
+  const geometry_data_set ds = {g_dir, g_frames, VIEWS, W, H, DIM};
+  geometry_checks(&ds);
 
   /* While another scene trains, heatmaps and health answer. */
   char *id = t_train("other", "{\"steps\": 1000000}");

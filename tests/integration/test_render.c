@@ -63,7 +63,7 @@ static void test_formats(void) {
   h_resp_free(r);
 
   /* Surface normals: 8-bit RGB too (their values are checked on a longer-trained field in
-   * test_geometry). */
+   * geometry_checks.c). */
   r = render_camera("sg", g_camera, "\"output\": \"normal\"");
   t_png_header(r, &w, &h, &bits, &type);
   ASSERT_EQ(w, 64);

@@ -1,5 +1,6 @@
 /* GET /v1/scenes/{s}/geometry and renders with "output": "normal", black-box over HTTP on a
- * trained scenegen tabletop (table top at z = 0, world +z up):
+ * trained scenegen tabletop (table top at z = 0, world +z up), as test_heatmap's second half
+ * (one training serves both; see geometry_checks.h):
  *   - 404 for an unknown scene, 409 not_trained before training;
  *   - mesh: a binary PLY (read back with fg_ply_decode) whose counts are the X-Vertex-Count
  *     and X-Face-Count headers, closed and consistently oriented, coloured, every vertex in
@@ -13,31 +14,23 @@
  *   - the normal render of a training view has the camera's size, unit normals, black
  *     background and, on average, normals looking up on the table's pixels (scenegen's
  *     mask).
- * Prints the time of the geometry requests.
- *
- * argv[1]: fieldgripd, argv[2]: fieldgrip-scenegen. */
+ * Prints the time of the geometry requests. */
 #include <math.h>
 
 #include "core/error.h"
 #include "io/image.h"
 #include "io/ply.h"
 #include "query/geometry.h"
+#include "geometry_checks.h"
 #include "training.h"
-
-#define VIEWS 30
-#define W 160
-#define H 120
-#define DIM 8
-#define PATCH 8
-
-#define TRAIN_BODY "{\"steps\": 250}"
 
 /* The workspace of t_scene_from_dataset, at the default 1 cm voxels: 70 x 90 x 40. */
 static const double WS_MIN[3] = {0.1, -0.45, -0.05}, WS_MAX[3] = {0.8, 0.45, 0.35};
 #define VOXEL 0.01
 
-static json_t *g_frames; /* transforms.json */
-static char *g_dir;      /* the data set */
+static const geometry_data_set *g_ds; /* the data set scene "sg" was trained on */
+#define W (g_ds->w)
+#define H (g_ds->h)
 
 static h_resp *geometry(const char *scene, const char *query) {
   char *path = h_fmt("/v1/scenes/%s/geometry%s%s", scene, query[0] ? "?" : "", query);
@@ -184,7 +177,7 @@ static void test_points(void) {
   ASSERT(at_top * 10 >= table * 9);
   /* As many as the heatmap of the same threshold calls occupied: one voxel cache. */
   char emb[256] = "[1";
-  for (int d = 1; d < DIM; d++) strcat(emb, ", 0");
+  for (int d = 1; d < g_ds->dim; d++) strcat(emb, ", 0");
   strcat(emb, "]");
   char *body = h_fmt("{\"embedding\": %s, \"alpha_threshold\": 0.1, \"max_points\": 1}", emb);
   h_resp *hm = h_post_json("/v1/scenes/sg/heatmap", body);
@@ -264,8 +257,8 @@ static void test_normal_render(void) {
   int best_view = -1;
   size_t best_count = 0;
   uint8_t *best_mask = NULL;
-  for (int v = 0; v < VIEWS; v++) {
-    char *path = h_fmt("%s/masks/%04d.png", g_dir, v);
+  for (int v = 0; v < g_ds->views; v++) {
+    char *path = h_fmt("%s/masks/%04d.png", g_ds->dir, v);
     size_t len;
     char *png = h_read_file(path, &len);
     ASSERT(png != NULL);
@@ -289,12 +282,12 @@ static void test_normal_render(void) {
     free(png);
     free(path);
   }
-  json_t *fr = json_array_get(JGET(g_frames, "frames"), (size_t)best_view);
+  json_t *fr = json_array_get(JGET(g_ds->frames, "frames"), (size_t)best_view);
   char *m = json_dumps(JGET(fr, "transform_matrix"), JSON_COMPACT | JSON_REAL_PRECISION(17));
   char *body = h_fmt("{\"camera\": {\"transform_matrix\": %s, \"fl_x\": %.17g, \"fl_y\": %.17g, "
                      "\"cx\": %.17g, \"cy\": %.17g, \"w\": %d, \"h\": %d}, \"output\": \"normal\"}",
-                     m, JNUM(g_frames, "fl_x"), JNUM(g_frames, "fl_y"), JNUM(g_frames, "cx"),
-                     JNUM(g_frames, "cy"), W, H);
+                     m, JNUM(g_ds->frames, "fl_x"), JNUM(g_ds->frames, "fl_y"), JNUM(g_ds->frames, "cx"),
+                     JNUM(g_ds->frames, "cy"), W, H);
   const double t = t_now();
   h_resp *r = t_render("sg", body);
   const double ms = (t_now() - t) * 1e3;
@@ -358,40 +351,25 @@ static void test_normal_render(void) {
   free(best_mask);
 }
 
-/* ---------------------------------------------------------------- main */
+/* ---------------------------------------------------------------- entry points */
 
-int main(int argc, char **argv) {
-  h_init(argc, argv);
-  if (argc < 3) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN", argv[0]);
-  const double t0 = t_now();
-  g_dir = t_dataset(argv[2], VIEWS, W, H, DIM, PATCH);
-  char *tf_path = h_fmt("%s/transforms.json", g_dir);
-  json_error_t jerr;
-  g_frames = json_load_file(tf_path, 0, &jerr);
-  ASSERT(g_frames != NULL);
-  h_start();
-  t_scene_from_dataset("sg", g_dir, VIEWS);
-
+void geometry_checks_untrained(void) {
   expect_error("sg", "", 409, "not_trained");
   h_resp *r = geometry("sg", "kind=points");
   ASSERT_HTTP_ERROR(r, 409, "not_trained");
   ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "POST /v1/scenes/sg/train");
   h_resp_free(r);
   expect_error("nope", "", 404, "scene_not_found");
+}
 
-  t_train_done("sg", TRAIN_BODY, 900);
-  const double t_trained = t_now();
+void geometry_checks(const geometry_data_set *ds) {
+  g_ds = ds;
+  const double t = t_now();
   test_mesh();
   test_points();
   test_other_voxel_size();
   test_errors();
   test_normal_render();
-  printf("setup and training %.1f s, checks %.1f s\n", t_trained - t0, t_now() - t_trained);
-
-  h_stop();
-  json_decref(g_frames);
-  free(tf_path);
-  free(g_dir);
-  h_done();
-  return 0;
+  printf("geometry checks %.1f s\n", t_now() - t);
+  g_ds = NULL;
 }
