@@ -5,14 +5,15 @@
  *
  * The data set comes from outside (tests/bench/run.sh makes it with `fieldgrip-scenegen --dim
  * 512`); this program generates nothing. It trains the set in-process for --steps steps on
- * --threads threads (test_grasp_scenegen's layout: field scale 2 around the workspace, every
- * view trained, the scene's background), builds the voxel feature cache (its seconds and
- * bytes are reported on their own: the daemon builds it once per field state, not per
- * request), and records one demo each of the mug's and the box's gt.json grasp (each task is
- * one demo, so Z = z at that pose, 100 query points of the default std). Then it times --runs
- * rounds of both tasks' requests done as the daemon does them: fg_grasp_field_new (its share
- * is reported as grasp_field_new_p50_s) + fg_grasp_search with the default options
- * (candidates at alpha >= 0.1, 24 rotations, n_keep 1024, n_final 64, 100 Adam iterations),
+ * --threads threads (as the quality test's layouts, tests/quality/layout.h: field scale 2
+ * around the workspace, the scene's background; here every view is trained), builds the
+ * voxel feature cache (its seconds and bytes are reported on their own: the daemon builds
+ * it once per field state, not per request), and records one demo each of the mug's and the
+ * box's gt.json grasp (each task is one demo, so Z = z at that pose, 100 query points of the
+ * default std). Then it times --runs rounds of both tasks' requests done as the daemon does
+ * them: fg_grasp_field_new (its share is reported as grasp_field_new_p50_s) +
+ * fg_grasp_search with the default options (candidates at alpha >= 0.1, 24 rotations,
+ * n_keep 1024, n_final 64, 100 Adam iterations),
  * the Robotiq 2F-140 open to 0.11 m for the collision checks. p50/min/max are over all 2 x runs requests; poses_optimised, evaluations
  * and lookups are those of the costlier of the two tasks' requests (they differ only by the
  * poses the collision check rejects). lookups = evaluations x N_q x 8 trilinear corners, each a

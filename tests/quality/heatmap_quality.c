@@ -1,4 +1,4 @@
-/* Heatmap quality on trained scenegen tabletops (two layouts, four object classes, class
+/* Heatmap quality on a trained scenegen layout (layout.h; four object classes, class
  * embeddings from gt.json), issue 5's criterion: per object class, the occupied voxels
  * (alpha >= 0.1) scoring >= 0.5 with negatives overlap the object's ground-truth voxels with
  * IoU >= 0.5 and the heatmap's best voxel lies at the object; with negatives a query for one
@@ -27,14 +27,14 @@
  * and prints the IoU with it, issue 5's number, beside it; their best voxel may lie in the
  * cavity. The box and the ball are held to the criterion as stated.
  *
- * Depth (issue 13). The second layout is captured as an RGB-D camera would (scenegen's 16-bit
- * depth maps) and trained with the depth loss at its default weight: there the cavities must
+ * Depth (issue 13). A layout captured as an RGB-D camera would (scenegen's 16-bit depth maps)
+ * is trained with the depth loss at its default weight: there the cavities must
  * come out empty and the field is held to issue 13's numbers (tests/scenegen/geomeval.h):
  * held-out depth error on object pixels median <= 2 mm, >= 95 % of the points 6 mm inside each
  * container's cavity free (alpha < 0.1 at 1 cm), each container's IoU with the cavity
  * counted >= 0.6, and every object's voxels >= 90 % solid (a depth surface is a shell; a
- * ball once came out with none). The first layout has no depth and keeps issue 5's
- * criterion as it was.
+ * ball once came out with none). A layout without depth keeps issue 5's criterion as it
+ * was.
  *
  * Best voxel. Scores with negatives saturate (0.9995-0.99999) over an object and the voxel
  * layer around it, where the feature grid's finest cells (1.4 cm) still carry the object's
@@ -45,23 +45,15 @@
  * the objects). At 500 steps the surfaces carry a haze a voxel thick (up to 230 false
  * positives per object outside the cavities, up to 70 at 1500 steps); with 8-pixel patches
  * the objects' lowest 3 cm take the table's feature (up to 120 of the bowl's voxels score
- * below 0.5, 7-80 with 4-pixel patches).
- * argv[1]: the fieldgrip-scenegen program. */
+ * below 0.5, 7-80 with 4-pixel patches). */
+#include "heatmap_quality.h"
+
 #include "testutil.h"
 
-#include <time.h>
-
-#include "core/fsutil.h"
-#include "field/model.h"
-#include "field/train.h"
 #include "geomeval.h"
 #include "gtvox.h"
-#include "io/dataset.h"
 #include "io/image.h"
-#include "query/heatmap.h"
 
-#define STEPS 1500
-#define N_VIEWS 30
 #define IOU_FLOOR 0.5
 #define DEPTH_MEDIAN_MM 2.0 /* issue 13, with depth maps */
 #define CAVITY_FREE 0.95
@@ -70,14 +62,6 @@
 #define OTHERS_CEIL 0.2
 #define TOP_PIXELS 50   /* brightest pixels of a held-out view that must lie on the mask */
 #define TOP_ON_MASK 0.9 /* ... the fraction of them */
-
-static const double ws_min[3] = {0.10, -0.45, 0.005}, ws_max[3] = {0.80, 0.45, 0.35};
-
-static double now_s(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 enum { PLACE_ELSEWHERE, PLACE_OBJECT, PLACE_NEXT, PLACE_CAVITY };
 static const char *const place_names[] = {"elsewhere", "in the object",
@@ -129,72 +113,36 @@ static void check_geometry(const sg_gt *gt, const char *dir, const fg_field *f,
   }
 }
 
-/* One layout: generate, train, and check every object class; with depth, the views carry
- * depth maps (an RGB-D capture) and the field is also held to issue 13's geometry. */
-static void check_layout(const char *scenegen, const char *seed, int depth) {
-  char *dir = sg_test_tmpdir("heatmap");
-  const char *args[] = {"--out", dir, "--seed", seed, "--views", "30", "--width", "160",
-                        "--height", "120", "--dim", "32", "--patch", "4", "--holdout", "0",
-                        depth ? "--depth" : NULL, "png", NULL};
-  ASSERT_EQ(sg_test_run(scenegen, args), 0);
-  char *transforms = fg_path_join(dir, "transforms.json"), *gt_path = fg_path_join(dir, "gt.json");
-  sg_gt gt;
-  ASSERT_OK(sg_gt_load(gt_path, &gt));
-  ASSERT_EQ(gt.n_objects, 4);
-  fg_ingest_opts io = {.background_rgb = {gt.background_rgb[0], gt.background_rgb[1],
-                                          gt.background_rgb[2]}};
-  fg_frame *frames;
-  size_t n;
-  ASSERT_OK(fg_dataset_load(transforms, &io, 2, &frames, &n));
-  ASSERT_EQ(n, N_VIEWS);
-  const int D = gt.feature_dim;
-
-  fg_field_config cfg;
-  ASSERT_OK(fg_field_config_for_workspace(&cfg, ws_min, ws_max, 2.0, D));
-  fg_field *f;
-  ASSERT_OK(fg_field_new(&f, &cfg, 1));
-  fg_train_opts o;
-  fg_train_opts_default(&o);
-  o.n_threads = 2;
-  o.holdout_every = 10; /* views 0, 10, 20 are held out */
-  o.target_samples = 1 << 15;
-  memcpy(o.background, gt.background_rgb, sizeof o.background);
-  fg_trainer *t;
-  ASSERT_OK(fg_trainer_new(&t, f, frames, n, &o));
-  fg_train_stats st;
-  const double t0 = now_s();
-  for (int s = 0; s < STEPS; s++) ASSERT_OK(fg_trainer_step(t, &st));
-  const double train_s = now_s() - t0;
-  fg_trainer_free(t);
-
-  check_geometry(&gt, dir, f, frames, n, depth);
-  fg_voxel_grid g;
-  ASSERT_OK(fg_voxel_grid_init(&g, ws_min, ws_max, 0.01));
-  fg_voxel_features *vf;
-  ASSERT_OK(fg_voxel_features_build(&vf, f, &g, 2));
+/* Every object class of layout L; with depth, issue 13's geometry too. */
+void heatmap_quality_check(const sg_layout *L) {
+  const sg_gt *gt = &L->gt;
+  ASSERT_EQ(gt->n_objects, 4);
+  const int D = gt->feature_dim;
+  fg_field *f = L->field;
+  const fg_frame *frames = L->frames;
+  ASSERT_EQ(L->spec.holdout_every, 10); /* view 10 is held out */
+  check_geometry(gt, L->dir, f, frames, L->n_frames, L->spec.depth);
+  const fg_voxel_features *vf = L->vf;
+  const fg_voxel_grid g = *fg_voxel_features_grid(vf);
   const size_t N = fg_voxel_grid_count(&g);
   const float *alpha = fg_voxel_features_alpha(vf);
-  printf("seed %s: %d steps in %.1f s, loss %.4f; voxel features: %zu of %zu voxels kept, "
-         "%.2f s, %.1f MB\n",
-         seed, STEPS, train_s, st.loss, fg_voxel_features_n_kept(vf), N,
-         fg_voxel_features_build_seconds(vf), fg_voxel_features_bytes(vf) / 1e6);
 
   signed char *owner = malloc(N), *cavity = malloc(N);
   ASSERT(owner && cavity);
-  sg_gt_voxelise(&gt, &g, owner, cavity);
+  sg_gt_voxelise(gt, &g, owner, cavity);
 
-  float *neg = malloc((size_t)gt.n_classes * D * sizeof *neg);
+  float *neg = malloc((size_t)gt->n_classes * D * sizeof *neg);
   ASSERT(neg);
-  for (int k = 0; k < gt.n_objects; k++) {
-    const int cls = gt.objects[k].class_id;
-    const int container = gt.objects[k].shape.type == SG_SHAPE_MUG ||
-                          gt.objects[k].shape.type == SG_SHAPE_BOWL;
+  for (int k = 0; k < gt->n_objects; k++) {
+    const int cls = gt->objects[k].class_id;
+    const int container = gt->objects[k].shape.type == SG_SHAPE_MUG ||
+                          gt->objects[k].shape.type == SG_SHAPE_BOWL;
     int nn = 0; /* negatives: every other class, table and background included */
-    for (int c = 0; c < gt.n_classes; c++)
-      if (c != cls) memcpy(neg + (size_t)nn++ * D, gt.embeddings + (size_t)c * D, D * 4);
+    for (int c = 0; c < gt->n_classes; c++)
+      if (c != cls) memcpy(neg + (size_t)nn++ * D, gt->embeddings + (size_t)c * D, D * 4);
     fg_query qp, qn;
-    ASSERT_OK(fg_query_init(&qp, D, gt.embeddings + (size_t)cls * D, 1, NULL, 0, 0.1f));
-    ASSERT_OK(fg_query_init(&qn, D, gt.embeddings + (size_t)cls * D, 1, neg, nn, 0.1f));
+    ASSERT_OK(fg_query_init(&qp, D, gt->embeddings + (size_t)cls * D, 1, NULL, 0, 0.1f));
+    ASSERT_OK(fg_query_init(&qn, D, gt->embeddings + (size_t)cls * D, 1, neg, nn, 0.1f));
     fg_heatmap hp, hn;
     ASSERT_OK(fg_heatmap_compute(vf, &qp, NULL, &hp));
     ASSERT_OK(fg_heatmap_compute(vf, &qn, NULL, &hn));
@@ -228,12 +176,12 @@ static void check_layout(const char *scenegen, const char *seed, int depth) {
     /* where the heatmap's best voxel lies (the rule with negatives, as the API reports it)
      * and the cosine rule's */
     ASSERT(hn.has_best && hp.has_best);
-    const int best_n = best_place(&gt, &g, owner, cavity, k, hn.best_index);
-    const int best_p = best_place(&gt, &g, owner, cavity, k, hp.best_index);
+    const int best_n = best_place(gt, &g, owner, cavity, k, hn.best_index);
+    const int best_p = best_place(gt, &g, owner, cavity, k, hp.best_index);
     printf("  %-5s: %zu voxels, %zu predicted; IoU %.3f, without the cavity %.3f; false "
            "positives %zu in the cavity, %zu elsewhere; false negatives %zu free (alpha < "
            "0.1), %zu scoring < 0.5\n",
-           gt.class_names[cls], n_gt, n_pred, iou, iou_x, fp_cavity, fp_other, fn_free,
+           gt->class_names[cls], n_gt, n_pred, iou, iou_x, fp_cavity, fp_other, fn_free,
            fn_score);
     printf("         best voxel %.6f at (%.3f %.3f %.3f): %s; cosine rule's %.3f at (%.3f "
            "%.3f %.3f): %s; others' mean score %.3f over %zu voxels\n",
@@ -258,7 +206,7 @@ static void check_layout(const char *scenegen, const char *seed, int depth) {
     float *sc = malloc((size_t)w * h * sizeof *sc);
     uint8_t *blend = malloc((size_t)w * h * 3);
     ASSERT(feat && rgb && op && sc && blend);
-    ASSERT_OK(fg_field_render_camera(f, fr->T_world_cam, &fr->cam, o.background, rgb, NULL, op,
+    ASSERT_OK(fg_field_render_camera(f, fr->T_world_cam, &fr->cam, L->background, rgb, NULL, op,
                                      feat, 2));
     ASSERT_OK(fg_query_score_features(&qn, feat, (int64_t)w * h, D, op, 0.5f, sc, 2));
     fg_heatmap_blend(rgb, sc, (int64_t)w * h, 0.0f, 1.0f, blend);
@@ -266,7 +214,7 @@ static void check_layout(const char *scenegen, const char *seed, int depth) {
     snprintf(name, sizeof name, "masks/%04d.png", 10);
     char *png;
     size_t len;
-    sg_test_read(dir, name, &png, &len);
+    sg_test_read(L->dir, name, &png, &len);
     fg_image mask;
     const float black[3] = {0, 0, 0};
     ASSERT_OK(fg_image_decode(png, len, black, &mask));
@@ -301,20 +249,4 @@ static void check_layout(const char *scenegen, const char *seed, int depth) {
   free(neg);
   free(owner);
   free(cavity);
-  fg_voxel_features_free(vf);
-  fg_field_free(f);
-  fg_dataset_free(frames, n);
-  sg_gt_free(&gt);
-  fg_rmtree(dir);
-  free(dir);
-  free(transforms);
-  free(gt_path);
-}
-
-int main(int argc, char **argv) {
-  ASSERT(argc == 2);
-  check_layout(argv[1], "0", 0);
-  check_layout(argv[1], "1", 1);
-  printf("ok\n");
-  return 0;
 }

@@ -1,0 +1,65 @@
+/* Trained scenegen layouts for the quality checks: see layout.h. */
+#include "layout.h"
+
+#include "testutil.h"
+
+#include "core/clock.h"
+
+/* The tabletop workspace of SPEC.md's example configuration. */
+static const double ws_min[3] = {0.10, -0.45, 0.005}, ws_max[3] = {0.80, 0.45, 0.35};
+
+void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout *L) {
+  memset(L, 0, sizeof *L);
+  L->spec = *spec;
+  L->dir = sg_test_tmpdir("quality");
+  const char *args[] = {"--out", L->dir, "--seed", spec->seed, "--embedding-seed",
+                        spec->embedding_seed, "--views", "30", "--width", "160", "--height",
+                        "120", "--dim", "32", "--patch", "4", "--holdout", "0",
+                        spec->depth ? "--depth" : NULL, "png", NULL};
+  ASSERT_EQ(sg_test_run(scenegen, args), 0);
+  char *transforms = fg_path_join(L->dir, "transforms.json");
+  char *gt_path = fg_path_join(L->dir, "gt.json");
+  ASSERT_OK(sg_gt_load(gt_path, &L->gt));
+  memcpy(L->background, L->gt.background_rgb, sizeof L->background);
+  fg_ingest_opts io = {.background_rgb = {L->background[0], L->background[1], L->background[2]}};
+  ASSERT_OK(fg_dataset_load(transforms, &io, 2, &L->frames, &L->n_frames));
+  ASSERT_EQ(L->n_frames, SG_LAYOUT_VIEWS);
+
+  fg_field_config cfg;
+  ASSERT_OK(fg_field_config_for_workspace(&cfg, ws_min, ws_max, 2.0, L->gt.feature_dim));
+  ASSERT_OK(fg_field_new(&L->field, &cfg, 1));
+  fg_train_opts o;
+  fg_train_opts_default(&o);
+  o.n_threads = 2;
+  o.holdout_every = spec->holdout_every;
+  o.target_samples = 1 << 15;
+  memcpy(o.background, L->background, sizeof o.background);
+  fg_trainer *t;
+  ASSERT_OK(fg_trainer_new(&t, L->field, L->frames, L->n_frames, &o));
+  fg_train_stats st;
+  const double t0 = fg_mono_s();
+  for (int s = 0; s < SG_LAYOUT_STEPS; s++) ASSERT_OK(fg_trainer_step(t, &st));
+  const double train_s = fg_mono_s() - t0;
+  fg_trainer_free(t);
+
+  fg_voxel_grid g;
+  ASSERT_OK(fg_voxel_grid_init(&g, ws_min, ws_max, 0.01));
+  ASSERT_OK(fg_voxel_features_build(&L->vf, L->field, &g, 2));
+  printf("seed %s%s: %d steps in %.1f s, loss %.4f; voxel features: %zu of %zu voxels kept, "
+         "%.2f s, %.1f MB\n", spec->seed, spec->depth ? " (with depth)" : "", SG_LAYOUT_STEPS,
+         train_s, st.loss, fg_voxel_features_n_kept(L->vf), fg_voxel_grid_count(&g),
+         fg_voxel_features_build_seconds(L->vf), fg_voxel_features_bytes(L->vf) / 1e6);
+  fflush(stdout);
+  free(transforms);
+  free(gt_path);
+}
+
+void sg_layout_free(sg_layout *L) {
+  fg_voxel_features_free(L->vf);
+  fg_field_free(L->field);
+  fg_dataset_free(L->frames, L->n_frames);
+  sg_gt_free(&L->gt);
+  fg_rmtree(L->dir);
+  free(L->dir);
+  memset(L, 0, sizeof *L);
+}

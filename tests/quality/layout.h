@@ -1,0 +1,52 @@
+/* A trained scenegen layout for the quality checks (tests/quality): one generated tabletop,
+ * its field trained in-process and its voxel features, which the heatmap checks (issue 5, and
+ * issue 13 with depth) and the grasp checks (issue 12) share where they can, so that no
+ * layout is trained twice.
+ *
+ * Every layout: 30 views of 160 x 120 with 32-d features in 4-pixel patches, 1500 steps of
+ * 2^15 samples on 2 threads over the tabletop workspace of SPEC.md's example configuration,
+ * voxel features at 1 cm. What differs
+ * is in sg_layout_spec. Like the harness, every helper asserts instead of returning an
+ * error. */
+#ifndef SG_LAYOUT_H
+#define SG_LAYOUT_H
+
+#include <stddef.h>
+
+#include "field/model.h"
+#include "field/train.h"
+#include "gt.h"
+#include "io/dataset.h"
+#include "query/heatmap.h"
+
+#define SG_LAYOUT_STEPS 1500
+#define SG_LAYOUT_VIEWS 30
+
+typedef struct sg_layout_spec {
+  const char *seed;           /* scenegen's --seed */
+  const char *embedding_seed; /* its --embedding-seed: the class embeddings (one vocabulary
+                                 for layouts that share it, as frames of one feature
+                                 extractor have) */
+  int depth;                  /* 1: 16-bit depth maps (an RGB-D capture), trained with depth */
+  int holdout_every;          /* the trainer's: 10 holds views 0, 10 and 20 out; 0 none */
+} sg_layout_spec;
+
+typedef struct sg_layout {
+  sg_layout_spec spec;
+  char *dir;                /* the data set: gt.json, masks/ */
+  sg_gt gt;
+  fg_frame *frames;         /* all 30, the held-out ones included */
+  size_t n_frames;
+  fg_field *field;
+  float background[3];      /* the trainer's background colour */
+  fg_voxel_features *vf;    /* 1 cm voxels over the workspace */
+} sg_layout;
+
+/* Generates the layout of spec with fieldgrip-scenegen (the program's path), trains it and
+ * builds its voxel features; prints the training's time and loss. */
+void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout *L);
+
+/* Releases everything and removes the data set's folder. */
+void sg_layout_free(sg_layout *L);
+
+#endif
