@@ -23,6 +23,7 @@
 #include "query/geometry.h"
 #include "geometry_checks.h"
 #include "training.h"
+#include "views.h"
 
 /* The workspace of t_scene_from_dataset, at the default 1 cm voxels: 70 x 90 x 40. */
 static const double WS_MIN[3] = {0.1, -0.45, -0.05}, WS_MAX[3] = {0.8, 0.45, 0.35};
@@ -254,40 +255,11 @@ static void test_errors(void) {
 
 static void test_normal_render(void) {
   /* The view that sees the most table. */
-  int best_view = -1;
-  size_t best_count = 0;
-  uint8_t *best_mask = NULL;
-  for (int v = 0; v < g_ds->views; v++) {
-    char *path = h_fmt("%s/masks/%04d.png", g_ds->dir, v);
-    size_t len;
-    char *png = h_read_file(path, &len);
-    ASSERT(png != NULL);
-    fg_image img;
-    const float bg[3] = {0, 0, 0};
-    ASSERT_OK(fg_image_decode(png, len, bg, &img));
-    ASSERT_EQ(img.w, W);
-    uint8_t *mask = malloc((size_t)W * H);
-    size_t count = 0;
-    for (size_t i = 0; i < (size_t)W * H; i++) {
-      mask[i] = (uint8_t)lrintf(img.rgb[3 * i] * 255.0f);
-      count += mask[i] == 1;
-    }
-    if (count > best_count) {
-      free(best_mask);
-      best_mask = mask, best_count = count, best_view = v;
-    } else {
-      free(mask);
-    }
-    fg_image_release(&img);
-    free(png);
-    free(path);
-  }
-  json_t *fr = json_array_get(JGET(g_ds->frames, "frames"), (size_t)best_view);
-  char *m = json_dumps(JGET(fr, "transform_matrix"), JSON_COMPACT | JSON_REAL_PRECISION(17));
-  char *body = h_fmt("{\"camera\": {\"transform_matrix\": %s, \"fl_x\": %.17g, \"fl_y\": %.17g, "
-                     "\"cx\": %.17g, \"cy\": %.17g, \"w\": %d, \"h\": %d}, \"output\": \"normal\"}",
-                     m, JNUM(g_ds->frames, "fl_x"), JNUM(g_ds->frames, "fl_y"), JNUM(g_ds->frames, "cx"),
-                     JNUM(g_ds->frames, "cy"), W, H);
+  uint8_t *best_mask;
+  size_t best_count;
+  const int best_view = v_best_view(g_ds->dir, g_ds->views, W, H, 1, &best_mask, &best_count);
+  char *cam = v_frame_camera(g_ds->frames, best_view, W, H);
+  char *body = h_fmt("{\"camera\": %s, \"output\": \"normal\"}", cam);
   const double t = t_now();
   h_resp *r = t_render("sg", body);
   const double ms = (t_now() - t) * 1e3;
@@ -347,7 +319,7 @@ static void test_normal_render(void) {
   fg_image_release(&img);
   h_resp_free(r);
   free(body);
-  free(m);
+  free(cam);
   free(best_mask);
 }
 

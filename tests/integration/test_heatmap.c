@@ -27,6 +27,7 @@
 #include "geometry_checks.h"
 #include "query/heatmap.h"
 #include "training.h"
+#include "views.h"
 
 #define VIEWS 30
 #define W 160
@@ -308,41 +309,12 @@ static int turbo_level(const uint8_t hp[3], const uint8_t rp[3]) {
 
 static void test_render(void) {
   /* The training view that sees most of the mug (mask value 2 = the mug). */
-  int best_view = -1;
-  size_t best_count = 0;
-  uint8_t *best_mask = NULL;
-  for (int v = 0; v < VIEWS; v++) {
-    char *path = h_fmt("%s/masks/%04d.png", g_dir, v);
-    size_t len;
-    char *png = h_read_file(path, &len);
-    ASSERT(png != NULL);
-    fg_image img;
-    const float bg[3] = {0, 0, 0};
-    ASSERT_OK(fg_image_decode(png, len, bg, &img));
-    ASSERT_EQ(img.w, W);
-    uint8_t *mask = malloc((size_t)W * H);
-    size_t count = 0;
-    for (size_t i = 0; i < (size_t)W * H; i++) {
-      mask[i] = (uint8_t)lrintf(img.rgb[3 * i] * 255.0f);
-      count += mask[i] == 2;
-    }
-    if (count > best_count) {
-      free(best_mask);
-      best_mask = mask, best_count = count, best_view = v;
-    } else {
-      free(mask);
-    }
-    fg_image_release(&img);
-    free(png);
-    free(path);
-  }
+  uint8_t *best_mask;
+  size_t best_count;
+  const int best_view = v_best_view(g_dir, VIEWS, W, H, 2, &best_mask, &best_count);
   ASSERT(best_count > 200);
-  json_t *fr = json_array_get(JGET(g_frames, "frames"), (size_t)best_view);
-  char *m = json_dumps(JGET(fr, "transform_matrix"), JSON_COMPACT | JSON_REAL_PRECISION(17));
   const int rw = W, rh = H;
-  char *cam = h_fmt("{\"transform_matrix\": %s, \"fl_x\": %.17g, \"fl_y\": %.17g, \"cx\": %.17g, "
-                    "\"cy\": %.17g, \"w\": %d, \"h\": %d}", m, JNUM(g_frames, "fl_x"),
-                    JNUM(g_frames, "fl_y"), JNUM(g_frames, "cx"), JNUM(g_frames, "cy"), rw, rh);
+  char *cam = v_frame_camera(g_frames, best_view, rw, rh);
   char *e = class_embedding("mug");
   char *body = h_fmt("{\"camera\": %s, \"output\": \"heatmap\", \"embedding\": %s}", cam, e);
   h_resp *hr = t_render("sg", body);
@@ -388,7 +360,6 @@ static void test_render(void) {
   free(body);
   free(e);
   free(cam);
-  free(m);
 }
 
 /* ---------------------------------------------------------------- concurrent first heatmaps */
