@@ -13,6 +13,7 @@
  * FG_DECODE_TEST_AS_HEADROOM_MB lower the CPU limit per request and the address space limit
  * (to the address space in use at start plus that headroom) so tests can reach them. */
 #include "decoder.h"
+#include "decode_seccomp.h"
 
 #include "config.h"
 #include "core/error.h"
@@ -134,13 +135,14 @@ static void limit(int resource, rlim_t value, const char *name) {
     fprintf(stderr, "fieldgrip-decode: cannot set %s: %s\n", name, strerror(errno));
 }
 
-/* Confines the process before it reads untrusted data; see decoder.h for why each limit.
- * The CPU limit is set per request (cpu_budget). No seccomp filter: OpenImageIO and OpenCV
- * start threads, map plugins and read files on their own terms, and the systemd unit's
- * SystemCallFilter= already applies to this child as to the daemon. */
+/* Confines the process before it reads untrusted data; see decoder.h for why each limit and
+ * decode_seccomp.h for the system call filter. The CPU limit is set per request
+ * (cpu_budget). */
 static void sandbox(void) {
   if (prctl(PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) != 0)
     fprintf(stderr, "fieldgrip-decode: cannot set no_new_privs: %s\n", strerror(errno));
+  else if (fg_decode_seccomp() != 0)
+    fprintf(stderr, "fieldgrip-decode: no system call filter: %s\n", fg_error_detail());
   limit(RLIMIT_CORE, 0, "RLIMIT_CORE");
   limit(RLIMIT_NOFILE, FG_DECODER_MAX_FDS, "RLIMIT_NOFILE");
 #if !defined(__SANITIZE_ADDRESS__)

@@ -29,8 +29,9 @@ typedef struct fg_decoder fg_decoder;
  * allows, as the encoded request and its float pixels, and the libraries' threads), CPU
  * time FG_DECODER_CPU_SECONDS per request (SIGXCPU ends the child; all threads count), no
  * core files, FG_DECODER_MAX_FDS open files, no file growth (RLIMIT_FSIZE 0, unless stderr
- * is a regular file: then the child's messages must still reach it), and no_new_privs, so
- * nothing it could exec gains privileges. */
+ * is a regular file: then the child's messages must still reach it), no_new_privs, and the
+ * system call filter of decode_seccomp.h (no programs, processes, sockets, file changes or
+ * other processes' signals). */
 #define FG_DECODER_MAX_ADDRESS_BYTES (8ull << 30)
 #define FG_DECODER_CPU_SECONDS 120
 #define FG_DECODER_MAX_FDS 64

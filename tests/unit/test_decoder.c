@@ -3,8 +3,8 @@
  * with the child's detail, a child
  * that crashes or is killed is replaced, the pool stays within max_procs under concurrent
  * use, idle children are reaped, and fg_decoder_free leaves no process behind. Children run
- * confined (rlimits, no_new_privs); an image past the CPU or memory limit is an error, not a
- * crash of the caller, and the installed program has no test hooks.
+ * confined (rlimits, no_new_privs, the system call filter); an image past the CPU or memory
+ * limit is an error, not a crash of the caller, and the installed program has no test hooks.
  * argv[1] is the test build fieldgrip-decode-test (with the hooks), argv[2] the installed
  * fieldgrip-decode. */
 #include "test.h"
@@ -12,6 +12,7 @@
 #include "config.h"
 #include "core/clock.h"
 #include "core/error.h"
+#include "core/fsutil.h"
 #include "decoder.h"
 #include "io/depth.h"
 #include "io/image.h"
@@ -675,6 +676,13 @@ static void test_child_limits(void) {
   pid_t pid;
   ASSERT_EQ(fg_decoder_child_pids(d, &pid, 1), 1);
   ASSERT_STRCONTAINS(proc_line(pid, "status", "NoNewPrivs:"), "1");
+  /* the system call filter (decode_seccomp.h): one more than this process runs under */
+  int filters = -1, ours = -1;
+  const char *line = proc_line(pid, "status", "Seccomp_filters:");
+  ASSERT(sscanf(line, "Seccomp_filters: %d", &filters) == 1);
+  line = proc_line(getpid(), "status", "Seccomp_filters:");
+  ASSERT(sscanf(line, "Seccomp_filters: %d", &ours) == 1);
+  ASSERT_EQ(filters, ours + 1);
   unsigned long long soft, hard;
   const char *core = proc_line(pid, "limits", "Max core file size");
   ASSERT(sscanf(core + 26, "%llu %llu", &soft, &hard) == 2 && soft == 0 && hard == 0);
@@ -697,6 +705,41 @@ static void test_child_limits(void) {
     ASSERT(sscanf(fsize + 26, "%llu", &soft) == 1 && soft == 0);
   fg_decoder_free(d);
   free(png);
+}
+
+/* JPEG, OpenEXR and TIFF, as a phone or a render farm writes them, decode in a child of the
+ * installed program to the same floats as in process: its system call filter leaves the
+ * codecs' threads, plugins and reads alone. */
+static void test_formats_under_filter(void) {
+  enum { FW = 40, FH = 30 };
+  static float px[FH * FW * 3];
+  for (int i = 0; i < FW * FH * 3; i++) px[i] = (float)((i * 37) % 101) / 100.0f;
+  char dir[] = "/tmp/fg-decoder-XXXXXX";
+  ASSERT(mkdtemp(dir));
+  fg_decoder *d;
+  ASSERT_OK(fg_decoder_new(&d, shipped, 1, 30));
+  static const char *const names[] = {"a.jpg", "a.exr", "a.tif"};
+  for (int i = 0; i < 3; i++) {
+    char *path = fg_path_join(dir, names[i]);
+    ASSERT(path);
+    ASSERT_OK(fg_image_write_file(path, px, FW, FH, 3));
+    char *bytes;
+    size_t len;
+    ASSERT_OK(fg_read_file(path, 1u << 24, &bytes, &len));
+    fg_image direct, via;
+    ASSERT_OK(fg_image_decode(bytes, len, NULL, &direct));
+    ASSERT_OK(fg_decoder_decode(d, bytes, len, NULL, &via));
+    ASSERT_EQ(via.w, FW);
+    assert_same_image(&direct, &via);
+    fg_image_release(&direct);
+    fg_image_release(&via);
+    free(bytes);
+    unlink(path);
+    free(path);
+  }
+  ASSERT_EQ(fg_decoder_child_pids(d, NULL, 0), 1); /* one child did all three */
+  fg_decoder_free(d);
+  rmdir(dir);
 }
 
 /* The installed program ignores the hooks' variables (main sets them): a marker that would
@@ -789,6 +832,7 @@ int main(int argc, char **argv) {
   test_missing_program();
   test_impostors();
   test_child_limits();
+  test_formats_under_filter();
   test_shipped_has_no_hooks();
   test_cpu_limit();
   test_memory_limit();
