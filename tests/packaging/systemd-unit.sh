@@ -4,7 +4,8 @@
 #     built daemon (the installed path /usr/local/sbin/fieldgripd need not exist here);
 #  2. `systemd-analyze security --offline=true` rates the sandbox at most MAX_EXPOSURE;
 #  3. the unit hands over the token credential that config/fieldgripd.conf reads
-#     (token_file = ${CREDENTIALS_DIRECTORY}/token).
+#     (token_file = ${CREDENTIALS_DIRECTORY}/token);
+#  4. the unit allows seccomp, so that fieldgrip-decode can add its own filter.
 # Usage: systemd-unit.sh UNIT_FILE FIELDGRIPD_BINARY
 # A missing systemd-analyze is a failure, not a skip: CI installs systemd.
 set -euo pipefail
@@ -63,6 +64,15 @@ if ! grep -qx 'LoadCredential=token:/etc/fieldgrip/token' "$unit"; then
   exit 1
 fi
 echo "credential: token"
+
+# No group of systemd's allows seccomp(2), so without it on an allow line fieldgrip-decode
+# would run without its own, narrower filter under the unit (EPERM from seccomp).
+if ! grep -E '^SystemCallFilter=[^~]' "$unit" | grep -qw seccomp; then
+  echo "FAIL: $unit does not allow seccomp, which fieldgrip-decode needs for its own" \
+       "system call filter" >&2
+  exit 1
+fi
+echo "system calls: seccomp allowed"
 
 echo "# systemd-analyze security --offline=true $unit"
 set +e
