@@ -72,7 +72,7 @@ static const long denied[] = {
   __NR_quotactl,
 };
 
-/* The program being built; the largest is about 200 instructions. */
+/* The program being built: 230 instructions on x86-64. */
 enum { MAX_INSNS = 320 };
 typedef struct {
   struct sock_filter insn[MAX_INSNS];

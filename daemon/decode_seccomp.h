@@ -18,7 +18,8 @@
  *     filter's back), bpf, perf_event_open, userfaultfd, keyctl, namespaces, mounts, modules,
  *     reboot, swap, and the terminal's TIOCSTI and TIOCLINUX ioctls (typing into the
  *     daemon's terminal when it runs in the foreground);
- *   - system calls of another architecture (i386 or x32 on x86-64): the process is killed.
+ *   - system calls of another architecture: an i386 call (int $0x80 on x86-64) kills the
+ *     process, an x32 call fails with EPERM.
  * Under AddressSanitizer ptrace and non-thread clone and fork stay allowed: LeakSanitizer
  * stops the threads with them at exit (FG_DECODE_SECCOMP_SANITIZED). */
 #ifndef FG_DAEMON_DECODE_SECCOMP_H
