@@ -22,6 +22,8 @@ const char *fg_strerror(int err) {
   case FG_EUNAVAIL: return "peer unavailable";
   case FG_EPEER: return "peer reported an error";
   case FG_ENOSPC: return "no space left on the device";
+  case FG_ELIMIT: return "refused by a safety limit";
+  case FG_ESTOPPED: return "stopped until reset";
   default: return "unknown error";
   }
 }

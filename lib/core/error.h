@@ -25,6 +25,9 @@ enum {
   FG_EUNAVAIL = -12, /* a peer is not connected (refused, reset, unreachable) */
   FG_EPEER = -13,    /* a peer answered with an error (Modbus exception, gripper fault) */
   FG_ENOSPC = -14,   /* a write failed for want of space: the disk or the quota is full */
+  FG_ELIMIT = -15,   /* refused by a configured safety limit (a motion outside its bounds) */
+  FG_ESTOPPED = -16, /* refused while a stop (or an unconfirmed outcome) holds the machine
+                      * until an operator resets it */
 };
 
 /* Returns a static, human-readable name of a FG_E* code; never NULL. */
