@@ -54,6 +54,8 @@ const fg_route fg_api_routes[] = {
   {"GET", "/v1/robot", "/v1/robot", fg_api_robot_get, 0},
   {"POST", "/v1/robot/commands", "/v1/robot/commands", fg_api_robot_command, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/robot/commands/{}", "/v1/robot/commands/{id}", fg_api_robot_command_get, 0},
+  {"POST", "/v1/robot/stop", "/v1/robot/stop", fg_api_robot_stop, FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/robot/reset", "/v1/robot/reset", fg_api_robot_reset, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/gripper", "/v1/gripper", fg_api_gripper_get, 0},
   {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_gripper_action, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/tasks", "/v1/tasks", fg_api_tasks_list, 0},

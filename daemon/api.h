@@ -41,6 +41,8 @@ int fg_api_embed_image(fg_req *req, fg_resp *resp);
 int fg_api_robot_command(fg_req *req, fg_resp *resp);
 int fg_api_robot_command_get(fg_req *req, fg_resp *resp);
 int fg_api_robot_get(fg_req *req, fg_resp *resp);
+int fg_api_robot_stop(fg_req *req, fg_resp *resp);
+int fg_api_robot_reset(fg_req *req, fg_resp *resp);
 int fg_api_gripper_get(fg_req *req, fg_resp *resp);
 int fg_api_gripper_action(fg_req *req, fg_resp *resp);
 int fg_api_tasks_list(fg_req *req, fg_resp *resp);

@@ -68,21 +68,23 @@ int fg_api_parse_robot_request(json_t *body, const char *const *allowed, fg_robo
     r->has_pose = 1;
     for (int i = 0; i < 3; i++) r->p_world_m[i] = T[4 * i + 3];
   }
-  static const char *const nums[] = {"width", "force", "speed"};
-  double *dst[] = {&r->width_m, &r->force_n, &r->speed_mps};
-  int *has[] = {&r->has_width, &r->has_force, &r->has_speed};
-  for (int i = 0; i < 3; i++) {
+  static const char *const nums[] = {"width", "force", "speed", "approach", "retreat"};
+  static const char *const units[] = {"metres", "newtons", "m/s", "metres", "metres"};
+  double *dst[] = {&r->width_m, &r->force_n, &r->speed_mps, &r->approach_m, &r->retreat_m};
+  int *has[] = {&r->has_width, &r->has_force, &r->has_speed, &r->has_approach,
+                &r->has_retreat};
+  for (int i = 0; i < 5; i++) {
     int rc = fg_json_number(body, nums[i], dst[i]);
     if (rc < 0 || (json_object_get(body, nums[i]) && rc == 0)) {
       fg_resp_error(resp, 400, "invalid_request", "\"%s\" must be a finite number (%s)",
-                    nums[i], i == 0 ? "metres" : i == 1 ? "newtons" : "m/s");
+                    nums[i], units[i]);
       return -1;
     }
     *has[i] = rc == 1;
   }
-  static const char *const flags[] = {"dry_run", "wait"};
-  int *fl[] = {&r->dry_run, &r->wait};
-  for (int i = 0; i < 2; i++) {
+  static const char *const flags[] = {"dry_run", "wait", "allow_drop"};
+  int *fl[] = {&r->dry_run, &r->wait, &r->allow_drop};
+  for (int i = 0; i < 3; i++) {
     json_t *b = json_object_get(body, flags[i]);
     if (!b) continue;
     if (!json_is_boolean(b)) {
@@ -124,6 +126,8 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
   if (v->req.has_width) json_object_set_new(o, "width", json_real(v->req.width_m));
   if (v->req.has_force) json_object_set_new(o, "force", json_real(v->req.force_n));
   if (v->req.has_speed) json_object_set_new(o, "speed", json_real(v->req.speed_mps));
+  if (v->req.has_approach) json_object_set_new(o, "approach", json_real(v->req.approach_m));
+  if (v->req.has_retreat) json_object_set_new(o, "retreat", json_real(v->req.retreat_m));
   if (!v->req.dry_run) {
     json_object_set_new(o, "wait", json_boolean(v->req.wait));
     json_object_set_new(o, "robot_status",
@@ -142,7 +146,7 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
     const fg_robot_step *st = &v->steps[i];
     if (st->kind == FG_STEP_ROBOT) {
       json_object_set_new(
-          regs, "robot",
+          regs, st->name,
           json_pack("{s:i, s:i, s:i, s:i, s:s, s:o}", "unit_id", v->robot_unit, "function", 16,
                     "address", st->address, "count", st->n_words, "encoding",
                     v->encoding == FG_POSE_FLOAT32 ? "float32" : "int16", "words",
@@ -177,10 +181,24 @@ static void answer_send(fg_resp *resp, json_t *o, int status, uint64_t id) {
   fg_resp_json(resp, status, o);
 }
 
-/* The answer for an error a command stopped at before it ran. */
-static int answer_refusal(fg_resp *resp, int rc) {
+/* The answer for an error a command stopped at before it ran; v holds what was planned (a
+ * limit's refusal shows the limit and the words that were not sent). */
+static int answer_refusal(fg_resp *resp, int rc, const fg_robot_cmd_view *v) {
   const char *d = fg_error_detail();
   switch (rc) {
+  case FG_ELIMIT: {
+    const fg_motion_violation *mv = &v->violation;
+    fg_robot_cmd_view plan = *v; /* shown as a dry run: the words that were not sent */
+    plan.req.dry_run = 1;
+    json_t *o = json_pack("{s:{s:s, s:s, s:s?, s:o, s:o}, s:o}", "error", "code", "motion_limit",
+                          "message", d, "limit", mv->limit, "value",
+                          isfinite(mv->value) ? json_real(mv->value) : json_null(), "bound",
+                          isfinite(mv->bound) ? json_real(mv->bound) : json_null(), "command",
+                          command_json(&plan));
+    fg_resp_json(resp, 422, o);
+    return 0;
+  }
+  case FG_ESTOPPED: return fg_resp_error(resp, 409, "robot_stopped", "%s", d);
   case FG_ERANGE: return fg_resp_error(resp, 400, "value_out_of_range", "%s", d);
   case FG_EINVAL: return fg_resp_error(resp, 400, "invalid_request", "%s", d);
   case FG_EBUSY: return fg_resp_error(resp, 409, "robot_busy", "%s", d);
@@ -272,10 +290,11 @@ static int actuate(fg_req *req, fg_resp *resp, const char *action, fg_robot_requ
     if (key) snprintf(r->key, sizeof r->key, "%s", key);
   }
   fg_robot_cmd_view v;
+  memset(&v, 0, sizeof v);
   int rc = run(req, action, r, &v);
   if (rc < 0) {
     if (key) fg_idem_cancel(req->app->idem, key); /* nothing ran: the key may be used again */
-    return answer_refusal(resp, rc);
+    return answer_refusal(resp, rc, &v);
   }
   int status;
   json_t *o = answer_json(&v, &status);
@@ -298,8 +317,8 @@ static int actuate(fg_req *req, fg_resp *resp, const char *action, fg_robot_requ
 int fg_api_robot_command(fg_req *req, fg_resp *resp) {
   json_t *body = fg_api_body_object(req, resp);
   if (!body) return 0;
-  static const char *const keys[] = {"command", "pose", "width", "force", "speed", "dry_run",
-                                     "wait", NULL};
+  static const char *const keys[] = {"command", "pose",    "width",   "force", "speed",
+                                     "approach", "retreat", "dry_run", "wait",  NULL};
   fg_robot_request r;
   int rc = fg_api_parse_robot_request(body, keys, &r, resp);
   json_decref(body);
@@ -344,6 +363,79 @@ static json_t *peer_json(const fg_peer_view *p, const char *profile) {
 
 static json_t *int_or_null(int v) { return v >= 0 ? json_integer(v) : json_null(); }
 
+static json_t *vec3_json(const double v[3]) { return json_pack("[f, f, f]", v[0], v[1], v[2]); }
+
+/* The limits in force and the path defaults, as GET /v1/robot shows them. */
+static json_t *limits_json(fg_robot_svc *svc) {
+  fg_motion_limits l;
+  fg_robot_limits_get(svc, &l);
+  double approach, retreat, speed;
+  fg_robot_path_defaults(svc, &approach, &retreat, &speed);
+  return json_pack("{s:o, s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "position_box",
+                   l.has_box ? json_pack("{s:o, s:o}", "min", vec3_json(l.box_min_m), "max",
+                                         vec3_json(l.box_max_m))
+                             : json_null(),
+                   "approach_cone_deg", l.cone_rad * (180 / M_PI), "max_force", l.max_force_n,
+                   "max_speed", l.max_speed_mps, "max_width", l.max_width_m, "speed", speed,
+                   "approach", approach, "retreat", retreat);
+}
+
+static json_t *latch_json(fg_robot_svc *svc) {
+  fg_robot_latch l;
+  fg_robot_latch_get(svc, &l);
+  if (!l.latched) return json_null();
+  return json_pack("{s:s, s:o, s:o, s:b, s:b}", "reason", l.reason, "at", time_json(l.at_s),
+                   "command", l.command ? json_integer((json_int_t)l.command) : json_null(),
+                   "stop_written", l.stop_written, "clear_pending", l.clear_pending);
+}
+
+/* POST /v1/robot/stop: always answers 200 once latched; says whether the robot got it. */
+int fg_api_robot_stop(fg_req *req, fg_resp *resp) {
+  json_t *body = body_or_empty(req, resp);
+  if (!body) return 0;
+  const char *reason = "POST /v1/robot/stop";
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    if (strcmp(key, "reason") != 0 || !json_is_string(v) || json_string_length(v) > 200) {
+      json_decref(body);
+      return fg_resp_error(resp, 400, "invalid_request", "stop takes only \"reason\": a text "
+                           "of at most 200 characters (the body may also be empty)");
+    }
+    reason = json_string_value(v);
+  }
+  char why[256];
+  snprintf(why, sizeof why, "stopped: %s", reason);
+  json_decref(body);
+  int written;
+  uint64_t id;
+  if (fg_robot_stop(req->app->robot, why, &written, &id) < 0)
+    return fg_resp_error(resp, 409, "not_configured", "%s", fg_error_detail());
+  fg_resp_json(resp, 200, json_pack("{s:b, s:b, s:o, s:o}", "latched", 1, "stop_written",
+                                    written, "stopped_command",
+                                    id ? json_integer((json_int_t)id) : json_null(), "robot",
+                                    latch_json(req->app->robot)));
+  return 0;
+}
+
+/* POST /v1/robot/reset: clears the latch once the robot's stop register is back at 0. */
+int fg_api_robot_reset(fg_req *req, fg_resp *resp) {
+  if (req->body_len) {
+    json_t *body = fg_api_body_object(req, resp);
+    if (!body) return 0;
+    const size_t n = json_object_size(body);
+    json_decref(body);
+    if (n) return fg_resp_error(resp, 400, "invalid_request", "reset takes no keys");
+  }
+  int rc = fg_robot_reset(req->app->robot);
+  if (rc == FG_EBUSY) return fg_resp_error(resp, 409, "robot_busy", "%s", fg_error_detail());
+  if (rc == FG_EUNAVAIL)
+    return fg_resp_error(resp, 503, "robot_disconnected", "%s", fg_error_detail());
+  if (rc < 0) return fg_resp_error(resp, 500, "state_unavailable", "%s", fg_error_detail());
+  fg_resp_json(resp, 200, json_pack("{s:b}", "latched", 0));
+  return 0;
+}
+
 int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   fg_robot_state st;
   fg_robot_state_get(req->app->robot, &st);
@@ -355,6 +447,8 @@ int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   json_object_set_new(o, "last_seq", st.last_seq ? json_integer(st.last_seq) : json_null());
   json_object_set_new(o, "ack", int_or_null(st.ack));
   json_object_set_new(o, "status", int_or_null(st.status));
+  json_object_set_new(o, "limits", limits_json(req->app->robot));
+  json_object_set_new(o, "latched", latch_json(req->app->robot));
   fg_robot_cmd_view v;
   json_object_set_new(o, "last_command",
                       st.last_command && fg_robot_command_get(req->app->robot, st.last_command,
@@ -407,8 +501,10 @@ int fg_api_gripper_action(fg_req *req, fg_resp *resp) {
   json_t *body = body_or_empty(req, resp);
   if (!body) return 0;
   static const char *const keys[] = {"width", "speed", "force", "dry_run", NULL};
+  static const char *const activate_keys[] = {"dry_run", "allow_drop", NULL};
   fg_robot_request r;
-  int rc = fg_api_parse_robot_request(body, keys, &r, resp);
+  int rc = fg_api_parse_robot_request(body, strcmp(action, "activate") == 0 ? activate_keys : keys,
+                                      &r, resp);
   json_decref(body);
   if (rc < 0) return 0;
   return actuate(req, resp, action, &r, run_gripper);

@@ -70,9 +70,14 @@ enum {
   K_TRANSPORT, K_HOST, K_PORT, K_DEVICE, K_BAUD, K_PARITY, K_UNIT_ID, K_TIMEOUT_MS,
   K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS, K_DONE_TIMEOUT_MS, K_MOTION_TIMEOUT_MS
 };
+/* [robot]'s motion keys follow its Modbus keys (robot_keys from index K_LIMIT_MIN on). */
+enum {
+  K_LIMIT_MIN = K_DONE_TIMEOUT_MS + 1, K_LIMIT_MAX, K_LIMIT_MARGIN, K_APPROACH_CONE_DEG,
+  K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M
+};
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
-#define MAX_KEYS 13
+#define MAX_KEYS 32
 
 static const char *const http_keys[] = {"listen",           "token",
                                         "max_upload_mb",    "token_file",
@@ -89,7 +94,9 @@ static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
                                          "baud",      "parity",   "unit_id",        "timeout_ms",
                                          "base",      "encoding", "ack_timeout_ms", "done_timeout_ms",
-                                         NULL};
+                                         "limit_min", "limit_max", "limit_margin",
+                                         "approach_cone_deg", "max_force_n", "max_speed_mps",
+                                         "speed_mps", "approach_m", "retreat_m", NULL};
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};
@@ -578,6 +585,32 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
   return 1;
 }
 
+/* A number from lo to hi (inclusive; lo_open excludes lo itself). */
+static int parse_bounded(conf_parse *st, const char *key, const char *v, double lo, int lo_open,
+                         double hi, double *out) {
+  if (!parse_double(st, key, v, out)) return 0;
+  if (*out < lo || (lo_open && *out == lo) || *out > hi)
+    return fail_at(st, st->line, st->sec_text, key, "expected a number %s %g and at most %g, "
+                   "got '%s'", lo_open ? "above" : "from", lo, hi, v);
+  return 1;
+}
+
+static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name,
+                      const char *v) {
+  switch (k) {
+  case K_LIMIT_MIN: return parse_vec3(st, name, v, "x y z in metres", m->limit_min);
+  case K_LIMIT_MAX: return parse_vec3(st, name, v, "x y z in metres", m->limit_max);
+  case K_LIMIT_MARGIN: return parse_bounded(st, name, v, 0, 0, 10, &m->limit_margin_m);
+  case K_APPROACH_CONE_DEG: return parse_bounded(st, name, v, 0, 0, 180, &m->approach_cone_deg);
+  case K_MAX_FORCE_N: return parse_bounded(st, name, v, 0, 1, 65535, &m->max_force_n);
+  case K_MAX_SPEED_MPS: return parse_bounded(st, name, v, 0, 1, 10, &m->max_speed_mps);
+  case K_SPEED_MPS: return parse_bounded(st, name, v, 0, 1, 10, &m->speed_mps);
+  case K_APPROACH_M: return parse_bounded(st, name, v, 0, 0, 1, &m->approach_m);
+  case K_RETREAT_M: return parse_bounded(st, name, v, 0, 0, 1, &m->retreat_m);
+  }
+  return 1;
+}
+
 static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, const char *v) {
   switch (k) {
   case K_WORKSPACE_MIN: return parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
@@ -706,7 +739,9 @@ static int conf_handler(void *user, const char *section, const char *name, const
     if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;
     c->gripper_model = (fg_gripper_model)x;
     return 1;
-  case SEC_ROBOT: return set_modbus(st, &c->robot, k, name, v);
+  case SEC_ROBOT:
+    if (k >= K_LIMIT_MIN) return set_motion(st, &c->motion, k, name, v);
+    return set_modbus(st, &c->robot, k, name, v);
   case SEC_GRIPPER_MODBUS:
     return set_modbus(st, &c->gripper_modbus, k > K_TIMEOUT_MS ? K_MOTION_TIMEOUT_MS : k, name,
                       v);
@@ -730,6 +765,33 @@ static void check_modbus(conf_parse *st, conf_section sec, const fg_conf_modbus 
   if (m->transport == FG_TRANSPORT_RTU && (!m->device || !m->device[0]))
     fail_at(st, lines[K_DEVICE] ? lines[K_DEVICE] : where, name, "device",
             "transport rtu needs a serial device; set device = /dev/ttyUSB0 or similar");
+}
+
+/* limit_min and limit_max come together and make a box; the default speed is one the limit
+ * allows. */
+static void check_motion(conf_parse *st, fg_conf_motion *m) {
+  const int *lines = st->key_line[SEC_ROBOT];
+  const int lmin = lines[K_LIMIT_MIN], lmax = lines[K_LIMIT_MAX];
+  if (lmin || lmax) {
+    if (!lmin || !lmax) {
+      fail_at(st, lmin ? lmin : lmax, "robot", lmin ? "limit_max" : "limit_min",
+              "missing; the position box needs both limit_min and limit_max (or neither: then "
+              "it is the scenes' workspaces grown by limit_margin)");
+      return;
+    }
+    static const char axis[3] = {'x', 'y', 'z'};
+    for (int i = 0; i < 3; i++)
+      if (!(m->limit_min[i] < m->limit_max[i])) {
+        fail_at(st, lmin, "robot", "limit_min", "must be below limit_max on every axis, but on "
+                "%c it is %g and limit_max is %g", axis[i], m->limit_min[i], m->limit_max[i]);
+        return;
+      }
+    m->has_box = 1;
+  }
+  if (m->speed_mps > m->max_speed_mps)
+    fail_at(st, lines[K_SPEED_MPS] ? lines[K_SPEED_MPS] : lines[K_MAX_SPEED_MPS], "robot",
+            "speed_mps", "the default speed %g m/s is above max_speed_mps = %g m/s",
+            m->speed_mps, m->max_speed_mps);
 }
 
 /* A scene's workspace must be a box, and a voxel must fit into it. Reported at the scene's
@@ -789,6 +851,7 @@ static void check_final(conf_parse *st) {
               "missing; [clip] needs both weights and vocab (or remove the section)");
   }
   check_modbus(st, SEC_ROBOT, &c->robot);
+  check_motion(st, &c->motion);
   check_modbus(st, SEC_GRIPPER_MODBUS, &c->gripper_modbus);
   for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);
 }

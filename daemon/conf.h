@@ -43,6 +43,21 @@ typedef struct fg_conf_modbus {
   int motion_timeout_ms; /* extension: activation and each move, 1..600000, default 10000 */
 } fg_conf_modbus;
 
+/* [robot]'s motion limits and the robot program's path (lib/motion/limits.h). */
+typedef struct fg_conf_motion {
+  int has_box;              /* limit_min and limit_max are both set */
+  double limit_min[3], limit_max[3]; /* TCP position box, metres, world frame */
+  double limit_margin_m;    /* without a box: the scenes' workspaces grown by this; 0..10,
+                             * default 0.10 */
+  double approach_cone_deg; /* tool +z within this of straight down; 0..180, default 60 */
+  double max_force_n;       /* 0 (default): the gripper model's largest force */
+  double max_speed_mps;     /* > 0, default 0.25 */
+  double speed_mps;         /* a command's speed when it gives none; default 0.10 */
+  double approach_m;        /* pick and place come in along the tool's +z from this far
+                             * back; 0..1, default 0.10 */
+  double retreat_m;         /* and leave by this much afterwards; 0..1, default 0.10 */
+} fg_conf_motion;
+
 /* A [scene NAME] section. */
 typedef struct fg_conf_scene {
   char name[FG_SCENE_NAME_MAX + 1];
@@ -89,6 +104,7 @@ typedef struct fg_conf {
   fg_gripper_model gripper_model;
   /* [robot], [gripper.modbus] */
   fg_conf_modbus robot;
+  fg_conf_motion motion; /* [robot]'s limit and path keys */
   fg_conf_modbus gripper_modbus;
   /* [scene NAME] */
   fg_conf_scene *scenes;

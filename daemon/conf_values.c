@@ -139,6 +139,14 @@ fg_conf *fg_conf_defaults(void) {
   c->train_threads = 0;
   c->max_image_side = 400;
   c->gripper_model = FG_GRIPPER_PANDA;
+  c->motion = (fg_conf_motion){
+      .limit_margin_m = 0.10,
+      .approach_cone_deg = 60,
+      .max_speed_mps = 0.25,
+      .speed_mps = 0.10,
+      .approach_m = 0.10,
+      .retreat_m = 0.10,
+  };
   int ok = modbus_defaults(&c->robot, 1);
   ok &= modbus_defaults(&c->gripper_modbus, 9);
   if (!ok || !c->listen || !c->state_dir || !c->three_js) {

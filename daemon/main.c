@@ -151,6 +151,21 @@ static int modbus_differs(const fg_conf_modbus *a, const fg_conf_modbus *b) {
          a->motion_timeout_ms != b->motion_timeout_ms;
 }
 
+/* The robot's default position box: the union of every scene's workspace (robot.h). */
+static int scenes_workspace(void *ctx, double min_m[3], double max_m[3]) {
+  fg_scene_info *info = NULL;
+  size_t n = 0;
+  if (fg_store_list(ctx, &info, &n) != 0) return 0;
+  for (size_t i = 0; i < n; i++)
+    for (int k = 0; k < 3; k++) {
+      const double lo = info[i].params.workspace_min[k], hi = info[i].params.workspace_max[k];
+      min_m[k] = i == 0 || lo < min_m[k] ? lo : min_m[k];
+      max_m[k] = i == 0 || hi > max_m[k] ? hi : max_m[k];
+    }
+  free(info);
+  return n > 0;
+}
+
 static void reload(fg_app *app, const options *o) {
   fg_notify_reloading();
   char err[1024];
@@ -196,6 +211,7 @@ static void reload(fg_app *app, const options *o) {
   fg_clip_model_release(had);
   fg_app_set_conf(app, conf);
   const fg_conf *now = fg_app_conf_acquire(app);
+  fg_robot_svc_configure(app->robot, now); /* the motion limits apply at once */
   fg_store_sync_declared(app->store, now);
   fg_app_conf_release(app, now);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
@@ -342,6 +358,7 @@ int main(int argc, char **argv) {
   if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
+  if (robot_rc == 0) fg_robot_svc_set_workspace_source(app.robot, scenes_workspace, app.store);
   free(robot_dir);
   free(idem_path);
   if (robot_rc != 0) {

@@ -7,9 +7,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <errno.h>
+#include <unistd.h>
+
+#include <jansson.h>
 
 #include "core/error.h"
 #include "core/clock.h"
+#include "core/fsutil.h"
 #include "core/log.h"
 #include "core/pose.h"
 #include "modbus/devices.h"
@@ -51,6 +56,18 @@ struct fg_robot_svc {
   uint64_t by_state[FG_CMD_STATES];
   void (*on_finish)(void *ctx, const fg_robot_cmd_view *v); /* set before any command */
   void *on_finish_ctx;
+  /* motion limits and path defaults (fg_robot_svc_configure) */
+  fg_motion_limits lim;  /* the box only when box_from_conf */
+  int box_from_conf;
+  double margin_m, speed_mps, approach_m, retreat_m;
+  fg_robot_workspace_fn ws_fn; /* set before any command */
+  void *ws_ctx;
+  /* the latch, and what is still to be written for it */
+  fg_robot_latch latch;
+  char *latch_path;     /* <state>/robot/latch.json */
+  int stop_requested;   /* the running command's waits end: it is being stopped */
+  int gripper_busy;     /* a gripper action runs */
+  int latch_stop;       /* the latch wants the stop register at 1 (a stop, not an outcome) */
 };
 
 void fg_robot_svc_on_finish(fg_robot_svc *svc, void (*fn)(void *ctx, const fg_robot_cmd_view *v),
@@ -62,13 +79,16 @@ void fg_robot_svc_on_finish(fg_robot_svc *svc, void (*fn)(void *ctx, const fg_ro
 static const char *const command_names[] = {"?", "pick", "place", "open", "close", "move"};
 
 static const char *const state_names[FG_CMD_STATES] = {
-    "pending", "acknowledged", "done", "failed", "unknown", "error"};
+    "pending", "acknowledged", "done", "failed", "unknown", "error", "stopped"};
 
 const char *fg_cmd_state_name(fg_cmd_state s) {
   return s >= 0 && s < FG_CMD_STATES ? state_names[s] : "?";
 }
 
 /* ---------------------------------------------------------------- idle jobs */
+
+static int latch_sync(fg_robot_svc *svc, fg_mb_link *l);
+static void limits_now(fg_robot_svc *svc, fg_motion_limits *lim);
 
 static int robot_idle(fg_mb_link *l, void *arg) {
   fg_robot_svc *svc = arg;
@@ -84,9 +104,11 @@ static int robot_idle(fg_mb_link *l, void *arg) {
      * never acknowledged is not given to another command */
     svc->last_seq = ack;
   }
+  if (svc->gen_seen != fg_mb_link_generation(l))
+    svc->latch.stop_written = 0; /* a new connection: the robot may have restarted */
   svc->gen_seen = fg_mb_link_generation(l);
   pthread_mutex_unlock(&svc->lock);
-  return 0;
+  return latch_sync(svc, l);
 }
 
 /* Stores a gripper status read on link l. */
@@ -103,6 +125,97 @@ static int gripper_idle(fg_mb_link *l, void *arg) {
   fg_robotiq_status s;
   FG_TRY(fg_gripper_read(l, &s));
   gripper_store(svc, l, &s);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- the latch */
+
+/* Latches (under the lock) with reason and the command that caused it; the first cause is
+ * kept while latched. stop: the stop register is to hold 1. */
+static void latch_set_locked(fg_robot_svc *svc, const char *reason, uint64_t command,
+                             int stop) {
+  fg_robot_latch *l = &svc->latch;
+  if (!l->latched) {
+    l->latched = 1;
+    snprintf(l->reason, sizeof l->reason, "%.500s", reason);
+    l->at_s = fg_real_s();
+    l->command = command;
+  }
+  if (stop) {
+    svc->latch_stop = 1;
+    l->stop_written = 0;
+  }
+  l->clear_pending = 1;
+}
+
+/* Writes the latch to its file (atomically), so that a restarted daemon is latched too. A
+ * failure is logged: the latch holds in memory either way. */
+static void latch_persist(fg_robot_svc *svc) {
+  if (!svc->latch_path) return;
+  pthread_mutex_lock(&svc->lock);
+  json_t *o = json_pack("{s:s, s:f, s:I, s:b}", "reason", svc->latch.reason, "at",
+                        svc->latch.at_s, "command", (json_int_t)svc->latch.command, "stop",
+                        svc->latch_stop);
+  pthread_mutex_unlock(&svc->lock);
+  char *text = o ? json_dumps(o, JSON_COMPACT) : NULL;
+  json_decref(o);
+  if (!text || fg_write_file_atomic(svc->latch_path, text, strlen(text)) < 0)
+    fg_error("robot: the latch could not be written to %s (%s); it holds until this daemon "
+             "stops", svc->latch_path, text ? fg_error_detail() : "out of memory");
+  free(text);
+}
+
+/* Reads the latch file of an earlier run, if any. */
+static void latch_load(fg_robot_svc *svc) {
+  char *buf = NULL;
+  size_t len = 0;
+  if (fg_read_file(svc->latch_path, 1 << 16, &buf, &len) < 0) return; /* none: not latched */
+  json_t *o = json_loadb(buf, len, 0, NULL);
+  free(buf);
+  const char *reason = "latched before the daemon restarted";
+  json_t *jr = json_object_get(o, "reason"), *jc = json_object_get(o, "command");
+  if (json_is_string(jr)) reason = json_string_value(jr);
+  latch_set_locked(svc, reason, json_is_integer(jc) ? (uint64_t)json_integer_value(jc) : 0,
+                   json_is_true(json_object_get(o, "stop")));
+  double at = json_real_value(json_object_get(o, "at"));
+  if (at > 0) svc->latch.at_s = at;
+  json_decref(o);
+  fg_warn("robot: latched since an earlier run (%s); motion is refused until POST "
+          "/v1/robot/reset", svc->latch.reason);
+}
+
+/* A no-op block under a new seq: a robot program that finds a block it has not run yet
+ * runs this instead. Clears clear_pending once written. */
+static int clear_block(fg_robot_svc *svc, fg_mb_link *l) {
+  pthread_mutex_lock(&svc->lock);
+  uint16_t seq = fg_seq_next(svc->last_seq);
+  if (seq == svc->ack) seq = fg_seq_next(seq);
+  svc->last_seq = seq;
+  pthread_mutex_unlock(&svc->lock);
+  const fg_pose_block b = {.seq = seq, .command = FG_ROBOT_NOOP};
+  uint16_t w[FG_POSE_MAX_WORDS];
+  FG_TRY(fg_pose_block_encode(&b, svc->rp.encoding, w));
+  FG_TRY(fg_robot_write(l, &svc->rp, w));
+  pthread_mutex_lock(&svc->lock);
+  svc->latch.clear_pending = 0;
+  pthread_mutex_unlock(&svc->lock);
+  fg_info("robot: wrote a no-op block (seq %u) so that nothing stays armed", seq);
+  return 0;
+}
+
+/* Writes what the latch still owes the robot: the stop word, the no-op block. */
+static int latch_sync(fg_robot_svc *svc, fg_mb_link *l) {
+  pthread_mutex_lock(&svc->lock);
+  const int stop = svc->latch.latched && svc->latch_stop && !svc->latch.stop_written;
+  const int clear = svc->latch.latched && svc->latch.clear_pending;
+  pthread_mutex_unlock(&svc->lock);
+  if (stop) {
+    FG_TRY(fg_robot_write_stop(l, &svc->rp, 1));
+    pthread_mutex_lock(&svc->lock);
+    svc->latch.stop_written = 1;
+    pthread_mutex_unlock(&svc->lock);
+  }
+  if (clear) FG_TRY(clear_block(svc, l));
   return 0;
 }
 
@@ -141,6 +254,15 @@ int fg_robot_svc_new(fg_robot_svc **out, const fg_conf *conf) {
   svc->model = conf->gripper_model == FG_GRIPPER_ROBOTIQ_2F140 ? &fg_robotiq_2f140
                                                                 : &fg_robotiq_2f85;
   svc->motion_timeout_ms = conf->gripper_modbus.motion_timeout_ms;
+  fg_robot_svc_configure(svc, conf);
+  char *dir = fg_path_join(conf->state_dir, "robot");
+  svc->latch_path = dir ? fg_path_join(dir, "latch.json") : NULL;
+  free(dir);
+  if (!svc->latch_path) {
+    fg_robot_svc_free(svc);
+    return FG_ENOMEM;
+  }
+  latch_load(svc);
   fg_mb_link_config lc;
   int rc = 0;
   if (peer_config(&conf->robot, "robot", &lc))
@@ -179,7 +301,47 @@ void fg_robot_svc_free(fg_robot_svc *svc) {
     rec_unref_locked(svc->recs[(svc->head + i) % MAX_RECORDS]);
   pthread_cond_destroy(&svc->cond);
   pthread_mutex_destroy(&svc->lock);
+  free(svc->latch_path);
   free(svc);
+}
+
+void fg_robot_svc_configure(fg_robot_svc *svc, const fg_conf *conf) {
+  const fg_conf_motion *m = &conf->motion;
+  const fg_robotiq_model *model =
+      conf->gripper_model == FG_GRIPPER_ROBOTIQ_2F140 ? &fg_robotiq_2f140 : &fg_robotiq_2f85;
+  const double stroke = fg_gripper_spec_get(conf->gripper_model)->stroke_m;
+  pthread_mutex_lock(&svc->lock);
+  svc->lim = (fg_motion_limits){
+      .has_box = m->has_box,
+      .cone_rad = m->approach_cone_deg * (M_PI / 180),
+      .max_force_n = m->max_force_n > 0 ? m->max_force_n : model->force_max_n,
+      .max_speed_mps = m->max_speed_mps,
+      .max_width_m = stroke,
+  };
+  memcpy(svc->lim.box_min_m, m->limit_min, sizeof m->limit_min);
+  memcpy(svc->lim.box_max_m, m->limit_max, sizeof m->limit_max);
+  svc->box_from_conf = m->has_box;
+  svc->margin_m = m->limit_margin_m;
+  svc->speed_mps = m->speed_mps;
+  svc->approach_m = m->approach_m;
+  svc->retreat_m = m->retreat_m;
+  pthread_mutex_unlock(&svc->lock);
+}
+
+void fg_robot_svc_set_workspace_source(fg_robot_svc *svc, fg_robot_workspace_fn fn, void *ctx) {
+  svc->ws_fn = fn;
+  svc->ws_ctx = ctx;
+}
+
+void fg_robot_limits_get(fg_robot_svc *svc, fg_motion_limits *out) { limits_now(svc, out); }
+
+void fg_robot_path_defaults(fg_robot_svc *svc, double *approach_m, double *retreat_m,
+                            double *speed_mps) {
+  pthread_mutex_lock(&svc->lock);
+  *approach_m = svc->approach_m;
+  *retreat_m = svc->retreat_m;
+  *speed_mps = svc->speed_mps;
+  pthread_mutex_unlock(&svc->lock);
 }
 
 int fg_robot_svc_has_robot(const fg_robot_svc *svc) { return svc->robot != NULL; }
@@ -214,7 +376,56 @@ static int open_position(fg_robot_svc *svc, const fg_robot_request *req, int *po
   return fg_robotiq_width_to_position(svc->model, req->width_m, position);
 }
 
-static int plan_locked(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v) {
+/* The limits in force: [robot]'s, with the box of the scenes' workspaces (grown by the
+ * margin) when [robot] sets none. Takes the lock itself; the workspace source runs
+ * outside it. */
+static void limits_now(fg_robot_svc *svc, fg_motion_limits *lim) {
+  pthread_mutex_lock(&svc->lock);
+  *lim = svc->lim;
+  const int from_conf = svc->box_from_conf;
+  const double margin = svc->margin_m;
+  pthread_mutex_unlock(&svc->lock);
+  if (from_conf) return;
+  double mn[3], mx[3];
+  lim->has_box = svc->ws_fn && svc->ws_fn(svc->ws_ctx, mn, mx);
+  for (int i = 0; lim->has_box && i < 3; i++) {
+    lim->box_min_m[i] = mn[i] - margin;
+    lim->box_max_m[i] = mx[i] + margin;
+  }
+}
+
+/* Fills a robot step with block b. */
+static int plan_robot_step(fg_robot_svc *svc, const char *name, const fg_pose_block *b,
+                           fg_robot_step *st) {
+  memset(st, 0, sizeof *st);
+  st->kind = FG_STEP_ROBOT;
+  st->name = name;
+  FG_TRY(fg_pose_block_encode(b, svc->rp.encoding, st->words));
+  st->n_words = fg_pose_block_words(svc->rp.encoding);
+  st->address = svc->rp.base;
+  return 0;
+}
+
+/* A length of the path (approach or retreat) as asked, or its default. */
+static int path_length(int has, double asked, double dflt, const char *name, double *out) {
+  if (!has) {
+    *out = dflt;
+    return 0;
+  }
+  if (!(asked >= 0 && asked <= 1))
+    return fg_fail(FG_ERANGE, "%s = %g m: expected 0 .. 1 m", name, asked);
+  *out = asked;
+  return 0;
+}
+
+/* Plans req under the lock with the limits lim (limits_now). The steps, in order:
+ *   pick:  gripper_open, robot (approach, descend), gripper_close, robot_retreat (lift)
+ *   place: robot (approach, descend), gripper_open, robot_retreat (back out)
+ *   move:  robot; open / close: the gripper (or the robot block without a gripper).
+ * Without a gripper of its own the robot program actuates the tool and retreats itself: the
+ * block carries the retreat and no robot_retreat step follows. */
+static int plan_locked(fg_robot_svc *svc, const fg_motion_limits *lim,
+                       const fg_robot_request *req, fg_robot_cmd_view *v) {
   memset(v, 0, sizeof *v);
   v->command = req->command;
   v->req = *req;
@@ -238,47 +449,90 @@ static int plan_locked(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_
   if (!robot_step && req->has_pose)
     return fg_fail(FG_EINVAL, "open and close go to the gripper ([gripper.modbus]) and take no "
                    "pose; use pick or place to move");
+  if (!needs_pose && (req->has_approach || req->has_retreat))
+    return fg_fail(FG_EINVAL, "open and close take no approach or retreat");
+  if (c == FG_ROBOT_MOVE && req->has_retreat)
+    return fg_fail(FG_EINVAL, "move takes no retreat (it ends at its pose); send another move");
   if (req->has_force && (req->force_n != floor(req->force_n) || req->force_n < 0 ||
                          req->force_n > 65535))
-    return fg_fail(FG_ERANGE, "force = %g: expected whole newtons, 0 .. 65535", req->force_n);
+    return fg_fail(FG_ERANGE, "force = %g N: expected whole newtons, 0 .. 65535", req->force_n);
+  if (req->has_speed && !(req->speed_mps > 0))
+    return fg_fail(FG_ERANGE, "speed = %g m/s: expected a speed above 0", req->speed_mps);
+  if (svc->latch.latched)
+    return fg_fail(FG_ESTOPPED, "the robot is stopped (%s); no motion is sent until an "
+                   "operator makes the cell safe and calls POST /v1/robot/reset",
+                   svc->latch.reason);
+  double approach = 0, retreat = 0;
+  FG_TRY(path_length(req->has_approach, req->approach_m,
+                     c == FG_ROBOT_MOVE ? 0 : svc->approach_m, "approach", &approach));
+  FG_TRY(path_length(req->has_retreat, req->retreat_m, c == FG_ROBOT_MOVE ? 0 : svc->retreat_m,
+                     "retreat", &retreat));
+  const double speed = req->has_speed ? req->speed_mps : svc->speed_mps;
+  const double force = req->has_force ? req->force_n : DEFAULT_FORCE_N;
+  const fg_retreat_kind rk = c == FG_ROBOT_PICK    ? FG_RETREAT_UP
+                             : c == FG_ROBOT_PLACE ? FG_RETREAT_BACK
+                                                   : FG_RETREAT_NONE;
+  FG_TRY(fg_motion_check_values(lim, req->has_force ? req->force_n : -1,
+                                robot_step ? speed : -1, req->has_width ? req->width_m : -1,
+                                &v->violation));
+  /* the robot steps' speed only: the gripper's fingers keep their own full speed */
+  fg_robot_request greq = *req;
+  greq.has_speed = 0;
   int n = 0, pos;
   if (grip && c == FG_ROBOT_PICK) {
     FG_TRY(open_position(svc, req, &pos));
-    FG_TRY(plan_gripper(svc, req, "gripper_open", pos, &v->steps[n++]));
+    FG_TRY(plan_gripper(svc, &greq, "gripper_open", pos, &v->steps[n++]));
   }
+  const int split_retreat = grip && (c == FG_ROBOT_PICK || c == FG_ROBOT_PLACE) && retreat > 0;
+  fg_pose_block b = {0};
   if (robot_step) {
-    fg_pose_block b = {
+    b = (fg_pose_block){
         .seq = fg_seq_next(svc->last_seq),
         .command = c,
         .width_m = req->has_width ? req->width_m : svc->model->stroke_m,
-        .force_n = (int)(req->has_force ? req->force_n : DEFAULT_FORCE_N),
+        .force_n = (int)force,
+        .approach_m = needs_pose ? approach : 0,
+        .retreat_m = needs_pose && !split_retreat ? retreat : 0,
+        .speed_mps = speed,
     };
     if (req->has_pose) {
       memcpy(b.p_world_m, req->p_world_m, sizeof b.p_world_m);
       fg_rotvec_from_quat(req->q_wxyz, b.rotvec_rad);
     }
-    fg_robot_step *st = &v->steps[n++];
-    memset(st, 0, sizeof *st);
-    st->kind = FG_STEP_ROBOT;
-    st->name = "robot";
-    FG_TRY(fg_pose_block_encode(&b, svc->rp.encoding, st->words));
-    st->n_words = fg_pose_block_words(svc->rp.encoding);
-    st->address = svc->rp.base;
+    FG_TRY(plan_robot_step(svc, "robot", &b, &v->steps[n++]));
     v->seq = b.seq;
   }
-  if (grip && c == FG_ROBOT_PICK) FG_TRY(plan_gripper(svc, req, "gripper_close", 255, &v->steps[n++]));
+  if (grip && c == FG_ROBOT_PICK)
+    FG_TRY(plan_gripper(svc, &greq, "gripper_close", 255, &v->steps[n++]));
   if (grip && (c == FG_ROBOT_PLACE || c == FG_ROBOT_OPEN)) {
     FG_TRY(open_position(svc, req, &pos));
-    FG_TRY(plan_gripper(svc, req, "gripper_open", pos, &v->steps[n++]));
+    FG_TRY(plan_gripper(svc, &greq, "gripper_open", pos, &v->steps[n++]));
   }
-  if (grip && c == FG_ROBOT_CLOSE) FG_TRY(plan_gripper(svc, req, "gripper_close", 255, &v->steps[n++]));
+  if (grip && c == FG_ROBOT_CLOSE)
+    FG_TRY(plan_gripper(svc, &greq, "gripper_close", 255, &v->steps[n++]));
+  if (split_retreat) {
+    /* the retreat as a move of its own, once the gripper has acted */
+    double pre[3];
+    fg_pose_block rb = b;
+    rb.seq = fg_seq_next(b.seq);
+    rb.command = FG_ROBOT_MOVE;
+    rb.approach_m = rb.retreat_m = 0;
+    fg_motion_path(req->p_world_m, req->q_wxyz, 0, retreat, rk, pre, rb.p_world_m);
+    FG_TRY(plan_robot_step(svc, "robot_retreat", &rb, &v->steps[n++]));
+  }
   v->n_steps = n;
+  /* the path, last, so that a refused dry run still shows what would have been sent */
+  if (needs_pose)
+    FG_TRY(fg_motion_check_pose(lim, req->p_world_m, req->q_wxyz, approach, retreat, rk,
+                                &v->violation));
   return 0;
 }
 
 int fg_robot_plan(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v) {
+  fg_motion_limits lim;
+  limits_now(svc, &lim);
   pthread_mutex_lock(&svc->lock);
-  int rc = plan_locked(svc, req, v);
+  int rc = plan_locked(svc, &lim, req, v);
   pthread_mutex_unlock(&svc->lock);
   return rc;
 }
@@ -304,6 +558,14 @@ static void finish(rec *r, fg_cmd_state state, int http, const char *code, const
   r->v.finished_s = fg_real_s();
   r->v.stage = "finished";
   svc->by_state[state]++;
+  const int latch = state == FG_CMD_UNKNOWN;
+  if (latch) {
+    /* before the command lets go of the robot, so that no other starts in between */
+    char reason[sizeof svc->latch.reason + 64];
+    snprintf(reason, sizeof reason, "command %llu (%s) ended unknown: %.400s",
+             (unsigned long long)r->v.id, command_names[r->v.command], r->v.message);
+    latch_set_locked(svc, reason, r->v.id, 0);
+  }
   if (svc->active == r) svc->active = NULL;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
@@ -311,6 +573,7 @@ static void finish(rec *r, fg_cmd_state state, int http, const char *code, const
     fg_warn("robot: command %llu (%s, seq %u) ended %s: %s", (unsigned long long)r->v.id,
             command_names[r->v.command], r->v.seq, state_names[state], r->v.message);
   if (svc->on_finish) svc->on_finish(svc->on_finish_ctx, &r->v);
+  if (latch) latch_persist(svc); /* held in memory already: the answer goes first */
 }
 
 static void set_stage(rec *r, const char *stage) {
@@ -319,10 +582,18 @@ static void set_stage(rec *r, const char *stage) {
   pthread_mutex_unlock(&r->svc->lock);
 }
 
+/* Ends a wait on the robot: the daemon stops, or the command is being stopped. */
 static int cancelled(void *arg) {
   fg_robot_svc *svc = arg;
   pthread_mutex_lock(&svc->lock);
-  int s = svc->stopping;
+  int s = svc->stopping || svc->stop_requested;
+  pthread_mutex_unlock(&svc->lock);
+  return s;
+}
+
+static int stop_requested(fg_robot_svc *svc) {
+  pthread_mutex_lock(&svc->lock);
+  int s = svc->stop_requested;
   pthread_mutex_unlock(&svc->lock);
   return s;
 }
@@ -333,13 +604,33 @@ typedef struct grip_job {
   const fg_robot_step *step;
   fg_robotiq_status status;
   int activate_only;
+  int may_activate;   /* a gripper that is not activated may be activated first */
+  int allow_drop;     /* activate_only: even while it holds an object */
 } grip_job;
 
+/* An activation resets the gripper, which opens it: whatever it holds falls. So it never
+ * happens while an object is detected unless the caller said so, and never in the middle
+ * of a command (the fingers at the grasp). */
 static int grip_run(fg_mb_link *l, void *arg) {
   grip_job *g = arg;
   fg_robot_svc *svc = g->svc;
   FG_TRY(fg_gripper_read(l, &g->status));
   gripper_store(svc, l, &g->status);
+  const int holding = g->status.act && fg_robotiq_object_detected(&g->status);
+  if (g->activate_only && holding && !g->allow_drop)
+    return fg_fail(FG_EPERM, "the gripper holds an object (gOBJ %d) and an activation opens "
+                   "it: place the object first, or send \"allow_drop\": true to drop it",
+                   g->status.obj);
+  if (!g->activate_only && (g->status.sta != 3 || !g->status.act)) {
+    if (!g->may_activate)
+      return fg_fail(FG_EBUSY, "the gripper is not activated (gSTA %d) and is not activated "
+                     "in the middle of a command; POST /v1/gripper/activate, then retry",
+                     g->status.sta);
+    if (holding)
+      return fg_fail(FG_EPERM, "the gripper is not activated but reports an object (gOBJ "
+                     "%d); activating it would open it: POST /v1/gripper/activate with "
+                     "\"allow_drop\": true once that is safe", g->status.obj);
+  }
   if (g->activate_only || g->status.sta != 3 || !g->status.act) {
     int rc = fg_gripper_activate(l, svc->motion_timeout_ms, &g->status);
     gripper_store(svc, l, &g->status);
@@ -354,9 +645,12 @@ static int grip_run(fg_mb_link *l, void *arg) {
 /* The HTTP answer for a failed gripper call. */
 static void gripper_outcome(int rc, int *http, const char **code) {
   *http = rc == FG_EUNAVAIL ? 503 : rc == FG_ETIMEDOUT ? 504 : 502;
+  if (rc == FG_EPERM || rc == FG_EBUSY) *http = 409;
   *code = rc == FG_EUNAVAIL    ? "gripper_disconnected"
           : rc == FG_ETIMEDOUT ? "gripper_timeout"
           : rc == FG_EPEER     ? "gripper_fault"
+          : rc == FG_EPERM     ? "gripper_holding"
+          : rc == FG_EBUSY     ? "gripper_not_activated"
                                : "gripper_error";
 }
 
@@ -366,7 +660,9 @@ static void gripper_outcome(int rc, int *http, const char **code) {
 static int run_gripper_step(rec *r, int i, int robot_moved, fg_mb_link *gl) {
   fg_robot_svc *svc = r->svc;
   set_stage(r, r->v.steps[i].name);
-  grip_job g = {.svc = svc, .step = &r->v.steps[i], .status.position = -1};
+  /* only the first step may activate: later ones act with the arm at the object */
+  grip_job g = {.svc = svc, .step = &r->v.steps[i], .status.position = -1,
+                .may_activate = i == 0};
   int rc = gl ? grip_run(gl, &g) : fg_mb_peer_call(svc->gripper, grip_run, &g);
   pthread_mutex_lock(&svc->lock);
   if (g.status.position >= 0) /* a status was read */
@@ -383,15 +679,48 @@ static int run_gripper_step(rec *r, int i, int robot_moved, fg_mb_link *gl) {
   return rc;
 }
 
-/* The robot step: write once, wait for ack, then for done. 0, or finishes r. */
-static int run_robot_step(rec *r, fg_mb_link *l, int i) {
+/* Ends r as stopped: the robot's waits were cancelled by fg_robot_stop. The stop word goes
+ * out from here, at once, rather than after the command's job has ended. */
+static int stopped(rec *r, fg_mb_link *l, const char *stage, int by_robot) {
+  fg_robot_svc *svc = r->svc;
+  if (l && fg_robot_write_stop(l, &svc->rp, 1) == 0) {
+    pthread_mutex_lock(&svc->lock);
+    svc->latch.stop_written = 1;
+    pthread_mutex_unlock(&svc->lock);
+  }
+  finish(r, FG_CMD_STOPPED, 409, "robot_stopped", "stopped %s during %s; POST "
+         "/v1/robot/reset once the cell is safe", by_robot ? "by the robot (status 4)"
+                                                           : "by POST /v1/robot/stop", stage);
+  return FG_ECANCELED;
+}
+
+/* Ends r as unknown (which latches) and disarms the block if the link lets us. */
+static int unknown(rec *r, fg_mb_link *l, int rc, const char *code, const char *fmt, ...)
+    __attribute__((format(printf, 5, 6)));
+static int unknown(rec *r, fg_mb_link *l, int rc, const char *code, const char *fmt, ...) {
+  char msg[400];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  va_end(ap);
+  finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502, code,
+         "%s; the robot is stopped until POST /v1/robot/reset", msg);
+  if (latch_sync(r->svc, l) < 0)
+    fg_warn("robot: the no-op block is written once the robot answers: %s", fg_error_detail());
+  return rc;
+}
+
+/* A robot step: write once, wait for ack, then for done. 0, or finishes r. robot_moved: an
+ * earlier step moved the robot, so a failure now is `failed`, not `error`. */
+static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
   fg_robot_svc *svc = r->svc;
   fg_robot_step *st = &r->v.steps[i];
-  set_stage(r, "robot");
+  const fg_cmd_state not_sent = robot_moved ? FG_CMD_FAILED : FG_CMD_ERROR;
+  set_stage(r, st->name);
   int rc = fg_mb_link_ensure(l);
   if (rc == 0 && svc->gen_seen != fg_mb_link_generation(l)) rc = robot_idle(l, svc);
   if (rc < 0) {
-    finish(r, FG_CMD_ERROR, 503, "robot_disconnected", "nothing was sent: %s",
+    finish(r, not_sent, 503, "robot_disconnected", "%s: nothing was sent: %s", st->name,
            fg_error_detail());
     return rc;
   }
@@ -400,13 +729,13 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
   if (seq == svc->ack) seq = fg_seq_next(seq);
   svc->last_seq = seq;
   st->words[0] = seq;
-  r->v.seq = seq;
+  if (!r->v.seq) r->v.seq = seq;
   pthread_mutex_unlock(&svc->lock);
 
   const double t0 = (fg_mono_s() * 1e3);
   rc = fg_robot_write(l, &svc->rp, st->words);
   if (rc == FG_EPEER) {
-    finish(r, FG_CMD_ERROR, 502, "modbus_exception", "the robot refused the pose write: %s",
+    finish(r, not_sent, 502, "modbus_exception", "the robot refused the pose write: %s",
            fg_error_detail());
     return rc;
   }
@@ -414,47 +743,48 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
     pthread_mutex_lock(&svc->lock);
     if (svc->last_seq == seq) svc->last_seq = (uint16_t)(seq == 1 ? 65535 : seq - 1);
     pthread_mutex_unlock(&svc->lock);
-    finish(r, FG_CMD_ERROR, 503, "robot_disconnected", "nothing was sent: %s",
+    finish(r, not_sent, 503, "robot_disconnected", "%s: nothing was sent: %s", st->name,
            fg_error_detail());
     return rc;
   }
-  if (rc < 0) {
-    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
-           rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
-           "the pose write of seq %u may have reached the robot but was not confirmed (%s); "
-           "it is not sent again: check the robot before sending a new command", seq,
-           fg_error_detail());
-    return rc;
-  }
+  if (rc < 0)
+    return unknown(r, l, rc, rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
+                   "the pose write of seq %u may have reached the robot but was not confirmed "
+                   "(%s); it is not sent again", seq, fg_error_detail());
   int status = -1;
   rc = fg_robot_wait_ack(l, &svc->rp, seq, &status, cancelled, svc);
-  if (rc < 0) {
-    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
-           rc == FG_ETIMEDOUT ? "ack_timeout" : "robot_unknown",
-           "%s; the command's outcome is unknown and it is not sent again: check the robot "
-           "before sending a new command", fg_error_detail());
-    return rc;
-  }
+  if (rc == FG_ECANCELED && stop_requested(svc)) return stopped(r, l, st->name, 0);
+  if (rc < 0)
+    return unknown(r, l, rc, rc == FG_ETIMEDOUT ? "ack_timeout" : "robot_unknown",
+                   "%s; the command's outcome is unknown and it is not sent again",
+                   fg_error_detail());
   pthread_mutex_lock(&svc->lock);
   svc->ack = seq;
   svc->status = status;
-  r->v.ack_ms = (fg_mono_s() * 1e3) - t0;
+  if (r->v.ack_ms < 0) r->v.ack_ms = (fg_mono_s() * 1e3) - t0;
   r->v.robot_status = status;
   r->v.state = FG_CMD_ACKNOWLEDGED;
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
 
   /* the status read with the ack may already be the end (a quick robot) */
-  if (status != FG_ROBOT_DONE && status != FG_ROBOT_FAILED)
+  if (status != FG_ROBOT_DONE && status != FG_ROBOT_FAILED && status != FG_ROBOT_STOPPED)
     rc = fg_robot_wait_done(l, &svc->rp, seq, &status, cancelled, svc);
+  if (rc == FG_ECANCELED && stop_requested(svc)) return stopped(r, l, st->name, 0);
   pthread_mutex_lock(&svc->lock);
   if (rc == 0) svc->status = r->v.robot_status = status;
   pthread_mutex_unlock(&svc->lock);
-  if (rc < 0) {
-    finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502,
-           rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
-           "seq %u was acknowledged but its end was not seen: %s", seq, fg_error_detail());
-    return rc;
+  if (rc < 0)
+    return unknown(r, l, rc, rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
+                   "seq %u was acknowledged but its end was not seen: %s", seq,
+                   fg_error_detail());
+  if (status == FG_ROBOT_STOPPED) {
+    /* stopped by someone else (the robot's own stop register, a pendant): latch too */
+    pthread_mutex_lock(&svc->lock);
+    latch_set_locked(svc, "the robot reported a command stopped (status 4)", r->v.id, 0);
+    pthread_mutex_unlock(&svc->lock);
+    latch_persist(svc);
+    return stopped(r, NULL, st->name, 1);
   }
   if (status == FG_ROBOT_FAILED) {
     finish(r, FG_CMD_FAILED, 502, "robot_failed", "the robot reported seq %u failed (status 3)",
@@ -464,14 +794,15 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i) {
   return 0;
 }
 
-/* The robot worker's job: every step in order. */
+/* The robot worker's job: every step in order; a stop ends it between steps too. */
 static int run_command(fg_mb_link *l, void *arg) {
   rec *r = arg;
   int robot_moved = 0;
   for (int i = 0; i < r->v.n_steps; i++) {
+    if (stop_requested(r->svc)) return stopped(r, l, r->v.steps[i].name, 0);
     const int rc = r->v.steps[i].kind == FG_STEP_GRIPPER
                        ? run_gripper_step(r, i, robot_moved, NULL)
-                       : run_robot_step(r, l, i);
+                       : run_robot_step(r, l, i, robot_moved);
     if (rc < 0) return rc;
     robot_moved |= r->v.steps[i].kind == FG_STEP_ROBOT;
   }
@@ -518,6 +849,8 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
                           fg_mb_job_fn fn, fg_robot_cmd_view *v) {
   rec *r = calloc(1, sizeof *r);
   if (!r) return FG_ENOMEM;
+  fg_motion_limits lim;
+  limits_now(svc, &lim);
   pthread_mutex_lock(&svc->lock);
   if (svc->stopping) {
     pthread_mutex_unlock(&svc->lock);
@@ -533,9 +866,15 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
     free(r);
     return rc;
   }
-  int rc = plan_locked(svc, req, &r->v);
+  if (svc->gripper_busy) {
+    pthread_mutex_unlock(&svc->lock);
+    free(r);
+    return fg_fail(FG_EBUSY, "a gripper action is running; wait for its answer");
+  }
+  int rc = plan_locked(svc, &lim, req, &r->v);
   if (rc < 0) {
     pthread_mutex_unlock(&svc->lock);
+    *v = r->v; /* the plan so far and the violation, for the refusal */
     free(r);
     return rc;
   }
@@ -609,11 +948,21 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   fg_robot_request r = *req;
   r.command = strcmp(action, "close") == 0 ? FG_ROBOT_CLOSE : FG_ROBOT_OPEN;
   r.has_pose = 0;
+  fg_motion_limits lim;
+  limits_now(svc, &lim);
   pthread_mutex_lock(&svc->lock);
   memset(v, 0, sizeof *v);
   v->gripper_unit = svc->gripper_unit;
+  v->command = r.command;
+  v->req = r;
   int rc = 0, pos = 255;
-  if (r.command == FG_ROBOT_OPEN) rc = open_position(svc, &r, &pos);
+  if (svc->latch.latched)
+    rc = fg_fail(FG_ESTOPPED, "the robot is stopped (%s); the gripper does not move either "
+                 "until POST /v1/robot/reset", svc->latch.reason);
+  if (rc == 0)
+    rc = fg_motion_check_values(&lim, r.has_force ? r.force_n : -1, -1,
+                                r.has_width ? r.width_m : -1, &v->violation);
+  if (rc == 0 && r.command == FG_ROBOT_OPEN) rc = open_position(svc, &r, &pos);
   if (rc == 0)
     rc = plan_gripper(svc, &r, r.command == FG_ROBOT_OPEN ? "gripper_open" : "gripper_close",
                       pos, &v->steps[0]);
@@ -644,13 +993,23 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
     rc = fg_fail(FG_EBUSY, "command %llu (%s) is running (stage %s); the gripper is part of "
                  "it: wait for it: GET /v1/robot/commands/%llu", (unsigned long long)a->id,
                  command_names[a->command], a->stage, (unsigned long long)a->id);
+  } else if (svc->gripper_busy) {
+    rc = fg_fail(FG_EBUSY, "another gripper action is running; wait for its answer");
+  } else if (svc->latch.latched) { /* latched since the plan */
+    rc = fg_fail(FG_ESTOPPED, "the robot is stopped (%s); POST /v1/robot/reset first",
+                 svc->latch.reason);
+  } else {
+    svc->gripper_busy = 1; /* robot commands wait for this action: one thing moves at once */
   }
   pthread_mutex_unlock(&svc->lock);
   if (rc < 0) return rc;
   grip_job g = {.svc = svc, .step = &v->steps[0], .activate_only = activate,
-                .status.position = -1};
+                .status.position = -1, .may_activate = 1, .allow_drop = req->allow_drop};
   v->created_s = fg_real_s();
   rc = fg_mb_peer_call(svc->gripper, grip_run, &g);
+  pthread_mutex_lock(&svc->lock);
+  svc->gripper_busy = 0;
+  pthread_mutex_unlock(&svc->lock);
   v->finished_s = fg_real_s();
   v->stage = "finished";
   if (g.status.position >= 0)
@@ -671,6 +1030,77 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   svc->by_state[v->state]++;
   pthread_mutex_unlock(&svc->lock);
   return 0;
+}
+
+/* ---------------------------------------------------------------- stop and reset */
+
+/* On the robot's worker, after the running command (if any) has ended: the stop word and a
+ * no-op block, read back through the ack first so that the no-op's seq is a new one. */
+static int stop_run(fg_mb_link *l, void *arg) {
+  fg_robot_svc *svc = arg;
+  FG_TRY(fg_mb_link_ensure(l));
+  return robot_idle(l, svc); /* reads ack, then latch_sync writes what the latch owes */
+}
+
+int fg_robot_stop(fg_robot_svc *svc, const char *reason, int *written, uint64_t *stopped_id) {
+  *written = 0;
+  *stopped_id = 0;
+  if (!svc->robot)
+    return fg_fail(FG_EUNAVAIL, "no robot is configured ([robot] transport = none): there is "
+                   "nothing to stop");
+  pthread_mutex_lock(&svc->lock);
+  if (svc->active) *stopped_id = svc->active->v.id;
+  latch_set_locked(svc, reason, *stopped_id, 1);
+  svc->stop_requested = 1;
+  pthread_mutex_unlock(&svc->lock);
+  latch_persist(svc);
+  /* queued behind the running command, whose waits end at their next poll */
+  const int rc = fg_mb_peer_call(svc->robot, stop_run, svc);
+  pthread_mutex_lock(&svc->lock);
+  svc->stop_requested = 0;
+  *written = svc->latch.stop_written;
+  pthread_mutex_unlock(&svc->lock);
+  if (rc < 0)
+    fg_warn("robot: the stop could not be written yet (%s); motion stays refused and the "
+            "stop is written when the robot answers", fg_error_detail());
+  return 0;
+}
+
+/* On the robot's worker: the stop register back to 0, after what the latch still owes (a
+ * no-op block must be in place before the robot may run again). */
+static int reset_run(fg_mb_link *l, void *arg) {
+  fg_robot_svc *svc = arg;
+  FG_TRY(fg_mb_link_ensure(l));
+  FG_TRY(robot_idle(l, svc));
+  return fg_robot_write_stop(l, &svc->rp, 0);
+}
+
+int fg_robot_reset(fg_robot_svc *svc) {
+  pthread_mutex_lock(&svc->lock);
+  int rc = 0;
+  if (svc->active || svc->gripper_busy)
+    rc = fg_fail(FG_EBUSY, "a command is still running; wait for it to end, then reset");
+  const int latched = svc->latch.latched;
+  pthread_mutex_unlock(&svc->lock);
+  if (rc < 0) return rc;
+  if (svc->robot && (rc = fg_mb_peer_call(svc->robot, reset_run, svc)) < 0)
+    return fg_fail(FG_EUNAVAIL, "the robot could not be reached to clear its stop register "
+                   "(%s); the stop stays latched", fg_error_detail());
+  if (latched && unlink(svc->latch_path) < 0 && errno != ENOENT)
+    return fg_fail(FG_EIO, "cannot remove %s (%s); the stop stays latched", svc->latch_path,
+                   strerror(errno));
+  pthread_mutex_lock(&svc->lock);
+  memset(&svc->latch, 0, sizeof svc->latch);
+  svc->latch_stop = 0;
+  pthread_mutex_unlock(&svc->lock);
+  if (latched) fg_info("robot: reset; motion is allowed again");
+  return 0;
+}
+
+void fg_robot_latch_get(fg_robot_svc *svc, fg_robot_latch *out) {
+  pthread_mutex_lock(&svc->lock);
+  *out = svc->latch;
+  pthread_mutex_unlock(&svc->lock);
 }
 
 /* ---------------------------------------------------------------- state and metrics */

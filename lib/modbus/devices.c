@@ -36,6 +36,11 @@ int fg_robot_write(fg_mb_link *l, const fg_robot_profile *rp, const uint16_t *wo
   return fg_mb_write_registers(l, rp->base, fg_pose_block_words(rp->encoding), words);
 }
 
+int fg_robot_write_stop(fg_mb_link *l, const fg_robot_profile *rp, int stop) {
+  const uint16_t w = stop ? 1 : 0;
+  return fg_mb_write_registers(l, rp->base + fg_pose_stop_offset(rp->encoding), 1, &w);
+}
+
 int fg_robot_wait_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,
                       fg_mb_cancel_fn cancel, void *cancel_arg) {
   const double start = (fg_mono_s() * 1e3), until = start + rp->ack_timeout_ms;
@@ -61,7 +66,8 @@ int fg_robot_wait_done(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, 
     if (ack != seq)
       return fg_fail(FG_EINVAL, "the robot's ack changed from %u to %u before it reported "
                      "seq %u done", seq, ack, seq);
-    if (*status == FG_ROBOT_DONE || *status == FG_ROBOT_FAILED) return 0;
+    if (*status == FG_ROBOT_DONE || *status == FG_ROBOT_FAILED || *status == FG_ROBOT_STOPPED)
+      return 0;
     if ((fg_mono_s() * 1e3) >= until)
       return fg_fail(FG_ETIMEDOUT, "the robot did not report seq %u done within %d ms "
                      "(status %d)", seq, rp->done_timeout_ms, *status);

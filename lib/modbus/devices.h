@@ -32,12 +32,15 @@ int fg_robot_read_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t *ack, 
 /* Writes the words of one command (fg_pose_block_encode) in one function-16 request. */
 int fg_robot_write(fg_mb_link *l, const fg_robot_profile *rp, const uint16_t *words);
 
+/* Writes the stop register (proto/modbus.md): 1 halts the robot, 0 lets it run again. */
+int fg_robot_write_stop(fg_mb_link *l, const fg_robot_profile *rp, int stop);
+
 /* Polls until ack = seq: 0, FG_ETIMEDOUT ("no acknowledgement of seq N within T ms; ack is
  * A"), a link error, or FG_ECANCELED. *status is the status read with the ack. */
 int fg_robot_wait_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,
                       fg_mb_cancel_fn cancel, void *cancel_arg);
 
-/* Polls until status is done or failed (with ack still = seq): 0 with *status set,
+/* Polls until status is done, failed or stopped (with ack still = seq): 0 with *status set,
  * FG_ETIMEDOUT, FG_EINVAL when the robot moved on to another seq, a link error or
  * FG_ECANCELED. */
 int fg_robot_wait_done(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,

@@ -14,6 +14,8 @@ int fg_pose_block_words(fg_pose_encoding e) {
 
 int fg_pose_ack_offset(fg_pose_encoding e) { return fg_pose_block_words(e); }
 
+int fg_pose_stop_offset(fg_pose_encoding e) { return fg_pose_block_words(e) + 2; }
+
 uint16_t fg_seq_next(uint16_t s) { return s == 65535 ? 1 : (uint16_t)(s + 1); }
 
 void fg_float32_to_words(float v, uint16_t w[2]) {
@@ -43,17 +45,40 @@ static int put_int16(const char *field, double v, double per_unit, const char *u
   return 0;
 }
 
+/* An unsigned length in units of 1/per_unit (0.1 mm, 1 mm/s) as a u16 register. */
+static int put_uint16(const char *field, double v, double per_unit, const char *unit_name,
+                      uint16_t *w) {
+  const double r = round(v * per_unit);
+  if (!(r >= 0.0 && r <= 65535.0))
+    return fg_fail(FG_ERANGE, "%s = %g %s does not fit the int16 encoding (0 .. %g %s)", field,
+                   v, unit_name, 65535.0 / per_unit, unit_name);
+  *w = (uint16_t)r;
+  return 0;
+}
+
+/* A finite value as float32 words; FG_ERANGE naming it when float32 cannot hold it. */
+static int put_float32(const char *field, double v, const char *unit_name, uint16_t w[2]) {
+  const float f = (float)v;
+  if (!isfinite(f)) return fg_fail(FG_ERANGE, "%s = %g %s exceeds float32", field, v, unit_name);
+  fg_float32_to_words(f, w);
+  return 0;
+}
+
 int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w) {
   static const char *const pn[3] = {"x", "y", "z"}, *const rn[3] = {"rx", "ry", "rz"};
   if (b->seq == 0) return fg_fail(FG_EINVAL, "seq 0 is never sent");
-  if (b->command < FG_ROBOT_PICK || b->command > FG_ROBOT_MOVE)
-    return fg_fail(FG_EINVAL, "unknown robot command %d (1..5)", b->command);
+  if (b->command < FG_ROBOT_NOOP || b->command > FG_ROBOT_MOVE)
+    return fg_fail(FG_EINVAL, "unknown robot command %d (0..5)", b->command);
   for (int i = 0; i < 3; i++) {
     if (!isfinite(b->p_world_m[i]) || !isfinite(b->rotvec_rad[i]))
       return fg_fail(FG_EINVAL, "the pose is not finite");
   }
-  if (!isfinite(b->width_m)) return fg_fail(FG_EINVAL, "width = %g m is not finite", b->width_m);
-  if (b->width_m < 0) return fg_fail(FG_ERANGE, "width = %g m: expected >= 0", b->width_m);
+  static const char *const ln[4] = {"width", "approach", "retreat", "speed"};
+  const double lv[4] = {b->width_m, b->approach_m, b->retreat_m, b->speed_mps};
+  for (int i = 0; i < 4; i++) {
+    if (!isfinite(lv[i])) return fg_fail(FG_EINVAL, "%s = %g is not finite", ln[i], lv[i]);
+    if (lv[i] < 0) return fg_fail(FG_ERANGE, "%s = %g: expected >= 0", ln[i], lv[i]);
+  }
   if (b->force_n < 0 || b->force_n > 65535)
     return fg_fail(FG_ERANGE, "force = %d N: expected 0 .. 65535", b->force_n);
   w[0] = b->seq;
@@ -63,27 +88,22 @@ int fg_pose_block_encode(const fg_pose_block *b, fg_pose_encoding e, uint16_t *w
       FG_TRY(put_int16(pn[i], b->p_world_m[i], 1e4, "m", &w[2 + i]));
       FG_TRY(put_int16(rn[i], b->rotvec_rad[i], 1e3, "rad", &w[5 + i]));
     }
-    const double wd = round(b->width_m * 1e4);
-    if (wd > 65535.0)
-      return fg_fail(FG_ERANGE, "width = %g m does not fit the int16 encoding (0 .. 6.5535 m)",
-                     b->width_m);
-    w[8] = (uint16_t)wd;
+    FG_TRY(put_uint16("width", b->width_m, 1e4, "m", &w[8]));
     w[9] = (uint16_t)b->force_n;
+    FG_TRY(put_uint16("approach", b->approach_m, 1e4, "m", &w[10]));
+    FG_TRY(put_uint16("retreat", b->retreat_m, 1e4, "m", &w[11]));
+    FG_TRY(put_uint16("speed", b->speed_mps, 1e3, "m/s", &w[12]));
     return 0;
   }
   for (int i = 0; i < 3; i++) {
-    const float p = (float)b->p_world_m[i], r = (float)b->rotvec_rad[i];
-    if (!isfinite(p))
-      return fg_fail(FG_ERANGE, "%s = %g m exceeds float32", pn[i], b->p_world_m[i]);
-    if (!isfinite(r))
-      return fg_fail(FG_ERANGE, "%s = %g rad exceeds float32", rn[i], b->rotvec_rad[i]);
-    fg_float32_to_words(p, &w[2 + 2 * i]);
-    fg_float32_to_words(r, &w[8 + 2 * i]);
+    FG_TRY(put_float32(pn[i], b->p_world_m[i], "m", &w[2 + 2 * i]));
+    FG_TRY(put_float32(rn[i], b->rotvec_rad[i], "rad", &w[8 + 2 * i]));
   }
-  if (!isfinite((float)b->width_m))
-    return fg_fail(FG_ERANGE, "width = %g m exceeds float32", b->width_m);
-  fg_float32_to_words((float)b->width_m, &w[14]);
+  FG_TRY(put_float32("width", b->width_m, "m", &w[14]));
   w[16] = (uint16_t)b->force_n;
+  FG_TRY(put_float32("approach", b->approach_m, "m", &w[17]));
+  FG_TRY(put_float32("retreat", b->retreat_m, "m", &w[19]));
+  FG_TRY(put_float32("speed", b->speed_mps, "m/s", &w[21]));
   return 0;
 }
 
@@ -98,6 +118,9 @@ void fg_pose_block_decode(const uint16_t *w, fg_pose_encoding e, fg_pose_block *
     }
     b->width_m = w[8] * 1e-4;
     b->force_n = w[9];
+    b->approach_m = w[10] * 1e-4;
+    b->retreat_m = w[11] * 1e-4;
+    b->speed_mps = w[12] * 1e-3;
     return;
   }
   for (int i = 0; i < 3; i++) {
@@ -106,6 +129,9 @@ void fg_pose_block_decode(const uint16_t *w, fg_pose_encoding e, fg_pose_block *
   }
   b->width_m = fg_float32_from_words(&w[14]);
   b->force_n = w[16];
+  b->approach_m = fg_float32_from_words(&w[17]);
+  b->retreat_m = fg_float32_from_words(&w[19]);
+  b->speed_mps = fg_float32_from_words(&w[21]);
 }
 
 /* ---------------------------------------------------------------- robotiq-2f */

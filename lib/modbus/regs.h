@@ -11,6 +11,8 @@
 typedef enum { FG_POSE_INT16 = 0, FG_POSE_FLOAT32 = 1 } fg_pose_encoding;
 
 typedef enum {
+  FG_ROBOT_NOOP = 0,  /* acknowledge and do nothing: disarms a block left by a command whose
+                       * outcome was not confirmed */
   FG_ROBOT_PICK = 1,  /* go to pose, close */
   FG_ROBOT_PLACE = 2, /* go to pose, open */
   FG_ROBOT_OPEN = 3,
@@ -18,14 +20,21 @@ typedef enum {
   FG_ROBOT_MOVE = 5, /* move only */
 } fg_robot_command;
 
-/* Robot-written status word. */
-enum { FG_ROBOT_IDLE = 0, FG_ROBOT_BUSY = 1, FG_ROBOT_DONE = 2, FG_ROBOT_FAILED = 3 };
+/* Robot-written status word. Stopped: the stop register halted the command's motion. */
+enum {
+  FG_ROBOT_IDLE = 0,
+  FG_ROBOT_BUSY = 1,
+  FG_ROBOT_DONE = 2,
+  FG_ROBOT_FAILED = 3,
+  FG_ROBOT_STOPPED = 4
+};
 
-/* Words fieldgrip writes (offsets 0 .. n-1) and the offset of ack (status follows it). */
-#define FG_POSE_WORDS_INT16 10
-#define FG_POSE_WORDS_FLOAT32 17
-#define FG_POSE_MAX_WORDS 17
-#define FG_POSE_BLOCK_SPAN 19 /* registers of the whole float32 block, ack and status too */
+/* Words fieldgrip writes in one request (offsets 0 .. n-1); ack, status and the stop
+ * register follow them. */
+#define FG_POSE_WORDS_INT16 13
+#define FG_POSE_WORDS_FLOAT32 23
+#define FG_POSE_MAX_WORDS 23
+#define FG_POSE_BLOCK_SPAN 26 /* registers of the whole float32 block: ack, status, stop too */
 
 /* One command as the robot sees it. */
 typedef struct fg_pose_block {
@@ -35,13 +44,22 @@ typedef struct fg_pose_block {
   double rotvec_rad[3]; /* TCP orientation as a rotation vector, radians (core/pose.h) */
   double width_m;       /* opening before the approach, metres, >= 0 */
   int force_n;          /* newtons, 0..65535 */
+  double approach_m;    /* pick/place/move: start this far back along the tool's -z and come
+                         * in along +z; metres, >= 0 */
+  double retreat_m;     /* after the tool action: pick lifts along world +z, place backs out
+                         * along the tool's -z, by this much; metres, >= 0 (0: stay) */
+  double speed_mps;     /* Cartesian speed of the TCP, m/s, > 0 (0 only in a no-op) */
 } fg_pose_block;
 
 /* Words of one command for encoding e: FG_POSE_WORDS_INT16 or FG_POSE_WORDS_FLOAT32. */
 int fg_pose_block_words(fg_pose_encoding e);
 
-/* Offset of `ack` from the base (10 or 17); `status` is the next register. */
+/* Offset of `ack` from the base (13 or 23); `status` is the next register, then `stop`. */
 int fg_pose_ack_offset(fg_pose_encoding e);
+
+/* Offset of the `stop` register from the base (15 or 25): 1 halts the robot's motion and
+ * keeps it from starting another command, 0 lets it run. */
+int fg_pose_stop_offset(fg_pose_encoding e);
 
 /* Encodes b into words[0 .. fg_pose_block_words(e)-1] (words has room for
  * FG_POSE_MAX_WORDS). Returns 0, or FG_ERANGE with a detail naming the field, its value and

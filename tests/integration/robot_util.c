@@ -4,10 +4,12 @@
 #include <string.h>
 #include <time.h>
 
-const uint16_t r_example_int16[10] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40};
-const uint16_t r_example_float32[17] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190,
+const uint16_t r_example_int16[13] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40,
+                                       1000, 1000, 100};
+const uint16_t r_example_float32[23] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190,
                                         0x3D0F, 0x5C29, 0x4039, 0xC1CB, 0xBF99, 0xE2DA,
-                                        0x0000, 0x0000, 0x3DA3, 0xD70A, 0x0028};
+                                        0x0000, 0x0000, 0x3DA3, 0xD70A, 0x0028, 0x3DCC,
+                                        0xCCCD, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD};
 
 void r_config(int robot_port, const char *robot_extra, int gripper_port,
               const char *gripper_extra) {
@@ -15,7 +17,8 @@ void r_config(int robot_port, const char *robot_extra, int gripper_port,
   int n = snprintf(text, sizeof text, "[gripper]\nmodel = robotiq-2f85\n");
   if (robot_port)
     n += snprintf(text + n, sizeof text - n,
-                  "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n%s\n",
+                  "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n"
+                  "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n%s\n",
                   robot_port, robot_extra ? robot_extra : "");
   if (gripper_port)
     n += snprintf(text + n, sizeof text - n,

@@ -6,7 +6,8 @@
 #include "harness.h"
 
 /* Writes a configuration with [robot] on robot_port and [gripper.modbus] on gripper_port
- * (0 leaves the section out), model robotiq-2f85, plus extra lines appended to [robot]
+ * (0 leaves the section out), model robotiq-2f85, a position box of [-1.5, 1.5] m in x and
+ * y and [-0.5, 1.5] m in z (robot_extra must not set limit_min or limit_max), plus extra lines appended to [robot]
  * (robot_extra) and [gripper.modbus] (gripper_extra), either may be NULL. */
 void r_config(int robot_port, const char *robot_extra, int gripper_port,
               const char *gripper_extra);
@@ -33,11 +34,13 @@ json_t *r_command(const h_resp *r);
 /* The robot words of a command reply into w; returns their count. */
 int r_robot_words(const h_resp *r, uint16_t *w, int max);
 
-/* The worked example of proto/modbus.md: a pick with seq 7, and its words. */
+/* The worked example of proto/modbus.md: a pick with seq 7 (without a gripper of fieldgrip's
+ * own, so the block carries the 0.10 m retreat; approach 0.10 m, speed 0.10 m/s by default),
+ * and its words. */
 #define R_EXAMPLE_BODY                                                                         \
   "{\"command\": \"pick\", \"pose\": {\"position\": [0.4523, -0.1207, 0.0350], "             \
   "\"quaternion\": [0, 0.9238795, -0.3826834, 0]}, \"width\": 0.08, \"force\": 40"
-extern const uint16_t r_example_int16[10];
-extern const uint16_t r_example_float32[17];
+extern const uint16_t r_example_int16[13];
+extern const uint16_t r_example_float32[23];
 
 #endif

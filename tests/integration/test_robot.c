@@ -95,9 +95,10 @@ static void check_gripper(void) {
   ASSERT(json_is_true(json_object_get(r->json, "object_detected")));
   ASSERT_NEAR(json_real_value(json_object_get(r->json, "gripper_width")), 0.040, 0.0005);
   h_resp_free(r);
-  /* activation (reset, rACT), open to 0.08 m (position 15), the pose block, close */
+  /* activation (reset, rACT), open to 0.08 m (position 15), the pose block, close, and the
+   * retreat: a move 0.10 m straight up */
   const uint16_t reset[3] = {0, 0, 0}, act[3] = {0x0100, 0, 0};
-  ASSERT_EQ(writes(&sim, -1), 5);
+  ASSERT_EQ(writes(&sim, -1), 6);
   expect_words(&g_w[0], 1000, reset, 3);
   expect_words(&g_w[1], 1000, act, 3);
   ASSERT_EQ(g_w[2].unit, 9);
@@ -108,6 +109,13 @@ static void check_gripper(void) {
   ASSERT_EQ(g_w[4].unit, 9);
   ASSERT_EQ(g_w[4].words[1], 255);
   ASSERT_EQ(g_w[4].words[2] & 0xFF, 24); /* 40 N on the 2F-85's 20..235 N */
+  ASSERT_EQ(g_w[3].words[10], 1000); /* approach 0.10 m */
+  ASSERT_EQ(g_w[3].words[11], 0);    /* no retreat in the block: fieldgrip sends it */
+  ASSERT_EQ(g_w[5].unit, 1);
+  ASSERT_EQ(g_w[5].words[1], 5);     /* move */
+  ASSERT_EQ(g_w[5].words[2], 4523);
+  ASSERT_EQ(g_w[5].words[4], 1350);  /* 0.035 + 0.10 m */
+  ASSERT_EQ(g_w[5].words[10], 0);
 
   r = r_post("/v1/robot/commands",
              "{\"command\": \"place\", \"pose\": {\"position\": [0.3, 0.2, 0.05], "
@@ -116,11 +124,15 @@ static void check_gripper(void) {
   ASSERT(json_is_null(json_object_get(r->json, "object_detected")));
   ASSERT_NEAR(json_real_value(json_object_get(r->json, "gripper_width")), 0.06, 0.0005);
   h_resp_free(r);
-  ASSERT_EQ(writes(&sim, -1), 7); /* the block, then the opening: no second activation */
-  ASSERT_EQ(g_w[5].unit, 1);
-  ASSERT_EQ(g_w[5].words[1], 2);
-  ASSERT_EQ(g_w[6].unit, 9);
-  ASSERT_EQ(g_w[6].words[1], 75); /* round(255 x 0.025 / 0.085) */
+  /* the block, the opening (no second activation), backing out along the tool's -z */
+  ASSERT_EQ(writes(&sim, -1), 9);
+  ASSERT_EQ(g_w[6].unit, 1);
+  ASSERT_EQ(g_w[6].words[1], 2);
+  ASSERT_EQ(g_w[7].unit, 9);
+  ASSERT_EQ(g_w[7].words[1], 75); /* round(255 x 0.025 / 0.085) */
+  ASSERT_EQ(g_w[8].unit, 1);
+  ASSERT_EQ(g_w[8].words[1], 5);
+  ASSERT_EQ(g_w[8].words[4], 1500); /* the tool points down: back out = up to 0.15 m */
 
   r = r_post("/v1/gripper/close", "", NULL);
   r_expect(r, 200, NULL);
@@ -152,7 +164,13 @@ static void check_gripper(void) {
   ASSERT(json_is_null(json_object_get(r->json, "seq")));
   h_resp_free(r);
   ASSERT_EQ(writes(&sim, 1), robot_writes);
+  /* an activation opens the gripper: refused while it holds something, unless asked for */
+  const int grip_writes = writes(&sim, 9);
   r = r_post("/v1/gripper/activate", "", NULL);
+  r_expect(r, 409, "gripper_holding");
+  h_resp_free(r);
+  ASSERT_EQ(writes(&sim, 9), grip_writes);
+  r = r_post("/v1/gripper/activate", "{\"allow_drop\": true}", NULL);
   r_expect(r, 200, NULL);
   h_resp_free(r);
   const int n = writes(&sim, 9);
@@ -178,7 +196,8 @@ static void check_gripper(void) {
 static void check_values(void) {
   simproc sim;
   simproc_start(&sim, 0, NULL);
-  r_config(sim.port, NULL, sim.port, NULL);
+  /* the encoding of any orientation: the approach cone admits every direction here */
+  r_config(sim.port, "approach_cone_deg = 180", sim.port, NULL);
   h_start();
   ASSERT(r_wait_true("/v1/robot", "connected", 5));
   /* a quarter turn clockwise about z: q = [cos(-pi/4), 0, 0, sin(-pi/4)] */
@@ -208,9 +227,9 @@ static void check_values(void) {
       {"/v1/robot/commands", "{\"command\": \"move\", \"pose\": {\"position\": [0, -3.27685, 0], "
        "\"quaternion\": [1, 0, 0, 0]}}", 400, "value_out_of_range"},
       {"/v1/robot/commands", "{\"command\": \"pick\", \"pose\": {\"position\": [0.4, 0, 0.1], "
-       "\"quaternion\": [1, 0, 0, 0]}, \"width\": 0.1}", 400, "value_out_of_range"},
+       "\"quaternion\": [1, 0, 0, 0]}, \"width\": 0.1}", 422, "motion_limit"},
       {"/v1/robot/commands", "{\"command\": \"pick\", \"pose\": {\"position\": [0.4, 0, 0.1], "
-       "\"quaternion\": [1, 0, 0, 0]}, \"force\": 300}", 400, "value_out_of_range"},
+       "\"quaternion\": [1, 0, 0, 0]}, \"force\": 300}", 422, "motion_limit"},
       {"/v1/robot/commands", "{\"command\": \"move\", \"pose\": {\"position\": [0.4, 0, 0.1], "
        "\"quaternion\": [1, 0, 0, 0]}, \"force\": 1.5}", 400, "value_out_of_range"},
       {"/v1/robot/commands", "{\"command\": \"move\", \"pose\": {\"position\": [0.4, 0, 0.1], "
@@ -312,8 +331,8 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
   simproc_init(argv[2], h_tmpdir());
-  check_example("int16", r_example_int16, 10);
-  check_example("float32", r_example_float32, 17);
+  check_example("int16", r_example_int16, 13);
+  check_example("float32", r_example_float32, 23);
   check_gripper();
   check_values();
   check_idempotency();

@@ -78,9 +78,44 @@ static void check_no_ack(void) {
   r_expect(r, 504, "ack_timeout");
   ASSERT(json_is_true(json_object_get(r->json, "replayed")));
   h_resp_free(r);
-  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 1);
+  /* the block, then a no-op under the next seq: a robot program that comes back later finds
+   * nothing armed */
+  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 2);
+  ASSERT_EQ(g_w[0].words[1], 5);
+  ASSERT_EQ(g_w[1].words[0], g_w[0].words[0] + 1);
+  ASSERT_EQ(g_w[1].words[1], 0);
   r = h_get("/metrics");
   ASSERT(strstr(r->body, "fieldgrip_robot_commands_total{state=\"unknown\"} 1"));
+  h_resp_free(r);
+  /* the unknown outcome latches: the next command is refused and sends nothing */
+  r = h_get("/v1/robot");
+  json_t *latched = json_object_get(r->json, "latched");
+  ASSERT(json_is_object(latched));
+  ASSERT_EQ(json_integer_value(json_object_get(latched, "command")), id);
+  ASSERT(json_is_false(json_object_get(latched, "clear_pending")));
+  h_resp_free(r);
+  r = send_move(NULL, "k-after-unknown");
+  r_expect(r, 409, "robot_stopped");
+  h_resp_free(r);
+  ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 2);
+  /* the latch outlives a restart, until an operator resets it */
+  h_stop();
+  h_start();
+  r = send_move(NULL, NULL);
+  r_expect(r, 409, "robot_stopped");
+  h_resp_free(r);
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  r = r_post("/v1/robot/reset", "", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_is_null(json_object_get(r->json, "latched")));
+  h_resp_free(r);
+  const int n = simproc_writes(&sim, 1, g_w, 64);
+  ASSERT_EQ(g_w[n - 1].n, 1); /* the stop register back to 0 */
+  ASSERT_EQ(g_w[n - 1].addr, 128 + 15);
+  ASSERT_EQ(g_w[n - 1].words[0], 0);
+  r = h_get("/metrics");
   ASSERT(strstr(r->body, "fieldgrip_modbus_connected{peer=\"robot\"} 1"));
   ASSERT(!strstr(r->body, "peer=\"gripper\""));
   h_resp_free(r);
@@ -220,6 +255,13 @@ static void check_killed_mid_command(void) {
   const char *fast[] = {"--done-delay-ms", "10", NULL};
   simproc_restart(&sim, fast);
   ASSERT(r_wait_true("/v1/robot", "connected", 10));
+  /* the unknown outcome latched: motion waits for an operator's reset */
+  r = send_move(NULL, NULL);
+  r_expect(r, 409, "robot_stopped");
+  h_resp_free(r);
+  r = r_post("/v1/robot/reset", "", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
   r = send_move(NULL, NULL);
   r_expect(r, 200, NULL);
   ASSERT_STREQ(state_of(r), "done");
@@ -309,8 +351,11 @@ static void check_not_configured(void) {
   r_expect(r, 409, "not_configured");
   ASSERT(strstr(r->body, "[robot]"));
   h_resp_free(r);
+  /* a dry run reports what the real command would be refused for: no scene, no box */
   r = send_move(", \"dry_run\": true", NULL);
-  r_expect(r, 200, NULL);
+  r_expect(r, 422, "motion_limit");
+  ASSERT_STREQ(json_string_value(json_object_get(json_object_get(r->json, "error"), "limit")),
+               "position_box");
   h_resp_free(r);
   r = r_post("/v1/gripper/open", "", NULL);
   r_expect(r, 409, "not_configured");

@@ -51,15 +51,15 @@ static void check_pymodbus(void) {
   ASSERT_EQ(simproc_writes(&peer, 1, g_w, 16), 1);
   ASSERT_EQ(g_w[0].fn, 16);
   ASSERT_EQ(g_w[0].addr, 128);
-  ASSERT_EQ(g_w[0].n, 10);
+  ASSERT_EQ(g_w[0].n, 13);
   ASSERT_EQ(g_w[0].words[0], 1);
-  for (int i = 1; i < 10; i++)
+  for (int i = 1; i < 13; i++)
     if (g_w[0].words[i] != r_example_int16[i])
       FG_TEST_FAIL("pymodbus received word %d = %u, expected %u", i, g_w[0].words[i],
                    r_example_int16[i]);
   /* and a second command continues the sequence */
   r = r_post("/v1/robot/commands", "{\"command\": \"move\", \"pose\": {\"position\": [-0.1, 0.2, "
-             "0.3], \"quaternion\": [1, 0, 0, 0]}}", NULL);
+             "0.3], \"quaternion\": [0, 1, 0, 0]}}", NULL);
   r_expect(r, 200, NULL);
   h_resp_free(r);
   ASSERT_EQ(simproc_writes(&peer, 1, g_w, 16), 2);

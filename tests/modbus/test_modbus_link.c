@@ -111,7 +111,8 @@ static double ensure_until_connected(fg_mb_link *l, double limit_ms) {
 
 /* The block of proto/modbus.md's worked example with sequence number seq. */
 static void example_words(uint16_t seq, fg_pose_encoding e, uint16_t *w) {
-  fg_pose_block b = {.seq = seq, .command = FG_ROBOT_PICK, .width_m = 0.08, .force_n = 40};
+  fg_pose_block b = {.seq = seq, .command = FG_ROBOT_PICK, .width_m = 0.08, .force_n = 40,
+                     .approach_m = 0.10, .retreat_m = 0.10, .speed_mps = 0.10};
   b.p_world_m[0] = 0.4523;
   b.p_world_m[1] = -0.1207;
   b.p_world_m[2] = 0.0350;
@@ -120,14 +121,18 @@ static void example_words(uint16_t seq, fg_pose_encoding e, uint16_t *w) {
   ASSERT_OK(fg_pose_block_encode(&b, e, w));
 }
 
+/* The simulator's motions take no time here: these tests time the handshake itself. */
+static const char *const k_instant[] = {"--time-scale", "0", NULL};
+
 static const char *const k_example_log =
-    "write unit=1 fn=16 addr=128 n=10 words=7,1,4523,64329,350,2902,64334,0,800,40\n";
+    "write unit=1 fn=16 addr=128 n=13 words=7,1,4523,64329,350,2902,64334,0,800,40,1000,1000,"
+    "100\n";
 
 /* ---------------------------------------------------------------- link */
 
 static void test_connect_rw(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   char addr[64];
   snprintf(addr, sizeof addr, "127.0.0.1:%d", p.port);
@@ -143,18 +148,19 @@ static void test_connect_rw(void) {
   ASSERT_EQ(fg_mb_link_generation(l), 1);
   ASSERT_EQ(link_state(l).connected, 1);
 
-  uint16_t v[19], w[FG_POSE_MAX_WORDS];
-  for (int i = 0; i < 12; i++) v[i] = 0xDEAD;
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
-  for (int i = 0; i < 12; i++) ASSERT_EQ(v[i], 0);
+  uint16_t v[26], w[FG_POSE_MAX_WORDS];
+  for (int i = 0; i < 16; i++) v[i] = 0xDEAD;
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
+  for (int i = 0; i < 16; i++) ASSERT_EQ(v[i], 0);
   example_words(7, FG_POSE_INT16, w);
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(fg_mb_link_exception(l), 0);
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
-  for (int i = 0; i < 10; i++) ASSERT_EQ(v[i], w[i]);
-  ASSERT_EQ(v[10], 7); /* ack */
-  ASSERT_EQ(v[11], 2); /* done */
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
+  for (int i = 0; i < 13; i++) ASSERT_EQ(v[i], w[i]);
+  ASSERT_EQ(v[13], 7); /* ack */
+  ASSERT_EQ(v[14], 2); /* done: the motion took no time (--time-scale 0) */
+  ASSERT_EQ(v[15], 0); /* stop */
   assert_log(&p, k_example_log);
 
   /* Input registers on the gripper's unit over a second link to the same server. */
@@ -165,7 +171,7 @@ static void test_connect_rw(void) {
   fg_mb_link_free(g);
 
   /* An address outside the block: exception 2, the connection stays. */
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 13, v), FG_EPEER, "exception 2");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 17, v), FG_EPEER, "exception 2");
   ASSERT_EQ(fg_mb_link_exception(l), 2);
   ASSERT_EQ(link_state(l).connected, 1);
 
@@ -235,24 +241,24 @@ static void test_bad_config(void) {
 
 static void test_exception(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--exception", "2", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--exception", "2", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
-  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  uint16_t w[FG_POSE_MAX_WORDS], v[16];
   example_words(5, FG_POSE_INT16, w);
   char want[96];
   snprintf(want, sizeof want, "robot 127.0.0.1:%d answered", p.port);
   const char *who = want;
-  ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EPEER, who);
+  ASSERT_ERR(fg_mb_write_registers(l, BASE, 13, w), FG_EPEER, who);
   ASSERT_STRCONTAINS(fg_error_detail(), "exception 2 (illegal data address)");
-  ASSERT_STRCONTAINS(fg_error_detail(), "write of 10 registers at 128");
+  ASSERT_STRCONTAINS(fg_error_detail(), "write of 13 registers at 128");
   ASSERT_EQ(fg_mb_link_exception(l), 2);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   /* The connection stays usable; the exception code is the last request's. */
   ASSERT_EQ(link_state(l).connected, 1);
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
   ASSERT_EQ(fg_mb_link_exception(l), 0);
-  for (int i = 0; i < 12; i++) ASSERT_EQ(v[i], 0); /* nothing was written */
-  ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EPEER, "exception 2");
+  for (int i = 0; i < 16; i++) ASSERT_EQ(v[i], 0); /* nothing was written */
+  ASSERT_ERR(fg_mb_write_registers(l, BASE, 13, w), FG_EPEER, "exception 2");
   ASSERT_EQ(fg_mb_link_generation(l), 1);
   fg_mb_link_state st = link_state(l);
   ASSERT_EQ(st.exceptions, 2);
@@ -310,7 +316,7 @@ static void test_timeout(void) {
 
 /* The size of a Modbus TCP reply to a read of 12 registers: MBAP header (7), function code,
  * byte count, 12 words. */
-static const int k_read12_reply_bytes = 7 + 1 + 1 + 2 * 12;
+static const int k_read16_reply_bytes = 7 + 1 + 1 + 2 * 16;
 
 /* Waits until a socket of this process connected to 127.0.0.1:port holds at least bytes
  * unread bytes: a reply has reached a link's socket and no request has taken it yet. The
@@ -336,30 +342,30 @@ static void wait_unread(int port, int bytes) {
  * and a success in between means two timeouts are not "in a row". */
 static void test_late_reply(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 150);
-  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  uint16_t w[FG_POSE_MAX_WORDS], v[16];
   example_words(7, FG_POSE_INT16, w);
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
 
   /* The stopped simulator cannot answer in time (SIGSTOP takes effect before it returns to
    * its poll loop); once continued it answers, and the test waits until that reply lies in
    * the link's socket before the next request. */
   ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 16, v), FG_ETIMEDOUT, "did not answer");
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
-  wait_unread(p.port, k_read12_reply_bytes);
+  wait_unread(p.port, k_read16_reply_bytes);
   memset(v, 0, sizeof v);
-  ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
+  ASSERT_OK(fg_mb_read_registers(l, BASE + 13, 2, v));
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(v[1], 2);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
 
   ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 16, v), FG_ETIMEDOUT, "did not answer");
   ASSERT_EQ(link_state(l).connected, 1); /* the first timeout since the success */
   ASSERT_EQ(kill(p.pid, SIGCONT), 0);
-  wait_unread(p.port, k_read12_reply_bytes);
+  wait_unread(p.port, k_read16_reply_bytes);
   ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
@@ -393,29 +399,29 @@ static void *cont_after_thread(void *arg) {
  * for a write. */
 static void test_reply_after_flush(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
-  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  uint16_t w[FG_POSE_MAX_WORDS], v[16];
   example_words(7, FG_POSE_INT16, w);
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
 
   ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 16, v), FG_ETIMEDOUT, "did not answer");
   cont_after c = {.link = l, .pid = p.pid, .requests = link_state(l).requests + 1};
   pthread_t t;
   ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
   memset(v, 0, sizeof v);
-  ASSERT_OK(fg_mb_read_registers(l, BASE + 10, 2, v));
+  ASSERT_OK(fg_mb_read_registers(l, BASE + 13, 2, v));
   ASSERT_EQ(pthread_join(t, NULL), 0);
   ASSERT_EQ(v[0], 7);
   ASSERT_EQ(v[1], 2);
 
   ASSERT_EQ(kill(p.pid, SIGSTOP), 0);
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_ETIMEDOUT, "did not answer");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 16, v), FG_ETIMEDOUT, "did not answer");
   c.requests = link_state(l).requests + 1;
   ASSERT_EQ(pthread_create(&t, NULL, cont_after_thread, &c), 0);
   example_words(8, FG_POSE_INT16, w);
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
   ASSERT_EQ(pthread_join(t, NULL), 0);
   ASSERT_OK(fg_mb_read_registers(l, BASE, 1, v));
   ASSERT_EQ(v[0], 8);
@@ -463,8 +469,8 @@ static int peer_down_then_up_once(void) {
   ASSERT_STRCONTAINS(fg_error_detail(), "refused"); /* the cause is still told */
   ASSERT_EQ(link_state(l).connect_failures, 1);
   /* A request meanwhile fails the same way and cannot have been sent. */
-  uint16_t v[12];
-  ASSERT_EQ(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL);
+  uint16_t v[16];
+  ASSERT_EQ(fg_mb_read_registers(l, BASE, 16, v), FG_EUNAVAIL);
   if (!inside_window(t_first, 100)) goto again;
   ASSERT_STRCONTAINS(fg_error_detail(), "next attempt in");
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 0);
@@ -509,7 +515,7 @@ static int peer_down_then_up_once(void) {
   ASSERT_EQ(st.connected, 1);
   ASSERT_EQ(st.reconnects, 0);
   ASSERT_EQ(fg_mb_link_generation(l), 1);
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
   fg_mb_link_free(l);
   simproc_stop(&p);
   return 1;
@@ -531,28 +537,28 @@ static void test_peer_down_then_up(void) {
 /* The peer dies mid-session (SIGKILL) and a new one starts on the same port. */
 static void test_peer_killed_restart(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   const int port = p.port;
   const int timeout_ms = 5000; /* far above any delay of a busy machine */
   fg_mb_link *l = link_open("robot", port, ROBOT, timeout_ms);
-  uint16_t w[FG_POSE_MAX_WORDS], v[12];
+  uint16_t w[FG_POSE_MAX_WORDS], v[16];
   example_words(7, FG_POSE_INT16, w);
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
-  ASSERT_EQ(v[10], 7);
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
+  ASSERT_EQ(v[13], 7);
   simproc_kill(&p);
 
   /* The request went out on what looked like a live connection: it may have been sent.
    * Noticed at once (FG_EUNAVAIL), not after the response timeout (FG_ETIMEDOUT). */
   double t0 = simproc_now_ms();
-  ASSERT_ERR(fg_mb_read_registers(l, BASE, 12, v), FG_EUNAVAIL, "connection lost");
+  ASSERT_ERR(fg_mb_read_registers(l, BASE, 16, v), FG_EUNAVAIL, "connection lost");
   ASSERT(simproc_now_ms() - t0 < timeout_ms);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(link_state(l).connected, 0);
   /* The next one is refused by the backoff and cannot have been sent. (A call that a busy
    * machine delays past the backoff tries to connect, is refused, and cannot have been sent
    * either.) */
-  ASSERT_EQ(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL);
+  ASSERT_EQ(fg_mb_write_registers(l, BASE, 13, w), FG_EUNAVAIL);
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 0);
   if (inside_window(t0, 100)) {
     ASSERT_STRCONTAINS(fg_error_detail(), "next attempt in");
@@ -566,9 +572,9 @@ static void test_peer_killed_restart(void) {
   fg_mb_link_state st = link_state(l);
   ASSERT_EQ(st.reconnects, 1);
   ASSERT_EQ(st.connected, 1);
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
   for (int i = 0; i < 12; i++) ASSERT_EQ(v[i], 0); /* a fresh peer */
-  ASSERT_OK(fg_mb_write_registers(l, BASE, 10, w));
+  ASSERT_OK(fg_mb_write_registers(l, BASE, 13, w));
   assert_log(&p, k_example_log);
   fg_mb_link_free(l);
   simproc_stop(&p);
@@ -578,23 +584,23 @@ static void test_peer_killed_restart(void) {
  * says it may have been sent, and indeed was applied. */
 static void test_drop_write(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--drop-after", "2", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--drop-after", "2", NULL});
   const int timeout_ms = 5000; /* far above any delay of a busy machine */
   fg_mb_link *l = link_open("robot", p.port, ROBOT, timeout_ms);
-  uint16_t w[FG_POSE_MAX_WORDS], v[12];
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v)); /* request 1 */
+  uint16_t w[FG_POSE_MAX_WORDS], v[16];
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v)); /* request 1 */
   example_words(7, FG_POSE_INT16, w);
   double t0 = simproc_now_ms();
-  ASSERT_ERR(fg_mb_write_registers(l, BASE, 10, w), FG_EUNAVAIL, "connection lost during");
+  ASSERT_ERR(fg_mb_write_registers(l, BASE, 13, w), FG_EUNAVAIL, "connection lost during");
   ASSERT(simproc_now_ms() - t0 < timeout_ms); /* the drop, not the response timeout */
-  ASSERT_STRCONTAINS(fg_error_detail(), "write of 10 registers at 128");
+  ASSERT_STRCONTAINS(fg_error_detail(), "write of 13 registers at 128");
   ASSERT_EQ(fg_mb_link_maybe_sent(l), 1);
   ASSERT_EQ(fg_mb_link_exception(l), 0);
   ASSERT_EQ(link_state(l).connected, 0);
   ensure_until_connected(l, 100 + SLACK_MS);
-  ASSERT_OK(fg_mb_read_registers(l, BASE, 12, v));
-  for (int i = 0; i < 10; i++) ASSERT_EQ(v[i], w[i]);
-  ASSERT_EQ(v[10], 7); /* the robot accepted the "failed" write */
+  ASSERT_OK(fg_mb_read_registers(l, BASE, 16, v));
+  for (int i = 0; i < 13; i++) ASSERT_EQ(v[i], w[i]);
+  ASSERT_EQ(v[13], 7); /* the robot accepted the "failed" write */
   assert_log(&p, k_example_log);
   fg_mb_link_free(l);
   simproc_stop(&p);
@@ -640,8 +646,8 @@ static void test_robot_handshake(void) {
   ASSERT_EQ(status, FG_ROBOT_DONE);
   fprintf(stderr, "robot ack after %.1f ms (delay 50), done after %.1f ms (50 + 50)\n", t_ack,
           t_done);
-  assert_log(&p, "write unit=1 fn=16 addr=128 n=10 "
-                 "words=1,1,4523,64329,350,2902,64334,0,800,40\n");
+  assert_log(&p, "write unit=1 fn=16 addr=128 n=13 "
+                 "words=1,1,4523,64329,350,2902,64334,0,800,40,1000,1000,100\n");
 
   /* ... and the next seq completes as usual on the same connection. */
   example_words(2, FG_POSE_INT16, w);
@@ -671,7 +677,7 @@ static void test_robot_handshake(void) {
 
 static void test_robot_never_ack(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--never-ack", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--never-ack", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 200,
                                .done_timeout_ms = 2000};
@@ -683,7 +689,7 @@ static void test_robot_never_ack(void) {
   ASSERT_ERR(fg_robot_wait_ack(l, &rp, 1, &status, NULL, NULL), FG_ETIMEDOUT,
              "did not acknowledge seq 1 within 200 ms");
   double ms = simproc_now_ms() - t0;
-  ASSERT_STRCONTAINS(fg_error_detail(), "ack register 138 holds 0");
+  ASSERT_STRCONTAINS(fg_error_detail(), "ack register 141 holds 0");
   ASSERT(ms >= 200 - 1 && ms < 200 + SLACK_MS);
   ASSERT_EQ(status, FG_ROBOT_IDLE);
   fprintf(stderr, "no ack: gave up after %.1f ms (ack_timeout_ms 200)\n", ms);
@@ -691,8 +697,8 @@ static void test_robot_never_ack(void) {
   ASSERT_EQ(link_state(l).connected, 1);
   ASSERT_EQ(link_state(l).errors, 0);
   /* The block is written once, never again. */
-  assert_log(&p, "write unit=1 fn=16 addr=128 n=10 "
-                 "words=1,1,4523,64329,350,2902,64334,0,800,40\n");
+  assert_log(&p, "write unit=1 fn=16 addr=128 n=13 "
+                 "words=1,1,4523,64329,350,2902,64334,0,800,40,1000,1000,100\n");
 
   /* A cancel function stops the wait early: with an ack timeout no run can reach, only the
    * cancel can end it, at its third call. */
@@ -710,7 +716,7 @@ static void test_robot_never_ack(void) {
 
 static void test_robot_fail(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--fail", "--done-delay-ms", "30", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--fail", "--done-delay-ms", "30", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 1000,
                                .done_timeout_ms = 2000};
@@ -726,7 +732,7 @@ static void test_robot_fail(void) {
   simproc_stop(&p);
 
   /* A robot that stays busy: done_timeout_ms. */
-  simproc_start(&p, 0, (const char *const[]){"--done-delay-ms", "60000", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--done-delay-ms", "60000", NULL});
   l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp2 = {.base = BASE, .encoding = FG_POSE_INT16, .ack_timeout_ms = 1000,
                                 .done_timeout_ms = 150};
@@ -745,14 +751,14 @@ static void test_robot_fail(void) {
 
 static void test_robot_float32(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--encoding", "float32", "--base", "200",
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--encoding", "float32", "--base", "200",
                                               "--ack-init", "6", NULL});
   fg_mb_link *l = link_open("robot", p.port, ROBOT, 1000);
   const fg_robot_profile rp = {.base = 200, .encoding = FG_POSE_FLOAT32, .ack_timeout_ms = 1000,
                                .done_timeout_ms = 2000};
   uint16_t ack;
   int status;
-  ASSERT_OK(fg_robot_read_ack(l, &rp, &ack, &status)); /* registers 217, 218 */
+  ASSERT_OK(fg_robot_read_ack(l, &rp, &ack, &status)); /* registers 223, 224 */
   ASSERT_EQ(ack, 6);
   const uint16_t seq = fg_seq_next(ack);
   uint16_t w[FG_POSE_MAX_WORDS];
@@ -762,21 +768,22 @@ static void test_robot_float32(void) {
   ASSERT_OK(fg_robot_wait_done(l, &rp, seq, &status, NULL, NULL));
   ASSERT_EQ(status, FG_ROBOT_DONE);
 
-  uint16_t v[19];
-  ASSERT_OK(fg_mb_read_registers(l, 200, 19, v));
-  const uint16_t want[17] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190,
-                             0x3D0F, 0x5C29, 0x4039, 0xC1CB, 0xBF99, 0xE2DA,
-                             0x0000, 0x0000, 0x3DA3, 0xD70A, 0x0028};
-  for (int i = 0; i < 17; i++)
+  uint16_t v[26];
+  ASSERT_OK(fg_mb_read_registers(l, 200, 26, v));
+  const uint16_t want[23] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190, 0x3D0F, 0x5C29,
+                             0x4039, 0xC1CB, 0xBF99, 0xE2DA, 0x0000, 0x0000, 0x3DA3, 0xD70A,
+                             0x0028, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD};
+  for (int i = 0; i < 23; i++)
     if (v[i] != want[i]) FG_TEST_FAIL("register %d: 0x%04X, want 0x%04X", 200 + i, v[i], want[i]);
-  ASSERT_EQ(v[17], 7);
-  ASSERT_EQ(v[18], 2);
+  ASSERT_EQ(v[23], 7);
+  ASSERT_EQ(v[24], 2);
   fg_pose_block d;
   fg_pose_block_decode(v, FG_POSE_FLOAT32, &d);
   ASSERT_NEAR(d.p_world_m[1], -0.1207, 1e-7);
   ASSERT_NEAR(d.rotvec_rad[0], 2.902453, 1e-6);
-  assert_log(&p, "write unit=1 fn=16 addr=200 n=17 words=7,1,16103,37854,48631,12688,15631,"
-                 "23593,16441,49611,49049,58074,0,0,15779,55050,40\n");
+  assert_log(&p, "write unit=1 fn=16 addr=200 n=23 words=7,1,16103,37854,48631,12688,15631,"
+                 "23593,16441,49611,49049,58074,0,0,15779,55050,40,15820,52429,15820,52429,"
+                 "15820,52429\n");
   fg_mb_link_free(l);
   simproc_stop(&p);
 }
@@ -785,7 +792,7 @@ static void test_robot_float32(void) {
 
 static void test_gripper(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "100", "--stroke-ms", "100",
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--activation-ms", "100", "--stroke-ms", "100",
                                               "--object-width-mm", "40", NULL});
   fg_mb_link *l = link_open("gripper", p.port, GRIPPER, 1000);
   fg_robotiq_status s;
@@ -841,7 +848,7 @@ static void test_gripper(void) {
   simproc_stop(&p);
 
   /* An activation that takes longer than allowed; a move meanwhile is refused. */
-  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "5000", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--activation-ms", "5000", NULL});
   l = link_open("gripper", p.port, GRIPPER, 1000);
   t0 = simproc_now_ms();
   ASSERT_ERR(fg_gripper_activate(l, 100, &s), FG_ETIMEDOUT, "did not finish its activation");
@@ -857,25 +864,25 @@ static void test_gripper(void) {
 
 typedef struct {
   pthread_t thread;
-  uint16_t regs[12];
+  uint16_t regs[16];
 } read_job;
 
 static int job_read(fg_mb_link *l, void *arg) {
   read_job *j = arg;
   j->thread = pthread_self();
-  return fg_mb_read_registers(l, BASE, 12, j->regs);
+  return fg_mb_read_registers(l, BASE, 16, j->regs);
 }
 
 static int job_write_example(fg_mb_link *l, void *arg) {
   uint16_t w[FG_POSE_MAX_WORDS];
   example_words(*(uint16_t *)arg, FG_POSE_INT16, w);
-  return fg_mb_write_registers(l, BASE, 10, w);
+  return fg_mb_write_registers(l, BASE, 13, w);
 }
 
 static int job_read_outside(fg_mb_link *l, void *arg) {
-  uint16_t v[13];
+  uint16_t v[17];
   (void)arg;
-  return fg_mb_read_registers(l, BASE, 13, v);
+  return fg_mb_read_registers(l, BASE, 17, v);
 }
 
 static int job_fail(fg_mb_link *l, void *arg) {
@@ -885,7 +892,7 @@ static int job_fail(fg_mb_link *l, void *arg) {
 
 static void test_peer_call(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   const fg_mb_link_config cfg = tcp_config("robot", p.port, ROBOT, 1000);
   fg_mb_peer *peer = NULL;
   ASSERT_OK(fg_mb_peer_new(&peer, &cfg, 1000, NULL, NULL));
@@ -896,17 +903,17 @@ static void test_peer_call(void) {
   read_job j;
   memset(&j, 0, sizeof j);
   j.thread = pthread_self();
-  for (int i = 0; i < 12; i++) j.regs[i] = 0xDEAD;
+  for (int i = 0; i < 16; i++) j.regs[i] = 0xDEAD;
   ASSERT_OK(fg_mb_peer_call(peer, job_read, &j));
   ASSERT(!pthread_equal(j.thread, pthread_self()));
-  for (int i = 0; i < 12; i++) ASSERT_EQ(j.regs[i], 0);
+  for (int i = 0; i < 16; i++) ASSERT_EQ(j.regs[i], 0);
   const pthread_t worker = j.thread;
   uint16_t seq = 7;
   ASSERT_OK(fg_mb_peer_call(peer, job_write_example, &seq));
   ASSERT_OK(fg_mb_peer_call(peer, job_read, &j));
   ASSERT(pthread_equal(j.thread, worker)); /* always the same thread */
   ASSERT_EQ(j.regs[0], 7);
-  ASSERT_EQ(j.regs[10], 7);
+  ASSERT_EQ(j.regs[13], 7);
 
   /* The job's code and detail reach the caller. */
   int n = 42;
@@ -1150,7 +1157,7 @@ static void wait_count(atomic_int *counter, int want, double limit_ms, const cha
  * worker slows the case down but cannot fail it. */
 static void test_peer_idle(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   const int port = p.port;
   idle_count ic;
   atomic_init(&ic.calls, 0);

@@ -20,12 +20,16 @@ static fg_pose_block worked_example(void) {
   fg_rotvec_from_quat(q_wxyz, b.rotvec_rad);
   b.width_m = 0.08;
   b.force_n = 40;
+  b.approach_m = 0.10;
+  b.retreat_m = 0.10;
+  b.speed_mps = 0.10;
   return b;
 }
 
 /* A block at the origin that encodes cleanly; tests change one field. */
 static fg_pose_block plain_block(void) {
-  fg_pose_block b = {.seq = 1, .command = FG_ROBOT_MOVE, .width_m = 0.05, .force_n = 10};
+  fg_pose_block b = {.seq = 1, .command = FG_ROBOT_MOVE, .width_m = 0.05, .force_n = 10,
+                     .speed_mps = 0.1};
   return b;
 }
 
@@ -96,13 +100,14 @@ static void test_worked_example_int16(void) {
   ASSERT_NEAR(b.rotvec_rad[0], 2.902453, 5e-7);
   ASSERT_NEAR(b.rotvec_rad[1], -1.202235, 5e-7);
   ASSERT_NEAR(b.rotvec_rad[2], 0.0, 1e-15);
-  ASSERT_EQ(fg_pose_block_words(FG_POSE_INT16), 10);
-  ASSERT_EQ(fg_pose_ack_offset(FG_POSE_INT16), 10);
+  ASSERT_EQ(fg_pose_block_words(FG_POSE_INT16), 13);
+  ASSERT_EQ(fg_pose_ack_offset(FG_POSE_INT16), 13);
+  ASSERT_EQ(fg_pose_stop_offset(FG_POSE_INT16), 15);
   uint16_t w[FG_POSE_MAX_WORDS];
   for (int i = 0; i < FG_POSE_MAX_WORDS; i++) w[i] = 0xAAAA;
   ASSERT_OK(fg_pose_block_encode(&b, FG_POSE_INT16, w));
-  const uint16_t want[10] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40};
-  for (int i = 0; i < 10; i++) ASSERT_EQ(w[i], want[i]);
+  const uint16_t want[13] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40, 1000, 1000, 100};
+  for (int i = 0; i < 13; i++) ASSERT_EQ(w[i], want[i]);
 
   fg_pose_block d;
   fg_pose_block_decode(w, FG_POSE_INT16, &d);
@@ -116,18 +121,22 @@ static void test_worked_example_int16(void) {
   ASSERT_NEAR(d.rotvec_rad[2], 0.0, 1e-12);
   ASSERT_NEAR(d.width_m, 0.08, 1e-12);
   ASSERT_EQ(d.force_n, 40);
+  ASSERT_NEAR(d.approach_m, 0.10, 1e-12);
+  ASSERT_NEAR(d.retreat_m, 0.10, 1e-12);
+  ASSERT_NEAR(d.speed_mps, 0.10, 1e-12);
 }
 
 static void test_worked_example_float32(void) {
   fg_pose_block b = worked_example();
-  ASSERT_EQ(fg_pose_block_words(FG_POSE_FLOAT32), 17);
-  ASSERT_EQ(fg_pose_ack_offset(FG_POSE_FLOAT32), 17);
+  ASSERT_EQ(fg_pose_block_words(FG_POSE_FLOAT32), 23);
+  ASSERT_EQ(fg_pose_ack_offset(FG_POSE_FLOAT32), 23);
+  ASSERT_EQ(fg_pose_stop_offset(FG_POSE_FLOAT32), 25);
   uint16_t w[FG_POSE_MAX_WORDS];
   ASSERT_OK(fg_pose_block_encode(&b, FG_POSE_FLOAT32, w));
-  const uint16_t want[17] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190,
-                             0x3D0F, 0x5C29, 0x4039, 0xC1CB, 0xBF99, 0xE2DA,
-                             0x0000, 0x0000, 0x3DA3, 0xD70A, 0x0028};
-  for (int i = 0; i < 17; i++)
+  const uint16_t want[23] = {0x0007, 0x0001, 0x3EE7, 0x93DE, 0xBDF7, 0x3190, 0x3D0F, 0x5C29,
+                             0x4039, 0xC1CB, 0xBF99, 0xE2DA, 0x0000, 0x0000, 0x3DA3, 0xD70A,
+                             0x0028, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD};
+  for (int i = 0; i < 23; i++)
     if (w[i] != want[i]) FG_TEST_FAIL("float32 word %d: 0x%04X, want 0x%04X", i, w[i], want[i]);
 
   fg_pose_block d;
@@ -142,6 +151,8 @@ static void test_worked_example_float32(void) {
   ASSERT_EQ(d.rotvec_rad[2], 0.0);
   ASSERT_EQ(d.width_m, (float)0.08);
   ASSERT_EQ(d.force_n, 40);
+  ASSERT_EQ(d.approach_m, (float)0.10);
+  ASSERT_EQ(d.speed_mps, (float)0.10);
 }
 
 /* ---------------------------------------------------------------- int16 encoding */
@@ -325,18 +336,29 @@ static void test_refusals(void) {
   ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_INT16, w), FG_EINVAL, "seq 0");
   ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_FLOAT32, w), FG_EINVAL, "seq 0");
 
-  static const int bad_cmd[] = {0, 6, -1, 65536};
+  static const int bad_cmd[] = {6, -1, 65536};
   for (size_t i = 0; i < sizeof bad_cmd / sizeof bad_cmd[0]; i++) {
     b = plain_block();
     b.command = bad_cmd[i];
     ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_INT16, w), FG_EINVAL, "command");
     ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_FLOAT32, w), FG_EINVAL, "command");
   }
-  for (int c = FG_ROBOT_PICK; c <= FG_ROBOT_MOVE; c++) {
+  for (int c = FG_ROBOT_NOOP; c <= FG_ROBOT_MOVE; c++) {
     b = plain_block();
     b.command = c;
     ASSERT_EQ(int16_word(&b, 1), c);
   }
+  /* approach, retreat and speed: negative or beyond a u16 of their unit is refused */
+  b = plain_block();
+  b.approach_m = -0.01;
+  ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_INT16, w), FG_ERANGE, "approach");
+  b = plain_block();
+  b.retreat_m = 6.6;
+  ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_INT16, w), FG_ERANGE, "retreat");
+  ASSERT_OK(fg_pose_block_encode(&b, FG_POSE_FLOAT32, w));
+  b = plain_block();
+  b.speed_mps = NAN;
+  ASSERT_ERR(fg_pose_block_encode(&b, FG_POSE_FLOAT32, w), FG_EINVAL, "speed");
 
   const double bad[3] = {NAN, INFINITY, -INFINITY};
   for (int k = 0; k < 3; k++) {

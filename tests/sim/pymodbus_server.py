@@ -28,8 +28,8 @@ from pymodbus.datastore import (ModbusSequentialDataBlock, ModbusServerContext,
                                 ModbusSlaveContext)
 from pymodbus.server import StartAsyncTcpServer
 
-BLOCK_REGS = 12  # int16 layout: offsets 0..11
-ACK, STATUS = 10, 11
+BLOCK_REGS = 16  # int16 layout: offsets 0..15 (the block, ack, status, stop)
+ACK, STATUS = 13, 14
 WRITE_FUNCTIONS = (6, 16, 22, 23)
 
 

@@ -77,6 +77,7 @@ static void new_files(simproc *p) {
   snprintf(p->port_file, sizeof p->port_file, "%s/sim%d.port", g_dir, k);
   snprintf(p->log, sizeof p->log, "%s/sim%d.log", g_dir, k);
   snprintf(p->err, sizeof p->err, "%s/sim%d.err", g_dir, k);
+  snprintf(p->events, sizeof p->events, "%s/sim%d.events", g_dir, k);
 }
 
 /* Fills argv with "sim --listen listen --port-file F --log F extra... NULL"; argv has
@@ -91,6 +92,11 @@ static void sim_argv(const char **argv, const simproc *p, const char *listen,
   argv[n++] = p->port_file;
   argv[n++] = "--log";
   argv[n++] = p->log;
+  argv[n++] = "--events";
+  argv[n++] = p->events;
+  /* motions 50 times faster than real time; a test that times one passes its own scale */
+  argv[n++] = "--time-scale";
+  argv[n++] = "0.02";
   for (int i = 0; extra && extra[i]; i++) {
     ASSERT(n < MAX_ARGS - 1);
     argv[n++] = extra[i];

@@ -19,6 +19,7 @@ typedef struct simproc {
   int port;  /* the TCP port it listens on, read from its port file */
   char port_file[PATH_MAX]; /* the port and a newline, written once it listens */
   char log[PATH_MAX];       /* its request log (--log) */
+  char events[PATH_MAX];    /* its robot's motions and stops (--events; fieldgrip-sim only) */
   char err[PATH_MAX];       /* its stdout and stderr, appended */
 } simproc;
 
@@ -36,7 +37,9 @@ typedef struct simproc_write {
  * reaps every process still running. */
 void simproc_init(const char *sim, const char *dir);
 
-/* Starts the simulator as "sim --listen 127.0.0.1:PORT --port-file F --log F extra...", port 0
+/* Starts the simulator as "sim --listen 127.0.0.1:PORT --port-file F --log F --events F
+ * --time-scale 0.02 extra..." (motions 50 times faster than real time unless extra sets
+ * another scale), port 0
  * meaning a free one, extra NULL-terminated (NULL: none), with new files, and waits up to 10 s
  * for its port file. Fails the test with the simulator's stderr when it exits first. Fills *p;
  * its previous content is ignored. */

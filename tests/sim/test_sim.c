@@ -46,23 +46,26 @@ static void wr(modbus_t *c, int addr, int n, const uint16_t *w) {
   if (rc != n) FG_TEST_FAIL("write %d x %d: %d (%s)", addr, n, rc, modbus_strerror(errno));
 }
 
+/* The robot's motions take no time here: these tests time the handshake itself. */
+static const char *const k_instant[] = {"--time-scale", "0", NULL};
+
 /* The int16 block of a command with sequence number seq (proto/modbus.md worked example). */
 static void block_int16(uint16_t seq, uint16_t *w) {
-  const uint16_t ex[10] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40};
+  const uint16_t ex[13] = {7, 1, 4523, 64329, 350, 2902, 64334, 0, 800, 40, 1000, 1000, 100};
   memcpy(w, ex, sizeof ex);
   w[0] = seq;
 }
 
 static void write_seq(modbus_t *c, uint16_t seq) {
-  uint16_t w[10];
+  uint16_t w[13];
   block_int16(seq, w);
-  wr(c, BASE, 10, w);
+  wr(c, BASE, 13, w);
 }
 
-/* Reads ack and status (offsets 10 and 11) in one request. */
+/* Reads ack and status (offsets 13 and 14) in one request. */
 static void ack_status(modbus_t *c, uint16_t *ack, uint16_t *status) {
   uint16_t v[2];
-  rd(c, BASE + 10, 2, v);
+  rd(c, BASE + 13, 2, v);
   *ack = v[0];
   *status = v[1];
 }
@@ -162,7 +165,7 @@ static void test_args(void) {
 
 static void test_robot_immediate(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   char *err = simproc_read(p.err);
   char want[96];
   snprintf(want, sizeof want, "fieldgrip-sim: listening on 127.0.0.1:%d\n", p.port);
@@ -170,21 +173,21 @@ static void test_robot_immediate(void) {
   free(err);
 
   modbus_t *c = client(p.port, ROBOT);
-  uint16_t v[12], w[10];
-  rd(c, BASE, 12, v);
-  for (int i = 0; i < 12; i++) ASSERT_EQ(v[i], 0);
+  uint16_t v[16], w[13];
+  rd(c, BASE, 16, v);
+  for (int i = 0; i < 16; i++) ASSERT_EQ(v[i], 0);
 
   block_int16(7, w);
-  wr(c, BASE, 10, w);
-  rd(c, BASE, 12, v);
-  for (int i = 0; i < 10; i++) ASSERT_EQ(v[i], w[i]);
-  ASSERT_EQ(v[10], 7); /* ack */
-  ASSERT_EQ(v[11], 2); /* done */
+  wr(c, BASE, 13, w);
+  rd(c, BASE, 16, v);
+  for (int i = 0; i < 13; i++) ASSERT_EQ(v[i], w[i]);
+  ASSERT_EQ(v[13], 7); /* ack */
+  ASSERT_EQ(v[14], 2); /* done */
 
   /* The same seq again is not a new command; a single-register write of seq is. */
   uint16_t ack, status;
-  ASSERT_EQ(modbus_write_register(c, BASE + 11, 0), 1);
-  wr(c, BASE, 10, w);
+  ASSERT_EQ(modbus_write_register(c, BASE + 14, 0), 1);
+  wr(c, BASE, 13, w);
   ack_status(c, &ack, &status);
   ASSERT_EQ(ack, 7);
   ASSERT_EQ(status, 0);
@@ -195,15 +198,15 @@ static void test_robot_immediate(void) {
 
   /* seq 0 is never a command. */
   ASSERT_EQ(modbus_write_register(c, BASE, 0), 1);
-  ASSERT_EQ(modbus_write_register(c, BASE + 11, 0), 1);
+  ASSERT_EQ(modbus_write_register(c, BASE + 14, 0), 1);
   ack_status(c, &ack, &status);
   ASSERT_EQ(ack, 8);
   ASSERT_EQ(status, 0);
 
   /* Outside the block, input registers, coils, other units. */
-  ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 13, v), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 17, v), EMBXILADD);
   ASSERT_FAILS_WITH(modbus_read_registers(c, BASE - 1, 2, v), EMBXILADD);
-  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE + 11, 2, w), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE + 15, 2, w), EMBXILADD);
   ASSERT_FAILS_WITH(modbus_read_input_registers(c, BASE, 2, v), EMBXILADD);
   uint8_t bits[8];
   ASSERT_FAILS_WITH(modbus_read_bits(c, 0, 8, bits), EMBXILFUN);
@@ -262,7 +265,7 @@ static void test_robot_delays(void) {
 static void test_robot_supersede(void) {
   simproc p;
   const int ack_ms = 300;
-  simproc_start(&p, 0, (const char *const[]){"--ack-delay-ms", "300", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--ack-delay-ms", "300", NULL});
   modbus_t *c = client(p.port, ROBOT);
   double t0 = simproc_now_ms();
   write_seq(c, 1);
@@ -290,7 +293,7 @@ static void test_robot_supersede(void) {
 
 static void test_robot_never_ack(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--never-ack", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--never-ack", NULL});
   modbus_t *c = client(p.port, ROBOT);
   write_seq(c, 1);
   simproc_sleep_ms(250);
@@ -307,7 +310,7 @@ static void test_robot_never_ack(void) {
 
 static void test_robot_fail(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--fail", "--done-delay-ms", "50", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--fail", "--done-delay-ms", "50", NULL});
   modbus_t *c = client(p.port, ROBOT);
   write_seq(c, 3);
   uint16_t ack, status;
@@ -326,14 +329,14 @@ static void test_robot_fail(void) {
 
 static void test_robot_exception(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--exception", "4", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--exception", "4", NULL});
   modbus_t *c = client(p.port, ROBOT);
-  uint16_t w[10], v[12];
+  uint16_t w[13], v[16];
   block_int16(5, w);
-  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE, 10, w), MODBUS_ENOBASE + 4);
+  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE, 13, w), MODBUS_ENOBASE + 4);
   ASSERT_FAILS_WITH(modbus_write_register(c, BASE, 5), MODBUS_ENOBASE + 4);
-  rd(c, BASE, 12, v); /* reads still answer; nothing was written */
-  for (int i = 0; i < 12; i++) ASSERT_EQ(v[i], 0);
+  rd(c, BASE, 16, v); /* reads still answer; nothing was written */
+  for (int i = 0; i < 16; i++) ASSERT_EQ(v[i], 0);
   /* The gripper is not affected. */
   ASSERT_EQ(modbus_set_slave(c, GRIPPER), 0);
   grip_write(c, 0x0100, 0, 0);
@@ -341,9 +344,9 @@ static void test_robot_exception(void) {
   client_free(c);
   simproc_stop(&p);
 
-  simproc_start(&p, 0, (const char *const[]){"--exception", "11", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--exception", "11", NULL});
   c = client(p.port, ROBOT);
-  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE, 10, w), EMBXGTAR);
+  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE, 13, w), EMBXGTAR);
   client_free(c);
   simproc_stop(&p);
 }
@@ -352,21 +355,21 @@ static void test_robot_exception(void) {
  * all connections and only that one request is dropped. */
 static void test_robot_drop(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--drop-after", "3", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--drop-after", "3", NULL});
   modbus_t *a = client(p.port, ROBOT);
   modbus_t *b = client(p.port, ROBOT);
-  uint16_t v[12];
+  uint16_t v[16];
   rd(a, BASE, 1, v); /* 1 */
   rd(b, BASE, 1, v); /* 2 */
-  uint16_t w[10];
+  uint16_t w[13];
   block_int16(5, w);
   double t0 = simproc_now_ms();
-  ASSERT_FAILS_WITH(modbus_write_registers(a, BASE, 10, w), ECONNRESET); /* 3 */
+  ASSERT_FAILS_WITH(modbus_write_registers(a, BASE, 13, w), ECONNRESET); /* 3 */
   ASSERT(simproc_now_ms() - t0 < 2500); /* closed, not a response timeout */
-  rd(b, BASE, 12, v); /* 4: the other connection is still served */
-  for (int i = 0; i < 10; i++) ASSERT_EQ(v[i], w[i]);
-  ASSERT_EQ(v[10], 5);
-  ASSERT_EQ(v[11], 2);
+  rd(b, BASE, 16, v); /* 4: the other connection is still served */
+  for (int i = 0; i < 13; i++) ASSERT_EQ(v[i], w[i]);
+  ASSERT_EQ(v[13], 5);
+  ASSERT_EQ(v[14], 2);
   client_free(a);
   a = client(p.port, ROBOT);
   rd(a, BASE, 1, v);
@@ -379,7 +382,7 @@ static void test_robot_drop(void) {
 
 static void test_robot_ack_init(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--ack-init", "41", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--ack-init", "41", NULL});
   modbus_t *c = client(p.port, ROBOT);
   uint16_t ack, status;
   ack_status(c, &ack, &status);
@@ -399,27 +402,28 @@ static void test_robot_ack_init(void) {
 
 static void test_robot_float32(void) {
   simproc p;
-  simproc_start(&p, 0, (const char *const[]){"--encoding", "float32", "--base", "200", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--encoding", "float32", "--base", "200", NULL});
   modbus_t *c = client(p.port, ROBOT);
-  uint16_t v[19];
-  rd(c, 200, 19, v);
-  ASSERT_FAILS_WITH(modbus_read_registers(c, 200, 20, v), EMBXILADD);
+  uint16_t v[27];
+  rd(c, 200, 26, v);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, 200, 27, v), EMBXILADD);
   ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 1, v), EMBXILADD);
-  const uint16_t w[17] = {9,      1,      0x3EE7, 0x93DE, 0xBDF7, 0x3190, 0x3D0F, 0x5C29, 0x4039,
-                          0xC1CB, 0xBF99, 0xE2DA, 0,      0,      0x3DA3, 0xD70A, 40};
-  wr(c, 200, 17, w);
-  rd(c, 200, 19, v);
-  for (int i = 0; i < 17; i++) ASSERT_EQ(v[i], w[i]);
-  ASSERT_EQ(v[17], 9);
-  ASSERT_EQ(v[18], 2);
+  const uint16_t w[23] = {9,      1,      0x3EE7, 0x93DE, 0xBDF7, 0x3190, 0x3D0F, 0x5C29,
+                          0x4039, 0xC1CB, 0xBF99, 0xE2DA, 0,      0,      0x3DA3, 0xD70A,
+                          40,     0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD, 0x3DCC, 0xCCCD};
+  wr(c, 200, 23, w);
+  rd(c, 200, 26, v);
+  for (int i = 0; i < 23; i++) ASSERT_EQ(v[i], w[i]);
+  ASSERT_EQ(v[23], 9);
+  ASSERT_EQ(v[24], 2);
   client_free(c);
   simproc_stop(&p);
 
-  /* The int16 layout ends at offset 11. */
-  simproc_start(&p, 0, (const char *const[]){"--encoding", "int16", NULL});
+  /* The int16 layout ends at offset 15. */
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--encoding", "int16", NULL});
   c = client(p.port, ROBOT);
-  rd(c, BASE, 12, v);
-  ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 19, v), EMBXILADD);
+  rd(c, BASE, 16, v);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, BASE, 17, v), EMBXILADD);
   client_free(c);
   simproc_stop(&p);
 }
@@ -429,7 +433,7 @@ static void test_robot_float32(void) {
 static void test_gripper_activation_and_moves(void) {
   simproc p;
   const int act_ms = 200, stroke_ms = 100;
-  simproc_start(&p, 0, (const char *const[]){"--activation-ms", "200", "--stroke-ms", "100", NULL});
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--activation-ms", "200", "--stroke-ms", "100", NULL});
   modbus_t *c = client(p.port, GRIPPER);
   grip_status st = grip_read(c);
   ASSERT_EQ(st.act + st.gto + st.sta + st.obj + st.flt + st.pr + st.po + st.cu, 0);
@@ -528,7 +532,7 @@ static void test_gripper_activation_and_moves(void) {
 static void test_gripper_object(void) {
   simproc p;
   /* 40 mm in an 85 mm stroke: P = round(255 * 45 / 85) = 135. */
-  simproc_start(&p, 0, (const char *const[]){"--object-width-mm", "40", "--activation-ms", "0",
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--object-width-mm", "40", "--activation-ms", "0",
                                               "--stroke-ms", "100", NULL});
   modbus_t *c = client(p.port, GRIPPER);
   grip_write(c, 0x0100, 0, 0);
@@ -563,7 +567,7 @@ static void test_gripper_object(void) {
   simproc_stop(&p);
 
   /* 2F-140 holding 70 mm: P = round(255 * 70 / 140) = round(127.5) = 128. */
-  simproc_start(&p, 0, (const char *const[]){"--stroke-mm", "140", "--object-width-mm", "70",
+  simproc_start(&p, 0, (const char *const[]){"--time-scale", "0", "--stroke-mm", "140", "--object-width-mm", "70",
                                               "--activation-ms", "0", "--stroke-ms", "50", NULL});
   c = client(p.port, GRIPPER);
   grip_write(c, 0x0100, 0, 0);
@@ -578,7 +582,7 @@ static void test_gripper_object(void) {
 
 static void test_two_clients(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   modbus_t *idle = client(p.port, ROBOT); /* connected, never sends */
   modbus_t *robot = client(p.port, ROBOT);
   modbus_t *grip = client(p.port, GRIPPER);
@@ -586,10 +590,10 @@ static void test_two_clients(void) {
   for (int i = 1; i <= 50; i++) {
     write_seq(robot, (uint16_t)i);
     ASSERT_EQ(modbus_set_slave(grip, ROBOT), 0);
-    uint16_t v[12];
-    rd(grip, BASE, 12, v);
+    uint16_t v[16];
+    rd(grip, BASE, 16, v);
     ASSERT_EQ(v[0], i);
-    ASSERT_EQ(v[10], i);
+    ASSERT_EQ(v[13], i);
     ASSERT_EQ(modbus_set_slave(grip, GRIPPER), 0);
     ASSERT_EQ(grip_read(grip).sta, 3);
   }
@@ -605,14 +609,14 @@ static void test_two_clients(void) {
 
 static void test_log(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   modbus_t *c = client(p.port, ROBOT);
-  uint16_t w[10], v[12];
+  uint16_t w[13], v[16];
   block_int16(7, w);
-  wr(c, BASE, 10, w);
-  rd(c, BASE, 12, v); /* reads are not logged */
+  wr(c, BASE, 13, w);
+  rd(c, BASE, 16, v); /* reads are not logged */
   ASSERT_EQ(modbus_write_register(c, BASE + 1, 3), 1);
-  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE + 10, 3, w), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_write_registers(c, BASE + 14, 3, w), EMBXILADD);
   ASSERT_EQ(modbus_set_slave(c, GRIPPER), 0);
   grip_write(c, 0x0900, 255, 0xFF40);
   ASSERT_EQ(modbus_set_slave(c, 5), 0);
@@ -627,10 +631,10 @@ static void test_log(void) {
   ASSERT_EQ(modbus_write_register(c, BASE, 8), 1);
 
   char *log = simproc_read(rotated);
-  ASSERT_STREQ(log, "write unit=1 fn=16 addr=128 n=10 "
-                    "words=7,1,4523,64329,350,2902,64334,0,800,40\n"
+  ASSERT_STREQ(log, "write unit=1 fn=16 addr=128 n=13 "
+                    "words=7,1,4523,64329,350,2902,64334,0,800,40,1000,1000,100\n"
                     "write unit=1 fn=6 addr=129 n=1 words=3\n"
-                    "write unit=1 fn=16 addr=138 n=3 words=7,1,4523\n"
+                    "write unit=1 fn=16 addr=142 n=3 words=7,1,4523\n"
                     "write unit=9 fn=16 addr=1000 n=3 words=2304,255,65344\n"
                     "write unit=5 fn=6 addr=1 n=1 words=65535\n");
   free(log);
@@ -645,12 +649,12 @@ static void test_log(void) {
  * one binds the same port at once (SO_REUSEADDR) and starts from a fresh state. */
 static void test_restart_same_port(void) {
   simproc p;
-  simproc_start(&p, 0, NULL);
+  simproc_start(&p, 0, k_instant);
   int port = p.port;
   modbus_t *c = client(port, ROBOT);
   write_seq(c, 4);
   simproc_kill(&p);
-  uint16_t v[12];
+  uint16_t v[16];
   ASSERT_EQ(modbus_read_registers(c, BASE, 1, v), -1);
   client_free(c);
 
@@ -659,7 +663,7 @@ static void test_restart_same_port(void) {
   ASSERT_EQ(p.port, port);
   fprintf(stderr, "restart on port %d took %.1f ms\n", port, simproc_now_ms() - t0);
   c = client(port, ROBOT);
-  rd(c, BASE, 12, v);
+  rd(c, BASE, 16, v);
   ASSERT_EQ(v[0], 0);
   ASSERT_EQ(v[10], 0);
   client_free(c);
