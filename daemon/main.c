@@ -337,13 +337,11 @@ int main(int argc, char **argv) {
 
   /* The robot and the gripper: peers that are down are fine, their workers keep trying. */
   char *robot_dir = fg_path_join(conf->state_dir, "robot");
-  char *idem_path = robot_dir ? fg_path_join(robot_dir, "idempotency.json") : NULL;
-  int robot_rc = !idem_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
-  if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
+  int robot_rc = !robot_dir ? FG_ENOMEM : fg_mkdir_p(robot_dir);
+  if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, robot_dir, NULL);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
   free(robot_dir);
-  free(idem_path);
   if (robot_rc != 0) {
     fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
     app_teardown(&app);
