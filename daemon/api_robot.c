@@ -4,6 +4,7 @@
  * Idempotency-Key (idem.h). */
 #include "api.h"
 #include "api_decode.h"
+#include "cmd_ids.h"
 #include "idem.h"
 #include "json.h"
 #include "robot.h"
@@ -185,6 +186,7 @@ static int answer_refusal(fg_resp *resp, int rc) {
   case FG_EINVAL: return fg_resp_error(resp, 400, "invalid_request", "%s", d);
   case FG_EBUSY: return fg_resp_error(resp, 409, "robot_busy", "%s", d);
   case FG_EUNAVAIL: return fg_resp_error(resp, 409, "not_configured", "%s", d);
+  case FG_ENOSPC: return fg_resp_error(resp, 507, "insufficient_storage", "%s", d);
   default: return fg_resp_error(resp, 500, "internal_error", "%s", d);
   }
 }
@@ -347,9 +349,17 @@ int fg_api_robot_command_get(fg_req *req, fg_resp *resp) {
   char *end;
   const unsigned long long id = strtoull(req->params[0], &end, 10);
   fg_robot_cmd_view v;
-  if (*end || end == req->params[0] || fg_robot_command_get(req->app->robot, id, &v) < 0)
-    return fg_resp_error(resp, 404, "not_found", "no command %s (commands are numbered from 1 "
-                         "at each start; the newest 1000 are kept)", req->params[0]);
+  if (*end || end == req->params[0])
+    return fg_resp_error(resp, 404, "not_found", "no command \"%s\": ids are whole numbers",
+                         req->params[0]);
+  const uint64_t first = fg_cmd_ids_first(req->app->cmd_ids);
+  if (id < first)
+    return fg_resp_error(resp, 404, "not_found", "command %llu is from before the daemon last "
+                         "started (this run's commands start at %" PRIu64 "); its record is "
+                         "not kept", id, first);
+  if (fg_robot_command_get(req->app->robot, id, &v) < 0)
+    return fg_resp_error(resp, 404, "not_found", "no command %llu (ids are never reused; the "
+                         "newest 1000 commands since the daemon last started are kept)", id);
   fg_resp_json(resp, 200, command_json(&v));
   return 0;
 }

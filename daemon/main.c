@@ -7,6 +7,7 @@
 #include "grasp_log.h"
 #include "http.h"
 #include "idem.h"
+#include "cmd_ids.h"
 #include "job_train.h"
 #include "jobs.h"
 #include "metrics.h"
@@ -241,6 +242,7 @@ static void app_teardown(fg_app *app) {
   fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
   fg_idem_free(app->idem);
+  fg_cmd_ids_free(app->cmd_ids);
   fg_jobs_free(app->jobs);
   fg_decoder_free(app->decoder);
   fg_store_close(app->store);
@@ -337,11 +339,15 @@ int main(int argc, char **argv) {
 
   /* The robot and the gripper: peers that are down are fine, their workers keep trying. */
   char *robot_dir = fg_path_join(conf->state_dir, "robot");
-  int robot_rc = !robot_dir ? FG_ENOMEM : fg_mkdir_p(robot_dir);
+  char *ids_path = robot_dir ? fg_path_join(robot_dir, "command_ids") : NULL;
+  int robot_rc = !ids_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
   if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, robot_dir, NULL);
+  if (robot_rc == 0) robot_rc = fg_cmd_ids_open(&app.cmd_ids, ids_path);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
+  if (robot_rc == 0) fg_robot_svc_set_ids(app.robot, app.cmd_ids);
   free(robot_dir);
+  free(ids_path);
   if (robot_rc != 0) {
     fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
     app_teardown(&app);

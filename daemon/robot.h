@@ -116,6 +116,11 @@ int fg_robot_plan(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_v
  * the plan's errors, FG_EBUSY when another command is running (detail names it). */
 int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v);
 
+/* Takes command ids from ids (kept by the caller, freed after svc), so that they stay
+ * unique across restarts; call before any command. Without, ids count from 1. */
+struct fg_cmd_ids;
+void fg_robot_svc_set_ids(fg_robot_svc *svc, struct fg_cmd_ids *ids);
+
 /* The record of command id (the newest 1000 are kept): 0 or FG_ENOENT. */
 int fg_robot_command_get(fg_robot_svc *svc, uint64_t id, fg_robot_cmd_view *v);
 
