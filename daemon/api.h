@@ -58,6 +58,12 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
 struct fg_robot_request;
 int fg_api_robot_run(fg_req *req, fg_resp *resp, struct fg_robot_request *r);
 
+/* The Idempotency-Key of a request that moves the robot or the gripper, looked up before the
+ * handler looks at anything else: a retry gets its first answer even when what it named is
+ * gone since (a grasp forgotten at a restart, or stale after a training). Returns 1 when it
+ * answered (a replay, a conflict, a malformed key), 0 when the request is to be handled. */
+int fg_api_idem_replay(fg_req *req, fg_resp *resp);
+
 /* fg_robot_svc_on_finish hook (ctx: the fg_app): stores the final answer of a command that
  * came with an Idempotency-Key, so that a retry sees how it ended. */
 struct fg_robot_cmd_view;

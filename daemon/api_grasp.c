@@ -385,6 +385,7 @@ out:
 /* ---------------------------------------------------------------- POST .../execute */
 
 int fg_api_grasp_execute(fg_req *req, fg_resp *resp) {
+  if (fg_api_idem_replay(req, resp)) return 0;
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
   const char *id = req->params[1];

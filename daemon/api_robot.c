@@ -4,6 +4,7 @@
  * Idempotency-Key (idem.h). */
 #include "api.h"
 #include "api_decode.h"
+#include "cmd_ids.h"
 #include "idem.h"
 #include "json.h"
 #include "robot.h"
@@ -203,24 +204,17 @@ static int answer_refusal(fg_resp *resp, int rc, const fg_robot_cmd_view *v) {
   case FG_EINVAL: return fg_resp_error(resp, 400, "invalid_request", "%s", d);
   case FG_EBUSY: return fg_resp_error(resp, 409, "robot_busy", "%s", d);
   case FG_EUNAVAIL: return fg_resp_error(resp, 409, "not_configured", "%s", d);
+  case FG_ENOSPC: return fg_resp_error(resp, 507, "insufficient_storage", "%s", d);
   default: return fg_resp_error(resp, 500, "internal_error", "%s", d);
   }
 }
 
 /* ---------------------------------------------------------------- idempotency */
 
-/* With an Idempotency-Key: answers a replay (or a conflict) itself and returns 1; returns 0
- * with *key set when the request is to run, -1 after answering an error. */
-static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
-  *key = fg_req_header(req, "Idempotency-Key");
-  if (!*key) return 0;
-  if (!fg_idem_key_valid(*key))
-    return fg_resp_error(resp, 400, "invalid_request", "Idempotency-Key must be 1 to %d "
-                         "printable ASCII characters", FG_IDEM_KEY_MAX), -1;
-  int status = 0;
-  char *body = NULL;
-  int rc = fg_idem_begin(req->app->idem, *key, req->path, req->body, req->body_len, &status,
-                         &body);
+/* The answer of an Idempotency-Key lookup: answers a replay (or a conflict) itself and
+ * returns 1; returns 0 when the request is to run (FG_IDEM_NEW), -1 after answering an
+ * error. */
+static int idem_answer(fg_resp *resp, int rc, int status, char *body) {
   switch (rc) {
   case FG_IDEM_NEW: return 0;
   case FG_IDEM_RUNNING:
@@ -238,10 +232,46 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
     fg_resp_json(resp, status, o);
     return 1;
   }
+  case FG_ERANGE:
+    return fg_resp_error(resp, 507, "idempotency_store_full", "%s", fg_error_detail()), -1;
+  case FG_ENOSPC:
+    return fg_resp_error(resp, 507, "insufficient_storage", "the Idempotency-Key could not "
+                         "be stored, so the command was not run: %s", fg_error_detail()), -1;
   default:
     return fg_resp_error(resp, 503, "state_unavailable", "the Idempotency-Key could not be "
                          "stored, so the command was not run: %s", fg_error_detail()), -1;
   }
+}
+
+static fg_idem_request idem_request(const fg_req *req) {
+  return (fg_idem_request){req->method, req->path, req->body, req->body_len};
+}
+
+int fg_api_idem_replay(fg_req *req, fg_resp *resp) {
+  const char *key = fg_req_header(req, "Idempotency-Key");
+  if (!key) return 0;
+  if (!fg_idem_key_valid(key))
+    return fg_resp_error(resp, 400, "invalid_request", "Idempotency-Key must be 1 to %d "
+                         "printable ASCII characters", FG_IDEM_KEY_MAX), 1;
+  int status = 0;
+  char *body = NULL;
+  const fg_idem_request rq = idem_request(req);
+  const int rc = fg_idem_peek(req->app->idem, key, &rq, &status, &body);
+  return idem_answer(resp, rc, status, body) != 0;
+}
+
+/* Takes the request's Idempotency-Key, if it has one (fg_api_idem_replay checked it first):
+ * answers a replay (or a conflict: another request took it since the check) itself and
+ * returns 1; returns 0 with *key set when the request is to run, -1 after answering an
+ * error. */
+static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
+  *key = fg_req_header(req, "Idempotency-Key");
+  if (!*key) return 0;
+  int status = 0;
+  char *body = NULL;
+  const fg_idem_request rq = idem_request(req);
+  const int rc = fg_idem_begin(req->app->idem, *key, &rq, &status, &body);
+  return idem_answer(resp, rc, status, body);
 }
 
 /* ---------------------------------------------------------------- handlers */
@@ -315,6 +345,7 @@ static int actuate(fg_req *req, fg_resp *resp, const char *action, fg_robot_requ
 }
 
 int fg_api_robot_command(fg_req *req, fg_resp *resp) {
+  if (fg_api_idem_replay(req, resp)) return 0;
   json_t *body = fg_api_body_object(req, resp);
   if (!body) return 0;
   static const char *const keys[] = {"command", "pose",    "width",   "force", "speed",
@@ -337,9 +368,17 @@ int fg_api_robot_command_get(fg_req *req, fg_resp *resp) {
   char *end;
   const unsigned long long id = strtoull(req->params[0], &end, 10);
   fg_robot_cmd_view v;
-  if (*end || end == req->params[0] || fg_robot_command_get(req->app->robot, id, &v) < 0)
-    return fg_resp_error(resp, 404, "not_found", "no command %s (commands are numbered from 1 "
-                         "at each start; the newest 1000 are kept)", req->params[0]);
+  if (*end || end == req->params[0])
+    return fg_resp_error(resp, 404, "not_found", "no command \"%s\": ids are whole numbers",
+                         req->params[0]);
+  const uint64_t first = fg_cmd_ids_first(req->app->cmd_ids);
+  if (id < first)
+    return fg_resp_error(resp, 404, "not_found", "command %llu is from before the daemon last "
+                         "started (this run's commands start at %" PRIu64 "); its record is "
+                         "not kept", id, first);
+  if (fg_robot_command_get(req->app->robot, id, &v) < 0)
+    return fg_resp_error(resp, 404, "not_found", "no command %llu (ids are never reused; the "
+                         "newest 1000 commands since the daemon last started are kept)", id);
   fg_resp_json(resp, 200, command_json(&v));
   return 0;
 }
@@ -491,6 +530,7 @@ int fg_api_gripper_get(fg_req *req, fg_resp *resp) {
 }
 
 int fg_api_gripper_action(fg_req *req, fg_resp *resp) {
+  if (fg_api_idem_replay(req, resp)) return 0;
   static const char *const actions[] = {"open", "close", "move", "activate", NULL};
   const char *action = NULL;
   for (int i = 0; actions[i]; i++)

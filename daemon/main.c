@@ -7,6 +7,7 @@
 #include "grasp_log.h"
 #include "http.h"
 #include "idem.h"
+#include "cmd_ids.h"
 #include "job_train.h"
 #include "jobs.h"
 #include "metrics.h"
@@ -257,6 +258,7 @@ static void app_teardown(fg_app *app) {
   fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
   fg_idem_free(app->idem);
+  fg_cmd_ids_free(app->cmd_ids);
   fg_jobs_free(app->jobs);
   fg_decoder_free(app->decoder);
   fg_store_close(app->store);
@@ -353,14 +355,16 @@ int main(int argc, char **argv) {
 
   /* The robot and the gripper: peers that are down are fine, their workers keep trying. */
   char *robot_dir = fg_path_join(conf->state_dir, "robot");
-  char *idem_path = robot_dir ? fg_path_join(robot_dir, "idempotency.json") : NULL;
-  int robot_rc = !idem_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
-  if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
+  char *ids_path = robot_dir ? fg_path_join(robot_dir, "command_ids") : NULL;
+  int robot_rc = !ids_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
+  if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, robot_dir, NULL);
+  if (robot_rc == 0) robot_rc = fg_cmd_ids_open(&app.cmd_ids, ids_path);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
   if (robot_rc == 0) fg_robot_svc_set_workspace_source(app.robot, scenes_workspace, app.store);
+  if (robot_rc == 0) fg_robot_svc_set_ids(app.robot, app.cmd_ids);
   free(robot_dir);
-  free(idem_path);
+  free(ids_path);
   if (robot_rc != 0) {
     fg_error("cannot set up the robot and gripper: %s", fg_error_detail());
     app_teardown(&app);

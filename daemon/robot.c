@@ -12,6 +12,7 @@
 
 #include <jansson.h>
 
+#include "cmd_ids.h"
 #include "core/error.h"
 #include "core/clock.h"
 #include "core/fsutil.h"
@@ -42,7 +43,8 @@ struct fg_robot_svc {
   pthread_cond_t cond;  /* records changed */
   rec *recs[MAX_RECORDS]; /* ring of the newest records, oldest at head */
   size_t n_recs, head;
-  uint64_t next_id;
+  uint64_t next_id;      /* one past the last id handed out */
+  fg_cmd_ids *ids;       /* where ids come from; NULL: from 1 at each start */
   rec *active;          /* the command running, or NULL */
   int stopping;
   /* robot: written by its worker */
@@ -69,6 +71,8 @@ struct fg_robot_svc {
   int gripper_busy;     /* a gripper action runs */
   int latch_stop;       /* the latch wants the stop register at 1 (a stop, not an outcome) */
 };
+
+void fg_robot_svc_set_ids(fg_robot_svc *svc, fg_cmd_ids *ids) { svc->ids = ids; }
 
 void fg_robot_svc_on_finish(fg_robot_svc *svc, void (*fn)(void *ctx, const fg_robot_cmd_view *v),
                             void *ctx) {
@@ -878,8 +882,15 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
     free(r);
     return rc;
   }
+  uint64_t id = svc->next_id;
+  if (svc->ids && (rc = fg_cmd_ids_next(svc->ids, &id)) < 0) {
+    pthread_mutex_unlock(&svc->lock);
+    free(r);
+    return rc;
+  }
   r->svc = svc;
-  r->v.id = svc->next_id++;
+  r->v.id = id;
+  svc->next_id = id + 1;
   r->v.created_s = fg_real_s();
   r->v.state = FG_CMD_PENDING;
   r->v.seq = 0;

@@ -178,6 +178,11 @@ typedef struct fg_robot_latch {
 
 void fg_robot_latch_get(fg_robot_svc *svc, fg_robot_latch *out);
 
+/* Takes command ids from ids (kept by the caller, freed after svc), so that they stay
+ * unique across restarts; call before any command. Without, ids count from 1. */
+struct fg_cmd_ids;
+void fg_robot_svc_set_ids(fg_robot_svc *svc, struct fg_cmd_ids *ids);
+
 /* The record of command id (the newest 1000 are kept): 0 or FG_ENOENT. */
 int fg_robot_command_get(fg_robot_svc *svc, uint64_t id, fg_robot_cmd_view *v);
 

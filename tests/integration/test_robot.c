@@ -205,6 +205,9 @@ static void check_values(void) {
                      "{\"command\": \"move\", \"pose\": {\"position\": [-0.25, -1.5, -0.01], "
                      "\"quaternion\": [0.7071067811865476, 0, 0, -0.7071067811865476]}}", NULL);
   r_expect(r, 200, NULL);
+  /* ids go on from the earlier starts of this state dir */
+  const json_int_t id = json_integer_value(json_object_get(r->json, "id"));
+  ASSERT(id >= 1);
   h_resp_free(r);
   ASSERT_EQ(writes(&sim, 1), 1);
   const uint16_t *w = g_w[0].words;
@@ -259,10 +262,15 @@ static void check_values(void) {
     h_resp_free(r);
   }
   ASSERT_EQ(writes(&sim, -1), before);
-  r = h_get("/v1/robot/commands/999");
+  char *none = h_fmt("/v1/robot/commands/%lld", (long long)id + 500); /* not yet given */
+  r = h_get(none);
+  free(none);
   r_expect(r, 404, "not_found");
+  ASSERT_STRCONTAINS(r->body, "ids are never reused");
   h_resp_free(r);
-  r = h_get("/v1/robot/commands/1");
+  char *path = h_fmt("/v1/robot/commands/%lld", (long long)id);
+  r = h_get(path);
+  free(path);
   r_expect(r, 200, NULL);
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "command")), "move");
   h_resp_free(r);
@@ -271,7 +279,18 @@ static void check_values(void) {
   simproc_stop(&sim);
 }
 
-/* The same Idempotency-Key twice actuates once, also after a restart of the daemon. */
+/* GET of a command id from before the daemon's last start: 404, saying so. */
+static void expect_gone(json_int_t id) {
+  char *path = h_fmt("/v1/robot/commands/%lld", (long long)id);
+  h_resp *r = h_get(path);
+  r_expect(r, 404, "not_found");
+  ASSERT_STRCONTAINS(r->body, "before the daemon last started");
+  h_resp_free(r);
+  free(path);
+}
+
+/* The same Idempotency-Key twice actuates once, also after a restart of the daemon (and
+ * when the client serialised the request again); command ids are unique across restarts. */
 static void check_idempotency(void) {
   simproc sim;
   simproc_start(&sim, 0, NULL);
@@ -291,6 +310,14 @@ static void check_idempotency(void) {
   ASSERT(json_is_true(json_object_get(r->json, "replayed")));
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "id")), id);
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "seq")), seq);
+  h_resp_free(r);
+  ASSERT_EQ(writes(&sim, 1), 1);
+  /* the same request serialised again, with other spacing and key order */
+  r = r_post("/v1/robot/commands", "{ \"pose\" : {\"quaternion\": [0, 1, 0, 0],\n"
+             "\"position\": [0.5, 0.1, 0.2]}, \"command\": \"move\" }", "pick-0001");
+  r_expect(r, 200, NULL);
+  ASSERT(json_is_true(json_object_get(r->json, "replayed")));
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "id")), id);
   h_resp_free(r);
   ASSERT_EQ(writes(&sim, 1), 1);
   /* the key with another body */
@@ -320,9 +347,29 @@ static void check_idempotency(void) {
   r = r_post("/v1/robot/commands", move, "pick-0003");
   r_expect(r, 200, NULL);
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "seq")), seq + 1);
+  /* command ids are not used again after a restart: the old one is not this command */
+  const json_int_t id2 = json_integer_value(json_object_get(r->json, "id"));
+  ASSERT(id2 > id);
   h_resp_free(r);
   ASSERT_EQ(writes(&sim, 1), 2);
   ASSERT_EQ(g_w[1].words[0], seq + 1);
+  expect_gone(id);
+  char *path = h_fmt("/v1/robot/commands/%lld", (long long)id2);
+  r = h_get(path);
+  r_expect(r, 200, NULL);
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "id")), id2);
+  h_resp_free(r);
+  free(path);
+
+  /* ... nor after kill -9 */
+  h_kill();
+  h_start();
+  ASSERT(r_wait_true("/v1/robot", "connected", 5));
+  r = r_post("/v1/robot/commands", move, "pick-0004");
+  r_expect(r, 200, NULL);
+  ASSERT(json_integer_value(json_object_get(r->json, "id")) > id2);
+  h_resp_free(r);
+  expect_gone(id2);
   h_stop();
   simproc_stop(&sim);
 }
