@@ -70,9 +70,11 @@ enum {
   K_TRANSPORT, K_HOST, K_PORT, K_DEVICE, K_BAUD, K_PARITY, K_UNIT_ID, K_TIMEOUT_MS,
   K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS, K_DONE_TIMEOUT_MS, K_MOTION_TIMEOUT_MS
 };
+/* [robot]'s keys past the Modbus ones (robot_keys[12..]): the audit log and the claim. */
+enum { K_AUDIT_MAX_MB = 12, K_AUDIT_KEEP, K_LOCK_DIR };
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
-#define MAX_KEYS 13
+#define MAX_KEYS 15
 
 static const char *const http_keys[] = {"listen",           "token",
                                         "max_upload_mb",    "token_file",
@@ -89,7 +91,7 @@ static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
                                          "baud",      "parity",   "unit_id",        "timeout_ms",
                                          "base",      "encoding", "ack_timeout_ms", "done_timeout_ms",
-                                         NULL};
+                                         "audit_max_mb", "audit_keep", "lock_dir", NULL};
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};
@@ -578,6 +580,26 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
   return 1;
 }
 
+/* [robot]'s audit_max_mb, audit_keep and lock_dir. A fraction of a MiB is allowed so that a
+ * test can rotate after a few lines. */
+static int set_robot_audit(conf_parse *st, fg_conf *c, int k, const char *name, const char *v) {
+  if (k == K_AUDIT_KEEP) return parse_int(st, name, v, 1, 1000, &c->audit_keep);
+  if (k == K_LOCK_DIR) {
+    if (v[0]) return set_path(st, name, &c->lock_dir, v);
+    free(c->lock_dir); /* empty: the default, so the example file can list the key */
+    c->lock_dir = NULL;
+    return 1;
+  }
+  double mb = 0;
+  if (!parse_double(st, name, v, &mb)) return 0;
+  if (!(mb > 0) || mb > 1048576)
+    return fail_at(st, st->line, st->sec_text, name,
+                   "expected a size in MiB above 0 and at most 1048576 (e.g. 16), got '%s'", v);
+  c->audit_max_bytes = (size_t)(mb * 1048576.0);
+  if (c->audit_max_bytes == 0) c->audit_max_bytes = 1;
+  return 1;
+}
+
 static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, const char *v) {
   switch (k) {
   case K_WORKSPACE_MIN: return parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
@@ -706,7 +728,9 @@ static int conf_handler(void *user, const char *section, const char *name, const
     if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;
     c->gripper_model = (fg_gripper_model)x;
     return 1;
-  case SEC_ROBOT: return set_modbus(st, &c->robot, k, name, v);
+  case SEC_ROBOT:
+    if (k >= K_AUDIT_MAX_MB) return set_robot_audit(st, c, k, name, v);
+    return set_modbus(st, &c->robot, k, name, v);
   case SEC_GRIPPER_MODBUS:
     return set_modbus(st, &c->gripper_modbus, k > K_TIMEOUT_MS ? K_MOTION_TIMEOUT_MS : k, name,
                       v);
