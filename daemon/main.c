@@ -2,6 +2,7 @@
 #include "api.h"
 #include "app.h"
 #include "audit.h"
+#include "claim.h"
 #include "clip_svc.h"
 #include "conf.h"
 #include "decoder.h"
@@ -253,6 +254,7 @@ static void app_teardown(fg_app *app) {
   fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
   fg_audit_free(app->audit); /* after the robot: the ends of its last commands are written */
+  fg_peer_claim_release(app->claim);
   fg_idem_free(app->idem);
   fg_jobs_free(app->jobs);
   fg_decoder_free(app->decoder);
@@ -353,6 +355,8 @@ int main(int argc, char **argv) {
   char *idem_path = robot_dir ? fg_path_join(robot_dir, "idempotency.json") : NULL;
   int robot_rc = !idem_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
   if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, idem_path);
+  /* One daemon per robot: claimed before anything connects to it (claim.h). */
+  if (robot_rc == 0) robot_rc = fg_peer_claim_take(&app.claim, conf, conf->listen);
   if (robot_rc == 0) robot_rc = audit_open(&app, conf);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
