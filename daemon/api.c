@@ -5,6 +5,7 @@
 #include "json.h"
 #include "metrics.h"
 #include "query.h"
+#include "audit.h"
 #include "robot.h"
 #include "voxcache.h"
 
@@ -52,12 +53,15 @@ const fg_route fg_api_routes[] = {
   {"DELETE", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_cancel, 0},
   {"GET", "/v1/jobs/{}/events", "/v1/jobs/{id}/events", fg_api_job_events, 0},
   {"GET", "/v1/robot", "/v1/robot", fg_api_robot_get, 0},
-  {"POST", "/v1/robot/commands", "/v1/robot/commands", fg_api_robot_command, FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/robot/commands", "/v1/robot/commands", fg_api_audit_robot_command,
+   FG_ROUTE_OFFLOAD},
+  {"GET", "/v1/robot/log", "/v1/robot/log", fg_api_robot_log, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/robot/commands/{}", "/v1/robot/commands/{id}", fg_api_robot_command_get, 0},
   {"POST", "/v1/robot/stop", "/v1/robot/stop", fg_api_robot_stop, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/robot/reset", "/v1/robot/reset", fg_api_robot_reset, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/gripper", "/v1/gripper", fg_api_gripper_get, 0},
-  {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_gripper_action, FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_audit_gripper_action,
+   FG_ROUTE_OFFLOAD},
   {"GET", "/v1/tasks", "/v1/tasks", fg_api_tasks_list, 0},
   {"GET", "/v1/tasks/{}", "/v1/tasks/{t}", fg_api_task_get, 0},
   {"DELETE", "/v1/tasks/{}", "/v1/tasks/{t}", fg_api_task_delete, 0},
@@ -66,7 +70,7 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/scenes/{}/grasps", "/v1/scenes/{s}/grasps", fg_api_scene_grasps,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/grasps/{}/execute", "/v1/scenes/{s}/grasps/{id}/execute",
-   fg_api_grasp_execute, FG_ROUTE_OFFLOAD},
+   fg_api_audit_grasp_execute, FG_ROUTE_OFFLOAD},
 };
 const size_t fg_api_n_routes = sizeof fg_api_routes / sizeof fg_api_routes[0];
 
@@ -230,8 +234,9 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   char *text = fg_metrics_render(&g, &len);
   if (!text) return fg_resp_error(resp, 500, "internal_error", "out of memory rendering metrics");
   if (req->app->robot) {
-    char modbus[4096];
-    const size_t n = fg_robot_metrics(req->app->robot, modbus, sizeof modbus);
+    char modbus[8192];
+    size_t n = fg_robot_metrics(req->app->robot, modbus, sizeof modbus);
+    n += fg_audit_metrics(req->app->audit, modbus + n, sizeof modbus - n);
     char *more = realloc(text, len + n + 1);
     if (!more) {
       free(text);

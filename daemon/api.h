@@ -52,6 +52,12 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp);
 int fg_api_task_demo_delete(fg_req *req, fg_resp *resp);
 int fg_api_scene_grasps(fg_req *req, fg_resp *resp);
 int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
+/* api_audit.c: the three routes that may move something, each its handler above under the
+ * audit log; and the log read back. */
+int fg_api_audit_robot_command(fg_req *req, fg_resp *resp);
+int fg_api_audit_gripper_action(fg_req *req, fg_resp *resp);
+int fg_api_audit_grasp_execute(fg_req *req, fg_resp *resp);
+int fg_api_robot_log(fg_req *req, fg_resp *resp);
 
 /* Runs robot request r (a pick or place the caller built) as POST /v1/robot/commands does:
  * under the request's Idempotency-Key, answering with the command (or its error). */
@@ -68,6 +74,10 @@ int fg_api_idem_replay(fg_req *req, fg_resp *resp);
  * came with an Idempotency-Key, so that a retry sees how it ended. */
 struct fg_robot_cmd_view;
 void fg_api_robot_finished(void *ctx, const struct fg_robot_cmd_view *v);
+
+/* Called by fg_api_robot_finished: writes the end of a command that was answered before it
+ * ended (wait false) to the audit log. */
+void fg_api_audit_finished(fg_app *app, const struct fg_robot_cmd_view *v);
 
 /* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
 #define FG_API_MAX_EVENT_STREAMS 64

@@ -278,6 +278,7 @@ static int idem_begin(fg_req *req, fg_resp *resp, const char **key) {
 
 void fg_api_robot_finished(void *ctx, const fg_robot_cmd_view *v) {
   fg_app *app = ctx;
+  fg_api_audit_finished(app, v);
   if (!v->req.key[0]) return;
   int status;
   json_t *o = answer_json(v, &status);

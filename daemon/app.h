@@ -27,6 +27,8 @@ typedef struct fg_app {
   struct fg_robot_svc *robot; /* the [robot] and [gripper.modbus] peers (robot.h) */
   struct fg_idem *idem;       /* Idempotency-Keys of actuating requests (idem.h) */
   struct fg_cmd_ids *cmd_ids; /* the robot's command ids, unique across restarts (cmd_ids.h) */
+  struct fg_audit *audit;     /* the robot's audit log (audit.h) */
+  struct fg_peer_claim *claim; /* this daemon's claim on its Modbus peers (claim.h) */
   struct fg_tasks *tasks;     /* the demonstration library (tasks.h) */
   struct fg_grasp_log *grasps; /* recent grasps, for execute (grasp_log.h) */
 } fg_app;

@@ -70,10 +70,12 @@ enum {
   K_TRANSPORT, K_HOST, K_PORT, K_DEVICE, K_BAUD, K_PARITY, K_UNIT_ID, K_TIMEOUT_MS,
   K_BASE, K_ENCODING, K_ACK_TIMEOUT_MS, K_DONE_TIMEOUT_MS, K_MOTION_TIMEOUT_MS
 };
-/* [robot]'s motion keys follow its Modbus keys (robot_keys from index K_LIMIT_MIN on). */
+/* [robot]'s keys past the Modbus ones (robot_keys from index K_LIMIT_MIN on): the motion
+ * limits and the path, then the audit log and the claim. */
 enum {
   K_LIMIT_MIN = K_DONE_TIMEOUT_MS + 1, K_LIMIT_MAX, K_LIMIT_MARGIN, K_APPROACH_CONE_DEG,
-  K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M
+  K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M,
+  K_AUDIT_MAX_MB, K_AUDIT_KEEP, K_LOCK_DIR
 };
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
@@ -96,7 +98,8 @@ static const char *const robot_keys[] = {"transport", "host",     "port",       
                                          "base",      "encoding", "ack_timeout_ms", "done_timeout_ms",
                                          "limit_min", "limit_max", "limit_margin",
                                          "approach_cone_deg", "max_force_n", "max_speed_mps",
-                                         "speed_mps", "approach_m", "retreat_m", NULL};
+                                         "speed_mps", "approach_m", "retreat_m",
+                                         "audit_max_mb", "audit_keep", "lock_dir", NULL};
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};
@@ -611,6 +614,26 @@ static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name
   return 1;
 }
 
+/* [robot]'s audit_max_mb, audit_keep and lock_dir. A fraction of a MiB is allowed so that a
+ * test can rotate after a few lines. */
+static int set_robot_audit(conf_parse *st, fg_conf *c, int k, const char *name, const char *v) {
+  if (k == K_AUDIT_KEEP) return parse_int(st, name, v, 1, 1000, &c->audit_keep);
+  if (k == K_LOCK_DIR) {
+    if (v[0]) return set_path(st, name, &c->lock_dir, v);
+    free(c->lock_dir); /* empty: the default, so the example file can list the key */
+    c->lock_dir = NULL;
+    return 1;
+  }
+  double mb = 0;
+  if (!parse_double(st, name, v, &mb)) return 0;
+  if (!(mb > 0) || mb > 1048576)
+    return fail_at(st, st->line, st->sec_text, name,
+                   "expected a size in MiB above 0 and at most 1048576 (e.g. 16), got '%s'", v);
+  c->audit_max_bytes = (size_t)(mb * 1048576.0);
+  if (c->audit_max_bytes == 0) c->audit_max_bytes = 1;
+  return 1;
+}
+
 static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, const char *v) {
   switch (k) {
   case K_WORKSPACE_MIN: return parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
@@ -740,6 +763,7 @@ static int conf_handler(void *user, const char *section, const char *name, const
     c->gripper_model = (fg_gripper_model)x;
     return 1;
   case SEC_ROBOT:
+    if (k >= K_AUDIT_MAX_MB) return set_robot_audit(st, c, k, name, v);
     if (k >= K_LIMIT_MIN) return set_motion(st, &c->motion, k, name, v);
     return set_modbus(st, &c->robot, k, name, v);
   case SEC_GRIPPER_MODBUS:

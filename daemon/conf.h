@@ -106,6 +106,10 @@ typedef struct fg_conf {
   fg_conf_modbus robot;
   fg_conf_motion motion; /* [robot]'s limit and path keys */
   fg_conf_modbus gripper_modbus;
+  /* [robot] audit log (audit.h) and the claim on the peers (claim.h), read at start-up */
+  size_t audit_max_bytes; /* from audit_max_mb (a number of MiB > 0, fractions allowed; 16) */
+  int audit_keep;        /* 1..1000, default 8: rotated files kept beside robot.log */
+  char *lock_dir;        /* absolute, or NULL: /run/lock when writable, else the state dir */
   /* [scene NAME] */
   fg_conf_scene *scenes;
   size_t n_scenes;

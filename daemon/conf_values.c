@@ -149,6 +149,8 @@ fg_conf *fg_conf_defaults(void) {
   };
   int ok = modbus_defaults(&c->robot, 1);
   ok &= modbus_defaults(&c->gripper_modbus, 9);
+  c->audit_max_bytes = (size_t)16 << 20;
+  c->audit_keep = 8;
   if (!ok || !c->listen || !c->state_dir || !c->three_js) {
     fg_conf_free(c);
     return NULL;
@@ -189,6 +191,7 @@ void fg_conf_free(fg_conf *conf) {
   free(conf->clip_vocab);
   modbus_free(&conf->robot);
   modbus_free(&conf->gripper_modbus);
+  free(conf->lock_dir);
   free(conf->scenes);
   free(conf);
 }

@@ -11,6 +11,7 @@
 #include <microhttpd.h>
 
 #include <math.h>
+#include <arpa/inet.h>
 #include <netdb.h>
 #include <pthread.h>
 #include <stdarg.h>
@@ -135,6 +136,24 @@ void fg_resp_stream(fg_resp *resp, int status, const char *content_type,
 
 const char *fg_req_header(const fg_req *req, const char *name) {
   return MHD_lookup_connection_value((struct MHD_Connection *)req->mhd_conn, MHD_HEADER_KIND, name);
+}
+
+char *fg_req_client(const fg_req *req, char *buf, size_t size) {
+  buf[0] = '\0';
+  const union MHD_ConnectionInfo *ci = MHD_get_connection_info(
+      (struct MHD_Connection *)req->mhd_conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+  const struct sockaddr *sa = ci ? ci->client_addr : NULL;
+  char host[INET6_ADDRSTRLEN];
+  if (sa && sa->sa_family == AF_INET) {
+    const struct sockaddr_in *in = (const struct sockaddr_in *)sa;
+    if (inet_ntop(AF_INET, &in->sin_addr, host, sizeof host))
+      snprintf(buf, size, "%s:%u", host, (unsigned)ntohs(in->sin_port));
+  } else if (sa && sa->sa_family == AF_INET6) {
+    const struct sockaddr_in6 *in6 = (const struct sockaddr_in6 *)sa;
+    if (inet_ntop(AF_INET6, &in6->sin6_addr, host, sizeof host))
+      snprintf(buf, size, "[%s]:%u", host, (unsigned)ntohs(in6->sin6_port));
+  }
+  return buf;
 }
 
 const char *fg_req_query(const fg_req *req, const char *name) {

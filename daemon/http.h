@@ -102,6 +102,10 @@ typedef struct fg_route {
 /* Looks up a request header (case-insensitive); NULL if absent. */
 const char *fg_req_header(const fg_req *req, const char *name);
 
+/* The client's address as "127.0.0.1:40312" or "[::1]:40312" into buf (size bytes); "" when
+ * it is not known. Returns buf. */
+char *fg_req_client(const fg_req *req, char *buf, size_t size);
+
 /* Looks up a query-string argument ("?output=pooled"); NULL if absent, "" when given without
  * a value. */
 const char *fg_req_query(const fg_req *req, const char *name);

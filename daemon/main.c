@@ -1,6 +1,8 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
 #include "api.h"
 #include "app.h"
+#include "audit.h"
+#include "claim.h"
 #include "clip_svc.h"
 #include "conf.h"
 #include "decoder.h"
@@ -250,6 +252,17 @@ static void signal_to_main(int sig) {
   errno = saved;
 }
 
+/* Opens <state>/audit/robot.log (audit.h) with [robot]'s audit settings. */
+static int audit_open(fg_app *app, const fg_conf *conf) {
+  char *dir = fg_path_join(conf->state_dir, "audit");
+  if (!dir) return FG_ENOMEM;
+  const fg_audit_config ac = {.dir = dir, .max_bytes = conf->audit_max_bytes,
+                              .keep = conf->audit_keep};
+  int rc = fg_audit_open(&app->audit, &ac);
+  free(dir);
+  return rc;
+}
+
 /* Frees what the start-up set up once the configuration was installed, in reverse order;
  * parts not set up yet are NULL. A running training stops after its step and keeps its
  * field. */
@@ -257,6 +270,8 @@ static void app_teardown(fg_app *app) {
   fg_grasp_log_free(app->grasps);
   fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
+  fg_audit_free(app->audit); /* after the robot: the ends of its last commands are written */
+  fg_peer_claim_release(app->claim);
   fg_idem_free(app->idem);
   fg_cmd_ids_free(app->cmd_ids);
   fg_jobs_free(app->jobs);
@@ -359,6 +374,9 @@ int main(int argc, char **argv) {
   int robot_rc = !ids_path ? FG_ENOMEM : fg_mkdir_p(robot_dir);
   if (robot_rc == 0) robot_rc = fg_idem_open(&app.idem, robot_dir, NULL);
   if (robot_rc == 0) robot_rc = fg_cmd_ids_open(&app.cmd_ids, ids_path);
+  /* One daemon per robot: claimed before anything connects to it (claim.h). */
+  if (robot_rc == 0) robot_rc = fg_peer_claim_take(&app.claim, conf, conf->listen);
+  if (robot_rc == 0) robot_rc = audit_open(&app, conf);
   if (robot_rc == 0) robot_rc = fg_robot_svc_new(&app.robot, conf);
   if (robot_rc == 0) fg_robot_svc_on_finish(app.robot, fg_api_robot_finished, &app);
   if (robot_rc == 0) fg_robot_svc_set_workspace_source(app.robot, scenes_workspace, app.store);

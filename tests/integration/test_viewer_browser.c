@@ -510,8 +510,11 @@ int main(int argc, char **argv) {
   printf("browser: %s\n", version);
   char *imports = g_dataset(argv[2]);
   /* a robot that is configured but not there: dry runs work, real commands fail */
-  g_config(imports, "[http]\ntoken = " TOKEN "\n\n[robot]\ntransport = tcp\nhost = 127.0.0.1\n"
-           "port = 9\n");
+  /* its own lock folder: port 9 is the same "robot" for every run on this machine */
+  char *robot = h_fmt("[http]\ntoken = " TOKEN "\n\n[robot]\ntransport = tcp\nhost = 127.0.0.1\n"
+                      "port = 9\nlock_dir = %s\n", h_tmpdir());
+  g_config(imports, robot);
+  free(robot);
   h_set_token(TOKEN);
   h_start();
   g_scene("sg", NULL);

@@ -233,6 +233,22 @@ static void test_spec_example(void) {
 
 /* ---------------------------------------------------------------- values */
 
+/* [robot]'s audit log and claim keys: a fraction of a MiB, the kept files, a lock folder
+ * taken from the file's folder, and an empty lock_dir meaning the default. */
+static void test_audit_keys(void) {
+  fg_conf *c = load_ok("[robot]\naudit_max_mb = 0.001\naudit_keep = 1000\nlock_dir = locks\n");
+  ASSERT_EQ(c->audit_max_bytes, 1048);
+  ASSERT_EQ(c->audit_keep, 1000);
+  ASSERT(c->lock_dir && c->lock_dir[0] == '/');
+  ASSERT_STRCONTAINS(c->lock_dir, "/locks");
+  fg_conf_free(c);
+  c = load_ok("[robot]\nlock_dir =\n");
+  ASSERT(c->lock_dir == NULL);
+  ASSERT_EQ(c->audit_max_bytes, (size_t)16 << 20);
+  ASSERT_EQ(c->audit_keep, 8);
+  fg_conf_free(c);
+}
+
 static void test_values(void) {
   fg_conf *c = load_ok(
       "; a full-line comment\n"
@@ -579,6 +595,12 @@ static void test_errors(void) {
                "expected none, tcp or rtu, got 'udp'");
   EXPECT_ERROR("[robot]\nencoding = int32\n", 2, "[robot] encoding:", "int16 or float32");
   EXPECT_ERROR("[robot]\nparity = X\n", 2, "[robot] parity:", "N, E or O");
+  EXPECT_ERROR("[robot]\naudit_max_mb = 0\n", 2, "[robot] audit_max_mb:", "above 0");
+  EXPECT_ERROR("[robot]\naudit_max_mb = -1\n", 2, "[robot] audit_max_mb:", "above 0");
+  EXPECT_ERROR("[robot]\naudit_max_mb = lots\n", 2, "[robot] audit_max_mb:", NULL);
+  EXPECT_ERROR("[robot]\naudit_keep = 0\n", 2, "[robot] audit_keep:", "1 to 1000");
+  EXPECT_ERROR("[gripper.modbus]\naudit_keep = 2\n", 2, "[gripper.modbus] audit_keep: unknown key",
+               "[robot] only");
   EXPECT_ERROR("[gripper]\nmodel = ur5\n", 2, "[gripper] model:",
                "panda, robotiq-2f85 or robotiq-2f140");
 
@@ -738,6 +760,9 @@ static void test_shipped(void) {
   ASSERT_EQ(c->max_queued_requests, d->max_queued_requests);
   ASSERT(c->viewer_dir == NULL && d->viewer_dir == NULL);
   ASSERT_STREQ(c->three_js, d->three_js);
+  ASSERT_EQ(c->audit_max_bytes, d->audit_max_bytes);
+  ASSERT_EQ(c->audit_keep, d->audit_keep);
+  ASSERT(c->lock_dir == NULL && d->lock_dir == NULL);
   fg_conf_free(c);
   fg_conf_free(d);
   snprintf(path, sizeof path, "%s/config/demo.conf", src);
@@ -757,6 +782,7 @@ int main(void) {
   test_defaults();
   test_spec_example();
   test_values();
+  test_audit_keys();
   test_paths();
   test_token_file();
   test_listen();
