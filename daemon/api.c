@@ -47,7 +47,7 @@ const fg_route fg_api_routes[] = {
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/text", "/v1/embed/text", fg_api_embed_text, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/embed/image", "/v1/embed/image", fg_api_embed_image,
-   FG_ROUTE_OFFLOAD | FG_ROUTE_LARGE_BODY},
+   FG_ROUTE_OFFLOAD | FG_ROUTE_LARGE_BODY | FG_ROUTE_IMAGE_BODY},
   {"GET", "/v1/jobs", "/v1/jobs", fg_api_jobs_list, 0},
   {"GET", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_get, 0},
   {"DELETE", "/v1/jobs/{}", "/v1/jobs/{id}", fg_api_job_cancel, 0},

@@ -57,7 +57,7 @@ static const char *const section_names[SEC_COUNT] = {
 enum {
   K_LISTEN, K_TOKEN, K_MAX_UPLOAD_MB, K_TOKEN_FILE, K_MAX_JSON_KB, K_MAX_CONNECTIONS,
   K_HEADER_TIMEOUT_S, K_IDLE_TIMEOUT_S, K_MIN_BODY_KB_PER_S, K_MAX_QUEUED_REQUESTS,
-  K_VIEWER_DIR, K_THREE_JS
+  K_VIEWER_DIR, K_THREE_JS, K_ALLOWED_HOSTS, K_ALLOWED_ORIGINS
 };
 enum { K_DIR, K_IMPORT_DIRS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
@@ -86,7 +86,8 @@ static const char *const http_keys[] = {"listen",           "token",
                                         "max_json_kb",      "max_connections",
                                         "header_timeout_s", "idle_timeout_s",
                                         "min_body_kb_per_s", "max_queued_requests",
-                                        "viewer_dir",       "three_js", NULL};
+                                        "viewer_dir",       "three_js",
+                                        "allowed_hosts",    "allowed_origins", NULL};
 static const char *const state_keys[] = {"dir", "import_dirs", NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
@@ -722,6 +723,15 @@ static int conf_handler(void *user, const char *section, const char *name, const
       return 1;
     case K_THREE_JS:
       return set_path(st, name, &c->three_js, v[0] ? v : FG_CONF_DEFAULT_THREE_JS);
+    case K_ALLOWED_HOSTS:
+    case K_ALLOWED_ORIGINS: {
+      const int hosts = k == K_ALLOWED_HOSTS;
+      int rc = fg_conf_split_list(v, hosts ? fg_conf_check_host_name : fg_conf_check_origin,
+                                  hosts ? &c->allowed_hosts : &c->allowed_origins,
+                                  hosts ? &c->n_allowed_hosts : &c->n_allowed_origins);
+      if (rc == FG_ENOMEM) return fail_nomem(st);
+      return rc == 0 ? 1 : fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
+    }
     case K_MAX_UPLOAD_MB:
       if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
       c->max_upload_bytes = (size_t)x << 20;

@@ -83,6 +83,12 @@ typedef struct fg_conf {
                           * (daemon/api_viewer.c) */
   char *three_js;        /* three.min.js for the viewer (absolute); default
                           * FG_CONF_DEFAULT_THREE_JS */
+  char **allowed_hosts;  /* Host names served besides IP addresses and localhost
+                          * (http_guard.h); separated by spaces or commas in the file */
+  size_t n_allowed_hosts;
+  char **allowed_origins; /* web origins ("http://panel.lab:8080") that may send requests that
+                           * change something, besides the daemon's own; same separators */
+  size_t n_allowed_origins;
   /* [state] */
   char *state_dir;
   char **import_dirs;    /* absolute paths */
@@ -126,6 +132,32 @@ int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen);
 /* Parses "host:port" / "[v6]:port" into host (malloc'd, brackets removed) and port (0..65535).
  * FG_EINVAL with a detail otherwise. */
 int fg_conf_parse_listen(const char *listen, char **host, int *port);
+
+/* Checks one [http] allowed_hosts entry: a host name (letters, digits, '.', '-', '_'), no
+ * port. FG_EINVAL with a detail otherwise. */
+int fg_conf_check_host_name(const char *name);
+
+/* Checks one [http] allowed_origins entry: an origin as browsers send it, "http://HOST" or
+ * "https://HOST" with an optional ":PORT" and nothing after it. FG_EINVAL with a detail
+ * otherwise. */
+int fg_conf_check_origin(const char *origin);
+
+/* Splits a list value at spaces and commas, checking each entry with check. On success *out
+ * (malloc'd strings in a malloc'd array, NULL when empty) and *n are the caller's; on failure
+ * they are untouched and check's detail (or FG_ENOMEM) is returned. */
+int fg_conf_split_list(const char *v, int (*check)(const char *), char ***out, size_t *n);
+
+/* 1 when a listen address ("host:port") can be reached from this machine only: 127.0.0.0/8,
+ * ::1 (also v4-mapped) or "localhost". Wildcards and every other name count as reachable
+ * from elsewhere. */
+int fg_conf_listen_is_loopback(const char *listen);
+
+/* Refuses a daemon that anyone on its network could make move the robot: a [robot] or
+ * [gripper.modbus] transport, a listen address that is not loopback and no [http] token.
+ * The listen address and the transports are running's when running is not NULL (at a
+ * reload they change only at a restart), the token is conf's. 0, or FG_EINVAL with a detail
+ * that names the keys to set. */
+int fg_conf_check_exposure(const fg_conf *conf, const fg_conf *running);
 
 /* Checks a scene name: 1..64 characters of [A-Za-z0-9_.-], not starting with '.'.
  * FG_EINVAL with a detail otherwise. */

@@ -6,9 +6,11 @@
 
 #include "core/error.h"
 
+#include <arpa/inet.h>
 #include <ctype.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <unistd.h>
 
 /* ---------------------------------------------------------------- listen and scene names */
@@ -85,6 +87,112 @@ int fg_scene_name_validate(const char *name) {
                      "a-z 0-9 _ . -", name, isprint(c) ? c : '?', c);
   }
   return 0;
+}
+
+/* ---------------------------------------------------------------- cross-site lists */
+
+/* See conf.h. Ports are not part of an entry: a rebinding attack is told apart by its name,
+ * and behind a proxy the port a browser used is not the daemon's. */
+int fg_conf_check_host_name(const char *name) {
+  size_t n = strlen(name);
+  if (n == 0 || n > 253)
+    return fg_fail(FG_EINVAL, "'%.64s' is not a host name; expected 1 to 253 characters", name);
+  for (size_t i = 0; i < n; i++) {
+    unsigned char c = (unsigned char)name[i];
+    if (c == ':' || c == '/')
+      return fg_fail(FG_EINVAL, "'%.64s' is not a bare host name; give the name alone, without "
+                     "scheme or port (IP addresses are always allowed)", name);
+    if (!isalnum(c) && c != '.' && c != '-' && c != '_')
+      return fg_fail(FG_EINVAL, "'%.64s' contains '%c'; a host name has letters, digits, '.', "
+                     "'-' and '_'", name, isprint(c) ? c : '?');
+  }
+  return 0;
+}
+
+/* See conf.h. "null" (sandboxed frames, file:// pages) and "*" are refused: either would let
+ * pages of any site in. */
+int fg_conf_check_origin(const char *origin) {
+  const char *host = NULL;
+  if (strncasecmp(origin, "http://", 7) == 0) host = origin + 7;
+  else if (strncasecmp(origin, "https://", 8) == 0) host = origin + 8;
+  if (!host || !*host || strpbrk(host, "/?#@"))
+    return fg_fail(FG_EINVAL, "'%.80s' is not a web origin; expected http://HOST[:PORT] or "
+                   "https://HOST[:PORT] as the browser's address bar shows it, without a path "
+                   "or a trailing '/'", origin);
+  for (const char *c = host; *c; c++)
+    if (!isalnum((unsigned char)*c) && !strchr(".-_:[]", *c))
+      return fg_fail(FG_EINVAL, "origin '%.80s' has '%c' in its host; expected "
+                     "http://HOST[:PORT] or https://HOST[:PORT]", origin,
+                     isprint((unsigned char)*c) ? *c : '?');
+  return 0;
+}
+
+static void free_list(char **list, size_t n) {
+  for (size_t i = 0; i < n; i++) free(list[i]);
+  free(list);
+}
+
+int fg_conf_split_list(const char *v, int (*check)(const char *), char ***out, size_t *n) {
+  char **list = NULL;
+  size_t count = 0;
+  for (const char *s = v; *s;) {
+    size_t len = strcspn(s, " \t,");
+    if (len > 0) {
+      char *item = strndup(s, len);
+      char **grown = item ? realloc(list, (count + 1) * sizeof *list) : NULL;
+      if (!grown) {
+        free(item);
+        free_list(list, count);
+        return fg_fail(FG_ENOMEM, "out of memory");
+      }
+      list = grown;
+      list[count++] = item;
+      int rc = check(item);
+      if (rc != 0) {
+        free_list(list, count);
+        return rc;
+      }
+    }
+    s += len;
+    if (*s) s++;
+  }
+  free_list(*out, *n);
+  *out = list;
+  *n = count;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- exposure */
+
+int fg_conf_listen_is_loopback(const char *listen) {
+  char *host = NULL;
+  int port;
+  if (fg_conf_parse_listen(listen, &host, &port) != 0) return 0;
+  unsigned char a[16];
+  int loop = strcasecmp(host, "localhost") == 0;
+  if (!loop && inet_pton(AF_INET, host, a) == 1) loop = a[0] == 127;
+  if (!loop && inet_pton(AF_INET6, host, a) == 1) {
+    static const unsigned char v6_loop[16] = {[15] = 1};
+    static const unsigned char v4_mapped[12] = {[10] = 0xff, [11] = 0xff};
+    loop = memcmp(a, v6_loop, 16) == 0 || (memcmp(a, v4_mapped, 12) == 0 && a[12] == 127);
+  }
+  free(host);
+  return loop;
+}
+
+/* See conf.h. The token is what stops other machines: Host and Origin checks (http_guard.h)
+ * stop web pages, not a client that sends what it likes. */
+int fg_conf_check_exposure(const fg_conf *conf, const fg_conf *running) {
+  const fg_conf *r = running ? running : conf;
+  const int robot = r->robot.transport != FG_TRANSPORT_NONE;
+  const int gripper = r->gripper_modbus.transport != FG_TRANSPORT_NONE;
+  if ((conf->token && conf->token[0]) || (!robot && !gripper) ||
+      fg_conf_listen_is_loopback(r->listen))
+    return 0;
+  return fg_fail(FG_EINVAL, "[http] listen %s can be reached from other machines and %s is "
+                 "set, but there is no token: anyone on the network could move the robot; set "
+                 "[http] token_file (or token), or listen on 127.0.0.1:PORT or [::1]:PORT",
+                 r->listen, robot ? "[robot] transport" : "[gripper.modbus] transport");
 }
 
 /* ---------------------------------------------------------------- defaults */
@@ -187,6 +295,8 @@ void fg_conf_free(fg_conf *conf) {
   free(conf->state_dir);
   for (size_t i = 0; i < conf->n_import_dirs; i++) free(conf->import_dirs[i]);
   free(conf->import_dirs);
+  free_list(conf->allowed_hosts, conf->n_allowed_hosts);
+  free_list(conf->allowed_origins, conf->n_allowed_origins);
   free(conf->clip_weights);
   free(conf->clip_vocab);
   modbus_free(&conf->robot);

@@ -2,6 +2,7 @@
 
 #include "conf.h"
 #include "http_conns.h"
+#include "http_guard.h"
 #include "metrics.h"
 
 #include "core/clock.h"
@@ -558,6 +559,13 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
     MHD_set_connection_option(c->conn, MHD_CONNECTION_OPTION_TIMEOUT,
                               (unsigned)conf->idle_timeout_s);
 
+  /* Before the token and the routes: a rebound name must not even learn what exists. */
+  const char *host = fg_req_header(&c->req, MHD_HTTP_HEADER_HOST);
+  if (fg_guard_host(conf, host) != 0)
+    return respond_now(c, 403, "host_not_allowed", fg_error_detail());
+  if (fg_guard_origin(conf, method, host, fg_req_header(&c->req, "Origin")) != 0)
+    return respond_now(c, 403, "origin_not_allowed", fg_error_detail());
+
   int path_known = 0, public_route = 0;
   for (size_t i = 0; i < h->cfg.n_routes; i++) {
     const fg_route *r = &h->cfg.routes[i];
@@ -606,12 +614,11 @@ static enum MHD_Result begin_request(fg_http *h, conn_ctx *c, const char *url, c
       return respond_now(c, 413, "payload_too_large", msg);
     }
   }
+  const int has_body = (cl && strtoull(cl, NULL, 10) > 0) ||
+                       fg_req_header(&c->req, MHD_HTTP_HEADER_TRANSFER_ENCODING);
+  if (fg_guard_body_type(c->route->flags, method, has_body, c->req.content_type) != 0)
+    return respond_now(c, 415, "unsupported_media_type", fg_error_detail());
   if (c->route->flags & FG_ROUTE_MULTIPART) {
-    const char *ct = c->req.content_type;
-    if (!ct || strncasecmp(ct, "multipart/form-data", 19) != 0)
-      return respond_now(c, 415, "unsupported_media_type",
-                         "this endpoint takes multipart/form-data (curl -F image=@photo.png "
-                         "-F meta='{...}')");
     c->pp = MHD_create_post_processor(c->conn, 64 * 1024, on_part, c);
     if (!c->pp)
       return respond_now(c, 400, "invalid_request",

@@ -10,6 +10,9 @@
  * refused 413 past max_json_kb, or max_upload_mb for FG_ROUTE_LARGE_BODY routes, before
  * they are read when their Content-Length says so.
  *
+ * Every request passes the cross-site guards first (http_guard.h): its Host, its Origin when
+ * it changes something, and its body's Content-Type.
+ *
  * Handlers see a complete request (fg_req) and fill a response (fg_resp); they never touch
  * libmicrohttpd. */
 #ifndef FG_DAEMON_HTTP_H
@@ -89,6 +92,8 @@ enum {
   FG_ROUTE_OFFLOAD = 2,   /* run on the offload pool */
   FG_ROUTE_MULTIPART = 4, /* body is multipart/form-data */
   FG_ROUTE_LARGE_BODY = 8, /* body up to [http] max_upload_mb (images); else max_json_kb */
+  FG_ROUTE_IMAGE_BODY = 16, /* body is an image file (image/..., application/octet-stream);
+                             * else JSON (http_guard.h) */
 };
 
 typedef struct fg_route {

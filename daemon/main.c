@@ -180,6 +180,16 @@ static void reload(fg_app *app, const options *o) {
     return;
   }
   const fg_conf *cur = fg_app_conf_acquire(app);
+  /* A token dropped while the robot is reachable from the network: keep the one running.
+   * Checked against the file alone too, so that it would not first fail at the restart. */
+  if (fg_conf_check_exposure(conf, cur) != 0 || fg_conf_check_exposure(conf, NULL) != 0) {
+    fg_error("reload failed, keeping the running configuration: %s", fg_error_detail());
+    fg_app_conf_release(app, cur);
+    fg_conf_free(conf);
+    fg_metrics_count_reload(0);
+    fg_notify_ready("running; the last reload failed, see the log");
+    return;
+  }
   if (strcmp(cur->listen, conf->listen) != 0)
     fg_warn("reload: [http] listen changed to %s; it takes effect at the next restart",
             conf->listen);
@@ -323,6 +333,11 @@ int main(int argc, char **argv) {
   fg_conf *conf;
   if (load_conf(&o, &conf, err, sizeof err) != 0) {
     fg_error("%s", err);
+    return 2;
+  }
+  if (fg_conf_check_exposure(conf, NULL) != 0) {
+    fg_error("%s", fg_error_detail());
+    fg_conf_free(conf);
     return 2;
   }
   fg_info("fieldgripd %s starting; configuration: %s", FG_VERSION,

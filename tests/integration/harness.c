@@ -562,6 +562,16 @@ h_resp *h_request(const h_req *req) {
     curl_easy_setopt(c, CURLOPT_MIMEPOST, mime);
     if (strcmp(method, "POST") != 0) curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method);
   } else if (req->read_cb) {
+    /* libcurl's own type for a POST is application/x-www-form-urlencoded, which the daemon
+     * refuses (http_guard.h): JSON unless the caller set a type or a Content-Type line. */
+    int typed = 0;
+    for (int i = 0; req->headers && req->headers[i]; i++)
+      typed |= strncasecmp(req->headers[i], "Content-Type:", 13) == 0;
+    if (!typed) {
+      snprintf(line, sizeof line, "Content-Type: %s",
+               req->content_type ? req->content_type : "application/json");
+      hdrs = curl_slist_append(hdrs, line);
+    }
     curl_easy_setopt(c, CURLOPT_POST, 1L);
     curl_easy_setopt(c, CURLOPT_READFUNCTION, req->read_cb);
     curl_easy_setopt(c, CURLOPT_READDATA, req->read_ud);

@@ -121,7 +121,8 @@ typedef struct h_req {
   const char *path;         /* "/v1/scenes" */
   const void *body;         /* raw body, or NULL */
   size_t body_len;
-  const char *content_type; /* for a raw body; "application/json" when NULL */
+  const char *content_type; /* for a raw body, or read_cb without a Content-Type line in
+                             * headers; "application/json" when NULL */
   const h_part *parts;      /* multipart/form-data (curl_mime) when n_parts > 0 */
   int n_parts;
   const char *const *headers; /* extra header lines, NULL-terminated, or NULL */

@@ -181,7 +181,7 @@ static int count_closed(const int *fds, int n) {
  * the connections in the daemon's table (k included). k itself is never the oldest idle
  * connection after a scrape: its answer moves it to the back of the shedding order. */
 static int table_size(int k) {
-  static const char req[] = "GET /metrics HTTP/1.1\r\nHost: fieldgrip\r\n\r\n";
+  static const char req[] = "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
   raw_send(k, req, sizeof req - 1);
   it_buf b = {0};
   const char *body = NULL;
@@ -290,7 +290,7 @@ static void slow_clients(void) {
 
   /* A body dripped a byte every 200 ms, under min_body_kb_per_s = 1. */
   fd = raw_open(0);
-  static const char head[] = "POST /v1/scenes HTTP/1.1\r\nHost: fieldgrip\r\n"
+  static const char head[] = "POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                              "Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{";
   t0 = now_s();
   raw_send(fd, head, sizeof head - 1);
@@ -416,7 +416,7 @@ static void queue_full(void) {
   uint8_t *body;
   size_t body_len;
   h_multipart_build(parts, 2, boundary, &body, &body_len);
-  char *head = h_fmt("POST /v1/scenes/q/frames HTTP/1.1\r\nHost: fieldgrip\r\n"
+  char *head = h_fmt("POST /v1/scenes/q/frames HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                      "Content-Type: multipart/form-data; boundary=%s\r\n"
                      "Content-Length: %zu\r\nConnection: close\r\n\r\n", boundary, body_len);
   /* One at a time, each taken by a worker before the next is sent: a request that arrives

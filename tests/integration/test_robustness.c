@@ -135,23 +135,23 @@ static void test_raw_http(void) {
    * more until the 120 s idle timeout, as any unfinished request does) */
   static const char hello[] = "\x16\x03\x01\x00\xa5\x01\x00\x00\xa1\x03\x03\r\n\r\n";
   raw_expect_closed(hello, sizeof hello - 1, "binary bytes as the first line");
-  const char *method = "GARBAGE /v1/scenes HTTP/1.1\r\nHost: x\r\n\r\n";
+  const char *method = "GARBAGE /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
   raw_expect_4xx(method, strlen(method), "an unknown method");
-  const char *proto = "GET /v1/health FOO/1.1\r\nHost: x\r\n\r\n";
+  const char *proto = "GET /v1/health FOO/1.1\r\nHost: 127.0.0.1\r\n\r\n";
   raw_expect_4xx(proto, strlen(proto), "a request line that is not HTTP");
   const char *nover = "GET /v1/health\r\n\r\n";
   raw_expect_4xx(nover, strlen(nover), "a request line without a version");
   const char *nocolon = "GET /v1/health HTTP/1.1\r\nHost x\r\n\r\n";
   raw_expect_4xx(nocolon, strlen(nocolon), "a header line without a colon");
-  const char *neg = "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n";
+  const char *neg = "POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: -5\r\n\r\n";
   raw_expect_4xx(neg, strlen(neg), "Content-Length -5");
-  const char *huge = "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+  const char *huge = "POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
                      "Content-Length: 99999999999999999999\r\n\r\n{}";
   raw_expect_4xx(huge, strlen(huge), "Content-Length 1e20");
-  const char *big = "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+  const char *big = "POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
                     "Content-Length: 5000000000\r\n\r\n{}";
   raw_expect_4xx(big, strlen(big), "Content-Length 5 GB");
-  const char *badchunk = "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+  const char *badchunk = "POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
                          "Transfer-Encoding: chunked\r\n\r\nZZZ\r\n{}\r\n0\r\n\r\n";
   raw_expect_4xx(badchunk, strlen(badchunk), "a bad chunk size");
 
@@ -159,7 +159,7 @@ static void test_raw_http(void) {
   size_t n = 200000;
   char *req = malloc(n + 128);
   ASSERT(req);
-  int k = snprintf(req, 128, "GET /v1/health HTTP/1.1\r\nHost: x\r\nX-Big: ");
+  int k = snprintf(req, 128, "GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Big: ");
   memset(req + k, 'a', n);
   memcpy(req + k + n, "\r\n\r\n", 5);
   raw_expect_4xx(req, strlen(req), "a 200 KB header");
@@ -169,13 +169,14 @@ static void test_raw_http(void) {
   for (int i = 0; i < 20; i++) {
     h_raw_abandon("GET /v1/scen", 12);
     h_raw_abandon("", 0);
-    h_raw_abandon("POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{\"na", 62);
+    h_raw_abandon("POST /v1/scenes HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 100\r\n"
+                  "\r\n{\"na", 70);
   }
   check_intact("half requests and silent connections");
 
   /* Two requests on one connection both get answered. */
-  const char *two = "GET /v1/health HTTP/1.1\r\nHost: x\r\n\r\n"
-                    "GET /v1/health HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n";
+  const char *two = "GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
+                    "GET /v1/health HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
   char out[8192];
   long got = h_raw_exchange(two, strlen(two), out, sizeof out);
   ASSERT(got > 0);

@@ -526,6 +526,65 @@ static void test_listen(void) {
   fg_conf_free(c);
 }
 
+/* [http] allowed_hosts and allowed_origins (lists at spaces and commas), and the refusal of a
+ * robot on a network address without a token. */
+static void test_cross_site(void) {
+  fg_conf *c = load_ok("[http]\nallowed_hosts = robot.lab, Robot-PC.local ,,x_y\n"
+                       "allowed_origins = http://panel.lab:8080 https://[::1]:7443\n");
+  ASSERT_EQ(c->n_allowed_hosts, 3);
+  ASSERT_STREQ(c->allowed_hosts[0], "robot.lab");
+  ASSERT_STREQ(c->allowed_hosts[1], "Robot-PC.local");
+  ASSERT_STREQ(c->allowed_hosts[2], "x_y");
+  ASSERT_EQ(c->n_allowed_origins, 2);
+  ASSERT_STREQ(c->allowed_origins[0], "http://panel.lab:8080");
+  ASSERT_STREQ(c->allowed_origins[1], "https://[::1]:7443");
+  fg_conf_free(c);
+  c = load_ok("[http]\nallowed_hosts =\nallowed_origins =\n");
+  ASSERT(c->n_allowed_hosts == 0 && c->allowed_hosts == NULL && c->n_allowed_origins == 0);
+  fg_conf_free(c);
+  EXPECT_ERROR("[http]\nallowed_hosts = robot.lab:7070\n", 2, "[http] allowed_hosts:",
+               "without scheme or port");
+  EXPECT_ERROR("[http]\nallowed_hosts = a b/c\n", 2, "'b/c'", NULL);
+  EXPECT_ERROR("[http]\nallowed_hosts = ro*t\n", 2, "contains '*'", NULL);
+  EXPECT_ERROR("[http]\nallowed_origins = http://panel.lab/\n", 2, "[http] allowed_origins:",
+               "without a path");
+  EXPECT_ERROR("[http]\nallowed_origins = null\n", 2, "is not a web origin", NULL);
+  EXPECT_ERROR("[http]\nallowed_origins = *\n", 2, "is not a web origin", NULL);
+  EXPECT_ERROR("[http]\nallowed_origins = ftp://x\n", 2, "is not a web origin", NULL);
+
+  ASSERT(fg_conf_listen_is_loopback("127.0.0.1:7070"));
+  ASSERT(fg_conf_listen_is_loopback("127.1.2.3:0"));
+  ASSERT(fg_conf_listen_is_loopback("[::1]:7070"));
+  ASSERT(fg_conf_listen_is_loopback("[::ffff:127.0.0.1]:7070"));
+  ASSERT(fg_conf_listen_is_loopback("LocalHost:7070"));
+  ASSERT(!fg_conf_listen_is_loopback("0.0.0.0:7070"));
+  ASSERT(!fg_conf_listen_is_loopback("[::]:7070"));
+  ASSERT(!fg_conf_listen_is_loopback("192.168.1.5:7070"));
+  ASSERT(!fg_conf_listen_is_loopback("robot-pc:7070"));
+
+  /* a robot or a gripper, a network address and no token: refused, naming the keys */
+  c = load_ok("[http]\nlisten = 0.0.0.0:7070\n[robot]\ntransport = tcp\nhost = 10.0.0.2\n");
+  ASSERT_ERR(fg_conf_check_exposure(c, NULL), FG_EINVAL, "[robot] transport");
+  ASSERT_STRCONTAINS(fg_error_detail(), "[http] token_file");
+  ASSERT_STRCONTAINS(fg_error_detail(), "127.0.0.1:PORT");
+  fg_conf *loop = load_ok("[robot]\ntransport = tcp\nhost = 10.0.0.2\n");
+  ASSERT_OK(fg_conf_check_exposure(loop, NULL));
+  /* at a reload the running listen address counts: the file's changes only at a restart */
+  ASSERT_OK(fg_conf_check_exposure(c, loop));
+  ASSERT_ERR(fg_conf_check_exposure(loop, c), FG_EINVAL, "0.0.0.0:7070");
+  fg_conf_free(loop);
+  fg_conf_free(c);
+  c = load_ok("[http]\nlisten = 0.0.0.0:7070\n[gripper.modbus]\ntransport = rtu\n");
+  ASSERT_ERR(fg_conf_check_exposure(c, NULL), FG_EINVAL, "[gripper.modbus] transport");
+  fg_conf_free(c);
+  c = load_ok("[http]\nlisten = 0.0.0.0:7070\ntoken = s3cret\n[robot]\ntransport = tcp\n");
+  ASSERT_OK(fg_conf_check_exposure(c, NULL));
+  fg_conf_free(c);
+  c = load_ok("[http]\nlisten = 0.0.0.0:7070\n"); /* nothing to move */
+  ASSERT_OK(fg_conf_check_exposure(c, NULL));
+  fg_conf_free(c);
+}
+
 static void test_scene_names(void) {
   ASSERT_OK(fg_scene_name_validate("tabletop"));
   ASSERT_OK(fg_scene_name_validate("A-b_c.9"));
@@ -786,6 +845,7 @@ int main(void) {
   test_paths();
   test_token_file();
   test_listen();
+  test_cross_site();
   test_scene_names();
   test_errors();
   test_missing_file();
