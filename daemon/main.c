@@ -151,6 +151,12 @@ static int modbus_differs(const fg_conf_modbus *a, const fg_conf_modbus *b) {
          a->motion_timeout_ms != b->motion_timeout_ms;
 }
 
+/* The store's caps from [state]. */
+static fg_store_limits store_limits(const fg_conf *conf) {
+  return (fg_store_limits){.max_scenes = (size_t)conf->max_scenes,
+                           .max_loaded_fields = (size_t)conf->max_loaded_fields};
+}
+
 static void reload(fg_app *app, const options *o) {
   fg_notify_reloading();
   char err[1024];
@@ -196,6 +202,8 @@ static void reload(fg_app *app, const options *o) {
   fg_clip_model_release(had);
   fg_app_set_conf(app, conf);
   const fg_conf *now = fg_app_conf_acquire(app);
+  const fg_store_limits limits = store_limits(now);
+  fg_store_set_limits(app->store, &limits);
   fg_store_sync_declared(app->store, now);
   fg_app_conf_release(app, now);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
@@ -308,7 +316,8 @@ int main(int argc, char **argv) {
     return 2;
   }
   if (conf->clip_weights) fg_metrics_count_clip_load(1);
-  if (fg_store_open(&app.store, conf->state_dir) != 0) {
+  const fg_store_limits limits = store_limits(conf);
+  if (fg_store_open(&app.store, conf->state_dir, &limits) != 0) {
     fg_error("cannot open the state dir %s: %s", conf->state_dir, fg_error_detail());
     fg_clip_svc_free(app.clip);
     fg_conf_free(conf);
