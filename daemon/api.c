@@ -121,13 +121,26 @@ fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
   return s;
 }
 
+int fg_api_field_error(fg_resp *resp, int rc) {
+  if (rc == FG_EBUSY || rc == FG_ENOMEM) {
+    snprintf(resp->header, sizeof resp->header, "Retry-After: 1");
+    return fg_resp_error(resp, 503, "memory_limit", "%s", fg_error_detail());
+  }
+  return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+}
+
 fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp) {
-  fg_field_ref *ref = fg_scene_field_acquire(s);
+  fg_field_ref *ref;
+  int rc = fg_scene_field_acquire(s, &ref);
+  if (rc != 0) return fg_api_field_error(resp, rc), NULL;
   if (ref) return ref;
-  if (info->checkpoint_error[0])
+  /* Asked again: a checkpoint that no longer loads shows only now. */
+  fg_scene_info now;
+  fg_scene_get_info(s, &now);
+  if (now.checkpoint_error[0])
     fg_resp_error(resp, 409, "not_trained", "scene '%s' has no trained field: its checkpoint "
                   "does not load (%s); POST /v1/scenes/%s/train to train it again, and wait "
-                  "until the job is done", info->name, info->checkpoint_error, info->name);
+                  "until the job is done", info->name, now.checkpoint_error, info->name);
   else
     fg_resp_error(resp, 409, "not_trained", "scene '%s' is not trained yet; train it first: "
                   "POST /v1/scenes/%s/train, and wait until the job is done", info->name,
@@ -224,6 +237,12 @@ int fg_api_metrics(fg_req *req, fg_resp *resp) {
   fg_metrics_gauges g = {0};
   fg_store_totals(req->app->store, &g.scenes, &g.frames);
   g.trained_scenes = fg_store_trained(req->app->store);
+  fg_store_field_stats fs;
+  fg_store_field_stats_get(req->app->store, &fs);
+  g.fields_loaded = fs.loaded;
+  g.max_loaded_fields = fs.max_loaded;
+  g.field_loads = fs.loads;
+  g.field_evictions = fs.evictions;
   g.voxel_cache_bytes = fg_store_voxel_cache_bytes(req->app->store);
   if (req->app->jobs) fg_jobs_count(req->app->jobs, g.jobs);
   fg_clip_model *m = req->app->clip ? fg_clip_svc_acquire(req->app->clip) : NULL;

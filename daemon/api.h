@@ -105,8 +105,12 @@ fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
 
 /* The scene's field with a reference (fg_field_ref_release), or NULL after answering 409
  * not_trained with a message that says to train it first (and why its checkpoint did not
- * load, when it did not). info is the scene's description. */
+ * load, when it did not), or fg_api_field_error's answer. info is the scene's description. */
 fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp);
+
+/* Answers an error of fg_scene_field_acquire: 503 memory_limit with Retry-After when the
+ * field cannot be loaded now (FG_EBUSY, FG_ENOMEM), else 500. Returns 0. */
+int fg_api_field_error(fg_resp *resp, int rc);
 
 /* The voxel features of ref's field on grid g from the field's voxel cache (voxcache.h),
  * built on first use: a build is counted in the metrics and logged for scene `name`. 0 and

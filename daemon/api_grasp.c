@@ -423,7 +423,11 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp) {
   /* Stale when the scene's field is not the one the grasp came from any more. */
   fg_scene_info info;
   fg_scene_get_info(s, &info);
-  ref = fg_scene_field_acquire(s);
+  int acq = fg_scene_field_acquire(s, &ref);
+  if (acq != 0) {
+    fg_api_field_error(resp, acq);
+    goto out;
+  }
   uint64_t now = 0;
   if (ref) {
     fg_voxel_grid grid;

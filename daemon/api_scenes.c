@@ -56,6 +56,8 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   if (rc == 0) rc = fg_store_create(req->app->store, name, &p, 0);
   if (rc == FG_EEXIST) {
     fg_resp_error(resp, 409, "scene_exists", "%s", fg_error_detail());
+  } else if (rc == FG_ERANGE) {
+    fg_resp_error(resp, 507, "scene_limit", "%s", fg_error_detail());
   } else if (rc == FG_EINVAL) {
     fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
   } else if (rc != 0) {

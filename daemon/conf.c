@@ -59,7 +59,7 @@ enum {
   K_HEADER_TIMEOUT_S, K_IDLE_TIMEOUT_S, K_MIN_BODY_KB_PER_S, K_MAX_QUEUED_REQUESTS,
   K_VIEWER_DIR, K_THREE_JS, K_ALLOWED_HOSTS, K_ALLOWED_ORIGINS
 };
-enum { K_DIR, K_IMPORT_DIRS };
+enum { K_DIR, K_IMPORT_DIRS, K_MAX_SCENES, K_MAX_LOADED_FIELDS };
 enum { K_WEIGHTS, K_VOCAB, K_CLIP_THREADS };
 enum { K_STEPS, K_THREADS, K_MAX_IMAGE_SIDE, K_HALF_PRECISION, K_DEPTH_WEIGHT, K_DISTORTION_WEIGHT };
 enum { K_MODEL };
@@ -88,7 +88,8 @@ static const char *const http_keys[] = {"listen",           "token",
                                         "min_body_kb_per_s", "max_queued_requests",
                                         "viewer_dir",       "three_js",
                                         "allowed_hosts",    "allowed_origins", NULL};
-static const char *const state_keys[] = {"dir", "import_dirs", NULL};
+static const char *const state_keys[] = {"dir", "import_dirs", "max_scenes", "max_loaded_fields",
+                                         NULL};
 static const char *const clip_keys[] = {"weights", "vocab", "threads", NULL};
 static const char *const train_keys[] = {"steps",          "threads",      "max_image_side",
                                          "half_precision", "depth_weight", "distortion_weight",
@@ -751,6 +752,9 @@ static int conf_handler(void *user, const char *section, const char *name, const
     }
   case SEC_STATE:
     if (k == K_DIR) return set_path(st, name, &c->state_dir, v);
+    if (k == K_MAX_SCENES) return parse_int(st, name, v, 0, 1000000, &c->max_scenes);
+    if (k == K_MAX_LOADED_FIELDS)
+      return parse_int(st, name, v, 0, 100000, &c->max_loaded_fields);
     return set_import_dirs(st, name, v);
   case SEC_CLIP:
     if (k == K_CLIP_THREADS) return parse_int(st, name, v, 0, 1024, &c->clip_threads);
@@ -888,6 +892,14 @@ static void check_final(conf_parse *st) {
   check_motion(st, &c->motion);
   check_modbus(st, SEC_GRIPPER_MODBUS, &c->gripper_modbus);
   for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);
+  /* The declared scenes alone would not fit: the file contradicts itself. */
+  if (c->max_scenes > 0 && c->n_scenes > (size_t)c->max_scenes)
+    fail_at(st, st->key_line[SEC_STATE][K_MAX_SCENES]
+                    ? st->key_line[SEC_STATE][K_MAX_SCENES]
+                    : st->scene_meta[c->max_scenes].header_line,
+            "state", "max_scenes", "the file declares %zu [scene NAME] sections, more than "
+            "max_scenes (%d); raise max_scenes or declare fewer scenes", c->n_scenes,
+            c->max_scenes);
 }
 
 /* ---------------------------------------------------------------- load and free */

@@ -93,6 +93,8 @@ typedef struct fg_conf {
   char *state_dir;
   char **import_dirs;    /* absolute paths */
   size_t n_import_dirs;
+  int max_scenes;        /* 0..1000000, default 64; 0: no limit */
+  int max_loaded_fields; /* 0..100000, default 4: trained fields in memory; 0: no limit */
   /* [clip] */
   char *clip_weights;    /* NULL when [clip] is absent; absolute */
   char *clip_vocab;

@@ -241,6 +241,8 @@ fg_conf *fg_conf_defaults(void) {
   c->max_queued_requests = 64;
   c->three_js = strdup(FG_CONF_DEFAULT_THREE_JS);
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
+  c->max_scenes = 64;
+  c->max_loaded_fields = 4;
   c->train_steps = 2000;
   c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
   c->distortion_weight = FG_TRAIN_DISTORTION_WEIGHT;

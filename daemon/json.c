@@ -225,6 +225,7 @@ json_t *fg_json_scene(const fg_scene_info *info) {
   json_object_set_new(o, "trained_steps", json_integer(info->trained_steps));
   json_object_set_new(o, "checkpoint_bytes", json_integer(info->checkpoint_bytes));
   json_object_set_new(o, "partial", json_boolean(info->partial));
+  json_object_set_new(o, "loaded", json_boolean(info->loaded));
   json_t *err = NULL;
   if (info->checkpoint_error[0]) {
     err = json_string(info->checkpoint_error);

@@ -169,6 +169,12 @@ static int scenes_workspace(void *ctx, double min_m[3], double max_m[3]) {
   return n > 0;
 }
 
+/* The store's caps from [state]. */
+static fg_store_limits store_limits(const fg_conf *conf) {
+  return (fg_store_limits){.max_scenes = (size_t)conf->max_scenes,
+                           .max_loaded_fields = (size_t)conf->max_loaded_fields};
+}
+
 static void reload(fg_app *app, const options *o) {
   fg_notify_reloading();
   char err[1024];
@@ -225,6 +231,8 @@ static void reload(fg_app *app, const options *o) {
   fg_app_set_conf(app, conf);
   const fg_conf *now = fg_app_conf_acquire(app);
   fg_robot_svc_configure(app->robot, now); /* the motion limits apply at once */
+  const fg_store_limits limits = store_limits(now);
+  fg_store_set_limits(app->store, &limits);
   fg_store_sync_declared(app->store, now);
   fg_app_conf_release(app, now);
   fg_info("configuration reloaded from %s", conf->path ? conf->path : "built-in defaults");
@@ -356,7 +364,8 @@ int main(int argc, char **argv) {
     return 2;
   }
   if (conf->clip_weights) fg_metrics_count_clip_load(1);
-  if (fg_store_open(&app.store, conf->state_dir) != 0) {
+  const fg_store_limits limits = store_limits(conf);
+  if (fg_store_open(&app.store, conf->state_dir, &limits) != 0) {
     fg_error("cannot open the state dir %s: %s", conf->state_dir, fg_error_detail());
     fg_clip_svc_free(app.clip);
     fg_conf_free(conf);

@@ -365,6 +365,19 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
   sb_printf(&sb, "# HELP fieldgrip_trained_scenes Scenes holding a trained field.\n"
                  "# TYPE fieldgrip_trained_scenes gauge\nfieldgrip_trained_scenes %zu\n",
             g->trained_scenes);
+  sb_printf(&sb, "# HELP fieldgrip_fields_loaded Trained fields in memory, with their voxel "
+                 "caches; at most fieldgrip_fields_loaded_max unless that is 0 (no limit).\n"
+                 "# TYPE fieldgrip_fields_loaded gauge\nfieldgrip_fields_loaded %zu\n"
+                 "# HELP fieldgrip_fields_loaded_max [state] max_loaded_fields.\n"
+                 "# TYPE fieldgrip_fields_loaded_max gauge\nfieldgrip_fields_loaded_max %zu\n"
+                 "# HELP fieldgrip_field_loads_total Trained fields loaded again from their "
+                 "checkpoint on demand since start.\n"
+                 "# TYPE fieldgrip_field_loads_total counter\nfieldgrip_field_loads_total %llu\n"
+                 "# HELP fieldgrip_field_evictions_total Trained fields evicted from memory to "
+                 "stay within [state] max_loaded_fields since start.\n"
+                 "# TYPE fieldgrip_field_evictions_total counter\n"
+                 "fieldgrip_field_evictions_total %llu\n",
+            g->fields_loaded, g->max_loaded_fields, g->field_loads, g->field_evictions);
   sb_printf(&sb, "# HELP fieldgrip_training_steps_total Training steps taken since start, over "
                  "all jobs.\n# TYPE fieldgrip_training_steps_total counter\n"
                  "fieldgrip_training_steps_total %llu\n", atomic_load(&training_steps));

@@ -67,6 +67,10 @@ typedef struct fg_metrics_gauges {
   size_t scenes;
   size_t frames;
   size_t trained_scenes;                /* scenes holding a trained field */
+  size_t fields_loaded;                 /* trained fields in memory ([state] max_loaded_fields) */
+  size_t max_loaded_fields;             /* 0: no limit */
+  unsigned long long field_loads;       /* fields loaded again on demand since start */
+  unsigned long long field_evictions;   /* fields evicted to stay within the limit */
   int clip_loaded;                      /* a CLIP model is being served */
   size_t voxel_cache_bytes;             /* heap bytes of every voxel feature cache */
   size_t jobs[FG_METRICS_JOB_STATES];   /* jobs known, by state (queued, running, done,

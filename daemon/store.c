@@ -195,12 +195,174 @@ const fg_field *fg_field_ref_field(const fg_field_ref *r) { return r->field; }
 
 fg_voxcache *fg_field_ref_voxcache(fg_field_ref *r) { return r->voxels; }
 
-fg_field_ref *fg_scene_field_acquire(fg_scene *s) {
+/* Records what the scene reports of its field f while f is not loaded. Under the scene's
+ * lock. */
+static void scene_note_field(fg_scene *s, const fg_field *f) {
+  s->trained = 1;
+  s->field_feature_dim = f->cfg.feature_dim;
+  s->trained_steps = f->trained_steps;
+}
+
+/* Puts the scene's field last in the eviction order. Under the scene's lock. */
+static void field_touch(fg_scene *s) {
+  s->field_used = atomic_fetch_add(&s->store->field_clock, 1) + 1;
+}
+
+static size_t max_loaded_fields(fg_store *st) {
+  pthread_mutex_lock(&st->lock);
+  size_t max = st->limits.max_loaded_fields;
+  pthread_mutex_unlock(&st->lock);
+  return max;
+}
+
+/* The fields in memory among the store's scenes (a deleted scene's, alive for the requests
+ * that hold it, no longer counts). Stable only under fields_lock, which every load holds. */
+static size_t fields_loaded(fg_store *st) {
+  pthread_mutex_lock(&st->lock);
+  size_t n = 0;
+  for (size_t i = 0; i < st->n; i++) {
+    pthread_mutex_lock(&st->scenes[i]->lock);
+    n += st->scenes[i]->field != NULL;
+    pthread_mutex_unlock(&st->scenes[i]->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+  return n;
+}
+
+/* Whether the scene's field may leave memory: the scene's reference is its only one (an
+ * acquire takes another under the scene's lock, so this holds while the lock is held), and
+ * field.fgc brings it back. A partial field came from field.next.fgc, which a training
+ * overwrites; it is in field.fgc only once fg_scene_keep_partial moved it. Under the
+ * scene's lock. */
+static int field_evictable(const fg_scene *s) {
+  if (!s->field || atomic_load(&s->field->refs) != 1) return 0;
+  if (!s->partial) return 1;
+  char *final = fg_path_join(s->dir, "field.fgc");
+  int there = final && access(final, F_OK) == 0;
+  free(final);
+  return there;
+}
+
+/* Evicts the least recently acquired field that may leave memory, other than keep's.
+ * 0 when every loaded field is in use. Under fields_lock. */
+static int evict_one(fg_store *st, const fg_scene *keep) {
+  fg_field_ref *victim = NULL;
+  char name[FG_SCENE_NAME_MAX + 1] = "";
+  pthread_mutex_lock(&st->lock);
+  fg_scene *best = NULL;
+  for (size_t i = 0; i < st->n; i++) {
+    fg_scene *c = st->scenes[i];
+    if (c == keep) continue;
+    pthread_mutex_lock(&c->lock);
+    if (field_evictable(c) && (!best || c->field_used < best->field_used)) best = c;
+    pthread_mutex_unlock(&c->lock);
+  }
+  if (best) {
+    pthread_mutex_lock(&best->lock);
+    if (field_evictable(best)) { /* else a request took it meanwhile: the caller looks again */
+      victim = best->field;
+      best->field = NULL;
+      snprintf(name, sizeof name, "%s", best->name);
+    }
+    pthread_mutex_unlock(&best->lock);
+  }
+  pthread_mutex_unlock(&st->lock);
+  if (victim) {
+    fg_field_ref_release(victim); /* the last reference: frees the field and its caches */
+    atomic_fetch_add(&st->field_evictions, 1);
+    fg_info("scene %s: trained field evicted from memory ([state] max_loaded_fields); it "
+            "loads again from field.fgc at its next use", name);
+  }
+  return best != NULL;
+}
+
+/* Evicts fields until `room` more fit within max_loaded_fields, sparing keep's. 0, or
+ * FG_EBUSY (without a detail) when every loaded field is in use. Under fields_lock. */
+static int make_room(fg_store *st, const fg_scene *keep, size_t room) {
+  for (;;) {
+    const size_t max = max_loaded_fields(st);
+    if (max == 0 || fields_loaded(st) + room <= max) return 0;
+    if (!evict_one(st, keep)) return FG_EBUSY;
+  }
+}
+
+/* Takes a reference to the scene's loaded field into *out. 1 when done: the scene had its
+ * field in memory, or has none to load (then *out stays NULL); 0 when it must be loaded. */
+static int field_take(fg_scene *s, fg_field_ref **out) {
   pthread_mutex_lock(&s->lock);
-  fg_field_ref *r = s->field;
-  if (r) atomic_fetch_add(&r->refs, 1);
+  int done = 1;
+  if (s->field) {
+    atomic_fetch_add(&s->field->refs, 1);
+    field_touch(s);
+    *out = s->field;
+  } else {
+    done = !s->trained || s->deleted;
+  }
   pthread_mutex_unlock(&s->lock);
-  return r;
+  return done;
+}
+
+/* Loads field.fgc as the scene's field and takes a reference to it into *out. A checkpoint
+ * that does not load any more leaves the scene untrained, as at start-up. Under fields_lock,
+ * with room made for the field. */
+static int field_load(fg_scene *s, fg_field_ref **out) {
+  char *path = fg_path_join(s->dir, "field.fgc");
+  if (!path) return fg_fail(FG_ENOMEM, "out of memory");
+  fg_field *f = NULL;
+  int rc = fg_checkpoint_load(path, &f);
+  free(path);
+  fg_field_ref *r = rc == 0 ? field_ref_new(f) : NULL;
+  if (rc == 0 && !r) {
+    fg_field_free(f);
+    rc = fg_fail(FG_ENOMEM, "out of memory");
+  }
+  if (rc == FG_ENOMEM) return rc;
+  pthread_mutex_lock(&s->lock);
+  if (rc != 0) {
+    char msg[600];
+    snprintf(msg, sizeof msg, "field.fgc: %s", fg_error_detail());
+    fg_error("scene %s: the trained field does not load again, so the scene is untrained until "
+             "it is trained again (the file is left as it is): %s", s->name, msg);
+    if (!s->deleted) {
+      s->trained = 0;
+      free(s->checkpoint_error);
+      s->checkpoint_error = strdup(msg);
+    }
+    rc = 0;
+  } else if (!s->deleted) {
+    s->field = r;
+    scene_note_field(s, f);
+    field_touch(s);
+    atomic_fetch_add(&r->refs, 1); /* the caller's, beside the scene's */
+    *out = r;
+    r = NULL;
+    atomic_fetch_add(&s->store->field_loads, 1);
+    fg_info("scene %s: trained field loaded again from field.fgc", s->name);
+  }
+  pthread_mutex_unlock(&s->lock);
+  fg_field_ref_release(r); /* the scene was deleted meanwhile */
+  return rc;
+}
+
+int fg_scene_field_acquire(fg_scene *s, fg_field_ref **out) {
+  *out = NULL;
+  if (field_take(s, out)) return 0;
+  fg_store *st = s->store;
+  /* One load at a time: two requests for the same scene load it once, and the count of
+   * loaded fields cannot pass the cap between make_room and the load. */
+  pthread_mutex_lock(&st->fields_lock);
+  int rc = 0;
+  if (!field_take(s, out)) {
+    if (make_room(st, s, 1) == 0)
+      rc = field_load(s, out);
+    else
+      rc = fg_fail(FG_EBUSY, "the trained field of scene '%s' is not in memory and cannot be "
+                   "loaded now: %zu fields are loaded ([state] max_loaded_fields) and requests "
+                   "are using every one; send the request again in a moment, or raise [state] "
+                   "max_loaded_fields", s->name, max_loaded_fields(st));
+  }
+  pthread_mutex_unlock(&st->fields_lock);
+  return rc;
 }
 
 /* Loads the field at start-up (see fg_store_open). Never fails the scene: a checkpoint that
@@ -233,14 +395,26 @@ static void scene_load_field(fg_scene *s) {
     else
       fg_warn("scene %s: cannot remove the leftover %s: %s", s->name, next, strerror(errno));
   }
+  s->checkpoint_bytes = file_size(path);
+  s->partial = !have_final;
+  scene_note_field(s, f);
+  /* Read to check it, kept only within the cap; a partial field stays, as field.fgc
+   * cannot bring it back. */
+  const size_t max = max_loaded_fields(s->store);
+  if (!s->partial && max > 0 && fields_loaded(s->store) >= max) {
+    fg_info("scene %s: trained field checked (%lld steps, %lld bytes); it loads at its first "
+            "use ([state] max_loaded_fields = %zu are loaded)", s->name,
+            (long long)f->trained_steps, (long long)s->checkpoint_bytes, max);
+    fg_field_free(f);
+    goto out;
+  }
   s->field = field_ref_new(f);
   if (!s->field) {
     fg_field_free(f);
+    s->trained = 0;
     s->checkpoint_error = strdup("out of memory loading the field");
     goto out;
   }
-  s->checkpoint_bytes = file_size(path);
-  s->partial = !have_final;
   if (s->partial)
     fg_warn("scene %s: loaded field.next.fgc, the checkpoint of a training the daemon did not "
             "finish (%lld steps); the scene reports \"partial\": true until it is trained again",
@@ -261,8 +435,10 @@ int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
     field_ref_discard(r);
     return fg_fail(FG_ENOMEM, "out of memory");
   }
+  fg_store *st = s->store;
+  pthread_mutex_lock(&st->fields_lock);
   pthread_mutex_lock(&s->lock);
-  int rc = 0;
+  int rc = 0, was_loaded = 0;
   fg_field_ref *old = NULL;
   if (s->deleted) {
     unlink(next_path);
@@ -272,7 +448,10 @@ int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
   } else {
     fg_fsync_dir(s->dir);
     old = s->field;
+    was_loaded = old != NULL;
     s->field = r;
+    scene_note_field(s, field);
+    field_touch(s);
     s->partial = 0;
     s->checkpoint_bytes = file_size(final);
     free(s->checkpoint_error);
@@ -282,6 +461,22 @@ int fg_scene_commit_field(fg_scene *s, fg_field *field, const char *next_path) {
   pthread_mutex_unlock(&s->lock);
   field_ref_discard(r); /* on failure; the field stays the caller's */
   fg_field_ref_release(old);
+  /* One field more in memory: room is made as for a load; when every other one is in use,
+   * the new one waits in field.fgc instead (unless a request took it already). */
+  fg_field_ref *unload = NULL;
+  if (rc == 0 && !was_loaded && make_room(st, s, 0) != 0) {
+    pthread_mutex_lock(&s->lock);
+    if (field_evictable(s)) {
+      unload = s->field;
+      s->field = NULL;
+    }
+    pthread_mutex_unlock(&s->lock);
+    if (unload)
+      fg_info("scene %s: trained field saved; it loads at its first use ([state] "
+              "max_loaded_fields are loaded and in use)", s->name);
+  }
+  pthread_mutex_unlock(&st->fields_lock);
+  fg_field_ref_release(unload);
   free(final);
   return rc;
 }
@@ -290,7 +485,7 @@ void fg_scene_keep_partial(fg_scene *s) {
   char *final = fg_path_join(s->dir, "field.fgc");
   char *next = fg_path_join(s->dir, "field.next.fgc");
   pthread_mutex_lock(&s->lock);
-  if (final && next && s->field && s->partial && !s->deleted && access(final, F_OK) != 0 &&
+  if (final && next && s->trained && s->partial && !s->deleted && access(final, F_OK) != 0 &&
       access(next, F_OK) == 0) {
     if (rename(next, final) == 0) {
       fg_fsync_dir(s->dir);
@@ -372,11 +567,13 @@ static int is_unfinished_create(const fg_scene *s) {
   return empty;
 }
 
-int fg_store_open(fg_store **out, const char *state_dir) {
+int fg_store_open(fg_store **out, const char *state_dir, const fg_store_limits *limits) {
   *out = NULL;
   fg_store *st = calloc(1, sizeof *st);
   if (!st) return fg_fail(FG_ENOMEM, "out of memory");
+  pthread_mutex_init(&st->fields_lock, NULL);
   pthread_mutex_init(&st->lock, NULL);
+  st->limits = *limits;
   st->scenes_dir = fg_path_join(state_dir, "scenes");
   int rc = st->scenes_dir ? fg_mkdir_p(st->scenes_dir) : fg_fail(FG_ENOMEM, "out of memory");
   if (rc == 0 && access(st->scenes_dir, W_OK) != 0)
@@ -423,8 +620,21 @@ int fg_store_open(fg_store **out, const char *state_dir) {
     fg_store_close(st);
     return rc;
   }
+  if (limits->max_scenes > 0 && st->n > limits->max_scenes)
+    fg_warn("the state dir holds %zu scenes, more than [state] max_scenes (%zu): all are "
+            "served, but no scene can be created until enough are deleted", st->n,
+            limits->max_scenes);
   *out = st;
   return 0;
+}
+
+void fg_store_set_limits(fg_store *st, const fg_store_limits *limits) {
+  pthread_mutex_lock(&st->fields_lock);
+  pthread_mutex_lock(&st->lock);
+  st->limits = *limits;
+  pthread_mutex_unlock(&st->lock);
+  make_room(st, NULL, 0); /* fields in use go once released and others are needed */
+  pthread_mutex_unlock(&st->fields_lock);
 }
 
 void fg_store_close(fg_store *st) {
@@ -433,6 +643,7 @@ void fg_store_close(fg_store *st) {
   free(st->scenes);
   free(st->scenes_dir);
   pthread_mutex_destroy(&st->lock);
+  pthread_mutex_destroy(&st->fields_lock);
   free(st);
 }
 
@@ -445,6 +656,13 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   if (store_find_locked(st, name, NULL)) {
     rc = fg_fail(FG_EEXIST, "a scene named '%s' exists already; delete it first or pick another "
                  "name", name);
+    goto out;
+  }
+  if (st->limits.max_scenes > 0 && st->n >= st->limits.max_scenes) {
+    rc = fg_fail(FG_ERANGE, "scene '%s' was not created: the daemon holds %zu scenes, its limit "
+                 "([state] max_scenes = %zu); delete a scene (DELETE /v1/scenes/{s}) or raise "
+                 "[state] max_scenes in the configuration file and reload it", name, st->n,
+                 st->limits.max_scenes);
     goto out;
   }
   s = scene_alloc(st, name);
@@ -519,11 +737,12 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->created_ms = s->created_ms;
   out->n_frames = s->n_frames;
   out->feature_dim = s->feature_dim;
-  out->field_feature_dim = s->field ? s->field->field->cfg.feature_dim : 0;
-  out->trained = s->field != NULL;
-  out->partial = s->field && s->partial;
-  out->trained_steps = s->field ? s->field->field->trained_steps : 0;
-  out->checkpoint_bytes = s->field ? s->checkpoint_bytes : 0;
+  out->field_feature_dim = s->trained ? s->field_feature_dim : 0;
+  out->trained = s->trained;
+  out->loaded = s->field != NULL;
+  out->partial = s->trained && s->partial;
+  out->trained_steps = s->trained ? s->trained_steps : 0;
+  out->checkpoint_bytes = s->trained ? s->checkpoint_bytes : 0;
   fg_voxcache_describe(s->field ? s->field->voxels : NULL, &out->voxel_cache);
   snprintf(out->checkpoint_error, sizeof out->checkpoint_error, "%s",
            s->checkpoint_error ? s->checkpoint_error : "");
@@ -568,11 +787,18 @@ size_t fg_store_trained(fg_store *st) {
   size_t n = 0;
   for (size_t i = 0; i < st->n; i++) {
     pthread_mutex_lock(&st->scenes[i]->lock);
-    n += st->scenes[i]->field != NULL;
+    n += st->scenes[i]->trained;
     pthread_mutex_unlock(&st->scenes[i]->lock);
   }
   pthread_mutex_unlock(&st->lock);
   return n;
+}
+
+void fg_store_field_stats_get(fg_store *st, fg_store_field_stats *out) {
+  out->loaded = fields_loaded(st);
+  out->max_loaded = max_loaded_fields(st);
+  out->loads = atomic_load(&st->field_loads);
+  out->evictions = atomic_load(&st->field_evictions);
 }
 
 size_t fg_store_voxel_cache_bytes(fg_store *st) {

@@ -29,8 +29,22 @@ typedef struct fg_scene fg_scene;
 /* A trained field shared by reference count: the scene holds one reference, every render
  * in flight another, so a training that installs a new field never pulls one from under a
  * render. Each carries the field's voxel feature cache (voxcache.h), which therefore goes
- * with the field it was built from. */
+ * with the field it was built from.
+ *
+ * Memory: at most max_loaded_fields fields (with their voxel caches and grasp fields, the
+ * big allocations) stay loaded. A trained scene whose field is not loaded keeps it in
+ * field.fgc and loads it again at its next fg_scene_field_acquire, after evicting the least
+ * recently acquired field that nothing holds (the scene's reference is its only one) and
+ * that field.fgc can bring back (a partial field still in field.next.fgc stays). An evicted
+ * field lives on for the requests that hold it. */
 typedef struct fg_field_ref fg_field_ref;
+
+/* The caps of the store ([state] max_scenes and max_loaded_fields); 0 stands for no
+ * limit. */
+typedef struct fg_store_limits {
+  size_t max_scenes;        /* scenes fg_store_create makes, counting the existing ones */
+  size_t max_loaded_fields; /* trained fields held in memory at once */
+} fg_store_limits;
 
 #define FG_JOB_ID_MAX 40
 
@@ -51,6 +65,7 @@ typedef struct fg_scene_info {
   int field_feature_dim; /* D of the trained field (uploaded or CLIP features); 0 when
                             untrained or trained on colour only */
   int trained;     /* the scene holds a field */
+  int loaded;      /* that field is in memory now (else it is loaded at its next use) */
   int partial;     /* that field is the checkpoint of an interrupted training */
   int64_t trained_steps;
   int64_t checkpoint_bytes;        /* size of the field's checkpoint file; 0 when untrained */
@@ -65,15 +80,26 @@ typedef struct fg_scene_info {
  * disk untouched. A field.fgc that does not load is logged and left on disk; its scene is
  * then untrained and reports the reason (checkpoint_error). A field.next.fgc left by a
  * training the daemon did not finish is loaded as the field (partial) when there is no
- * field.fgc, else removed. The caller owns *out (fg_store_close). */
-int fg_store_open(fg_store **out, const char *state_dir);
+ * field.fgc, else removed. Every checkpoint is read once, so that a bad one shows at
+ * start-up, but only limits->max_loaded_fields of them stay loaded (partial ones always do:
+ * field.fgc cannot bring them back). Scenes on disk beyond limits->max_scenes are all
+ * opened (nothing is dropped); only creation is refused. The caller owns *out
+ * (fg_store_close). */
+int fg_store_open(fg_store **out, const char *state_dir, const fg_store_limits *limits);
 void fg_store_close(fg_store *store);
+
+/* Applies new caps (a configuration reload): fields over the new max_loaded_fields are
+ * evicted now as far as nothing holds them, the rest as they are released and others
+ * acquired. */
+void fg_store_set_limits(fg_store *store, const fg_store_limits *limits);
 
 /* Checks scene parameters: finite, min < max per axis, 0 < voxel_size, background in [0,1].
  * FG_EINVAL with a detail. */
 int fg_scene_params_validate(const fg_scene_params *p);
 
-/* Creates a scene. FG_EEXIST if the name is taken, FG_EINVAL for a bad name or parameters. */
+/* Creates a scene. FG_EEXIST if the name is taken, FG_EINVAL for a bad name or parameters,
+ * FG_ERANGE when the store holds max_scenes scenes already (the detail names the limit and
+ * the key that raises it). */
 int fg_store_create(fg_store *store, const char *name, const fg_scene_params *params,
                     int declared_in_config);
 
@@ -101,6 +127,15 @@ void fg_store_totals(fg_store *store, size_t *scenes, size_t *frames);
 size_t fg_store_trained(fg_store *store);
 /* Heap bytes of every scene's voxel feature cache (voxcache.h). */
 size_t fg_store_voxel_cache_bytes(fg_store *store);
+
+/* The trained fields in memory now, and since the store opened: the loads on demand and the
+ * evictions of fields to stay within max_loaded_fields. */
+typedef struct fg_store_field_stats {
+  size_t loaded;
+  size_t max_loaded; /* 0: no limit */
+  unsigned long long loads, evictions;
+} fg_store_field_stats;
+void fg_store_field_stats_get(fg_store *store, fg_store_field_stats *out);
 
 /* The scene's folder and name; constant for the scene's lifetime, owned by the scene. */
 const char *fg_scene_dir(const fg_scene *scene);
@@ -135,9 +170,13 @@ int fg_scene_load_frame(fg_scene *scene, int number, fg_frame *out);
 
 /* ---- the trained field ---- */
 
-/* The scene's field with a reference the caller drops with fg_field_ref_release; NULL when
- * the scene is untrained. The field is read-only while shared. */
-fg_field_ref *fg_scene_field_acquire(fg_scene *scene);
+/* The scene's field with a reference the caller drops with fg_field_ref_release, loaded
+ * from field.fgc first when it is not in memory (see fg_field_ref for the eviction). *out is
+ * NULL and 0 returned when the scene is untrained, which it becomes, with the reason in its
+ * checkpoint_error, when field.fgc no longer loads. FG_EBUSY with a detail when the field is
+ * not loaded and cannot be: max_loaded_fields are loaded and every one is in use (send the
+ * request again later); FG_ENOMEM. The field is read-only while shared. */
+int fg_scene_field_acquire(fg_scene *scene, fg_field_ref **out);
 const fg_field *fg_field_ref_field(const fg_field_ref *ref);
 void fg_field_ref_release(fg_field_ref *ref);
 /* The field's voxel feature cache (voxcache.h), owned by ref and living as long as it. */
@@ -145,7 +184,9 @@ fg_voxcache *fg_field_ref_voxcache(fg_field_ref *ref);
 
 /* Commits a finished training: renames next_path (field's checkpoint, already written in the
  * scene's folder) over field.fgc and makes field the scene's field for new renders (renders
- * in flight finish with the old one). On success the scene owns field. FG_ENOENT when the
+ * in flight finish with the old one). On success the scene owns field; when the scene had no
+ * field loaded and no other can be evicted to stay within max_loaded_fields, field is freed
+ * at once and loaded from field.fgc at its first use. FG_ENOENT when the
  * scene was deleted meanwhile (next_path is removed; field stays the caller's), FG_EIO when
  * the rename fails (field stays the caller's, field.fgc is untouched). */
 int fg_scene_commit_field(fg_scene *scene, fg_field *field, const char *next_path);

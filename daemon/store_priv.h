@@ -26,8 +26,12 @@ struct fg_scene {
   int next_index;
   int feature_dim;
   int deleted;
-  /* the trained field */
-  fg_field_ref *field;     /* NULL when untrained */
+  /* the trained field: in memory (field) or only in field.fgc (trained, field NULL) */
+  fg_field_ref *field;     /* NULL when untrained or not loaded */
+  int trained;
+  int field_feature_dim;   /* the trained field's D and steps, known while it is not loaded */
+  int64_t trained_steps;
+  uint64_t field_used;     /* the store's field_clock at the field's last acquire: LRU order */
   int partial;
   int64_t checkpoint_bytes;
   int next_at_start;       /* field.next.fgc was there when the store opened */
@@ -38,9 +42,14 @@ struct fg_scene {
 
 struct fg_store {
   char *scenes_dir;
-  pthread_mutex_t lock; /* guards the scene array */
+  /* Serialises what loads, commits or evicts fields, so that the count of loaded fields
+   * only moves under it. Lock order: fields_lock, then lock, then a scene's lock. */
+  pthread_mutex_t fields_lock;
+  pthread_mutex_t lock; /* guards the scene array and the limits */
   fg_scene **scenes;
   size_t n, cap;
+  fg_store_limits limits;
+  atomic_ullong field_clock, field_loads, field_evictions;
 };
 
 /* 1 when n is a frame file's name (NNNNNN.fgf, at least six digits), its number in *index. */

@@ -68,6 +68,8 @@ static void check_defaults(const fg_conf *c) {
   ASSERT(c->token == NULL || c->token[0] == '\0');
   ASSERT_EQ(c->max_upload_bytes, 64u << 20);
   ASSERT_EQ(c->max_json_bytes, 1u << 20);
+  ASSERT_EQ(c->max_scenes, 64);
+  ASSERT_EQ(c->max_loaded_fields, 4);
   ASSERT_EQ(c->max_connections, 1024);
   ASSERT_EQ(c->header_timeout_s, 10);
   ASSERT_EQ(c->idle_timeout_s, 60);
@@ -630,6 +632,24 @@ static void test_errors(void) {
   EXPECT_ERROR("[train]\ndepth_weight = -1\n", 2, "[train] depth_weight:", "0 to 1000");
   EXPECT_ERROR("[train]\ndistortion_weight = lots\n", 2, "[train] distortion_weight:", "number");
   EXPECT_ERROR("[http]\nmax_upload_mb = 0\n", 2, "[http] max_upload_mb:", "1 to 4096");
+  EXPECT_ERROR("[state]\nmax_scenes = -1\n", 2, "[state] max_scenes:", "0 to 1000000");
+  EXPECT_ERROR("[state]\nmax_loaded_fields = many\n", 2, "[state] max_loaded_fields:",
+               "0 to 100000");
+  /* the declared scenes alone would not fit: the key's line, else the first one too many */
+  EXPECT_ERROR("[state]\nmax_scenes = 1\n[scene a]\n[scene b]\n", 2, "[state] max_scenes:",
+               "declares 2 [scene NAME] sections");
+  EXPECT_ERROR("[scene a]\n[scene b]\n[state]\nmax_scenes = 1\n", 4, "[state] max_scenes:",
+               "raise max_scenes");
+  {
+    fg_conf *c = load_ok("[state]\nmax_scenes = 0\nmax_loaded_fields = 0\n[scene a]\n");
+    ASSERT_EQ(c->max_scenes, 0);
+    ASSERT_EQ(c->max_loaded_fields, 0);
+    fg_conf_free(c);
+    c = load_ok("[state]\nmax_scenes = 1\nmax_loaded_fields = 100000\n[scene a]\n");
+    ASSERT_EQ(c->max_scenes, 1);
+    ASSERT_EQ(c->max_loaded_fields, 100000);
+    fg_conf_free(c);
+  }
   EXPECT_ERROR("[http]\nmax_upload_mb = 4097\n", 2, "[http] max_upload_mb:", "1 to 4096");
   EXPECT_ERROR("[http]\nmax_json_kb = 0\n", 2, "[http] max_json_kb:", "1 to 1048576");
   EXPECT_ERROR("[http]\nmax_connections = 15\n", 2, "[http] max_connections:",
@@ -817,6 +837,8 @@ static void test_shipped(void) {
   ASSERT_EQ(c->idle_timeout_s, d->idle_timeout_s);
   ASSERT_EQ(c->min_body_bytes_per_s, d->min_body_bytes_per_s);
   ASSERT_EQ(c->max_queued_requests, d->max_queued_requests);
+  ASSERT_EQ(c->max_scenes, d->max_scenes);
+  ASSERT_EQ(c->max_loaded_fields, d->max_loaded_fields);
   ASSERT(c->viewer_dir == NULL && d->viewer_dir == NULL);
   ASSERT_STREQ(c->three_js, d->three_js);
   ASSERT_EQ(c->audit_max_bytes, d->audit_max_bytes);
