@@ -304,6 +304,15 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   o->width_m = task->width_m < stroke ? task->width_m : stroke;
   o->candidate_mask = mask;
   o->n_threads = threads;
+  /* only poses the robot may be sent to, and never through the table */
+  fg_motion_limits lim;
+  double retreat_m, speed_mps;
+  fg_robot_limits_get(req->app->robot, &lim);
+  fg_robot_path_defaults(req->app->robot, &o->approach_m, &retreat_m, &speed_mps);
+  o->approach_m = task->approach_m;
+  o->retreat_m = task->kind == FG_TASK_PLACE ? 0 : retreat_m;
+  o->limits = &lim;
+  o->floor_solid = 1;
   const fg_grasp_target target = {.n_points = task->n_points, .dim = D,
                                    .p_gripper = task->p_gripper, .Z = task->Z,
                                    .q = r.language_weight ? q.q : NULL};
@@ -340,17 +349,19 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
     e->field_version = version;
     memcpy(e->T_world_gripper, res.poses[i].T_world_gripper, sizeof e->T_world_gripper);
     e->width_m = o->width_m;
+    e->approach_m = task->approach_m;
     e->place = task->kind == FG_TASK_PLACE;
     json_array_append_new(grasps, grasp_json(e, &res.poses[i], task->approach_m, task));
   }
   fg_grasp_log_put(req->app->grasps, entries, res.n);
   const fg_grasp_stats *st = &res.stats;
-  json_t *reply = json_pack("{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I}}", "grasps", grasps,
+  json_t *reply = json_pack("{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I, s:I}}", "grasps", grasps,
                             "task", task->name, "search", "candidates",
                             (json_int_t)st->candidates, "rotations", st->rotations,
                             "poses_scored", (json_int_t)st->poses_scored, "poses_optimised",
                             (json_int_t)st->poses_optimised, "iterations", st->iterations,
-                            "evaluations", (json_int_t)st->evaluations);
+                            "evaluations", (json_int_t)st->evaluations, "rejected_limits",
+                            (json_int_t)st->rejected_limits);
   if (reply && ret) {
     json_t *a = json_array();
     /* ret[0]'s reference moved to task: it is the first entry */
@@ -458,6 +469,8 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp) {
   fg_pose_to_quat(e.T_world_gripper, r.p_world_m, r.q_wxyz);
   r.has_width = 1;
   r.width_m = e.width_m;
+  r.has_approach = 1; /* the robot comes in from the pre_grasp the search returned */
+  r.approach_m = e.approach_m;
   json_decref(body);
   body = NULL;
   fg_voxels_release(vox);

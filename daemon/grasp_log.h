@@ -32,6 +32,7 @@ typedef struct fg_grasp_entry {
   uint64_t field_version;               /* fg_grasp_log_field_version of the field searched */
   double T_world_gripper[16];           /* row-major, metres */
   double width_m;
+  double approach_m;                    /* the task's approach: where pre_grasp stands */
   int place;                            /* 1: the task is a place task, 0: a grasp task */
 } fg_grasp_entry;
 

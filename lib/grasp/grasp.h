@@ -40,7 +40,13 @@
  *
  * Collisions. A pose collides when a sample point of one of the gripper's boxes (a lattice of
  * spacing at most voxel_size / sqrt(3) over each box, so every voxel whose inscribed ball lies
- * in a box holds a point) falls in a voxel whose alpha is at least the collision threshold. Space outside the workspace grid counts as free. */
+ * in a box holds a point) falls in a voxel whose alpha is at least the collision threshold. Space outside the workspace grid counts as free, except below its floor when the search is
+ * told that the floor is solid (a table: the workspace's lowest voxel layer stands on it).
+ *
+ * Motion limits. With opt.limits (motion/limits.h) the search returns only poses the robot
+ * may be sent to: rotations outside the approach cone are never scored, and every result's
+ * pose, the start of its approach (opt.approach_m back along the tool's -z) and the end of
+ * its lift (opt.retreat_m up) lie in the position box. */
 #ifndef FG_GRASP_GRASP_H
 #define FG_GRASP_GRASP_H
 
@@ -48,6 +54,7 @@
 #include <stdint.h>
 
 #include "grasp/gripper.h"
+#include "motion/limits.h"
 #include "query/heatmap.h"
 
 #define FG_GRASP_MAX_QUERY_POINTS 1000
@@ -155,11 +162,16 @@ typedef struct fg_grasp_options {
   float collision_alpha;      /* voxels with alpha >= this are obstacles */
   uint64_t seed;              /* 0: the spiral as it is; else turned by a rotation from seed */
   int n_threads;              /* <= 0: OpenMP's default */
+  int floor_solid;            /* 1: below the grid's lowest face is solid (checked collisions) */
+  const fg_motion_limits *limits; /* NULL: none; else results satisfy them (kept by the caller) */
+  double approach_m;          /* the path checked against limits: approach back along -z ... */
+  double retreat_m;           /* ... and the lift along world +z after the grasp */
 } fg_grasp_options;
 
 /* The defaults: candidate_alpha 0.1, no mask, mask_dilation 2, 24 rotations, n_keep 1024, n_final 64,
  * 100 iterations, lr 2 mm and 0.03 rad, top_k 10, NMS 1 cm and 15 degrees, panda at its
- * stroke, collisions checked at alpha 0.1, seed 0, n_threads 0. */
+ * stroke, collisions checked at alpha 0.1, seed 0, n_threads 0, the floor not solid, no
+ * limits. */
 void fg_grasp_options_default(fg_grasp_options *o);
 
 typedef struct fg_grasp_result_pose {
@@ -179,6 +191,8 @@ typedef struct fg_grasp_stats {
   size_t evaluations;         /* cost evaluations in all (with or without gradient) */
   size_t collision_checks;
   size_t rejected_collisions; /* poses dropped because they collide */
+  size_t rejected_limits;     /* poses dropped by the motion limits (rotations outside the
+                               * cone count once per candidate) */
   double seconds;
 } fg_grasp_stats;
 

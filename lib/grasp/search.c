@@ -59,7 +59,7 @@ static double grip_angle(const double A[9], const double B[9]) {
 /* Sample lattice of a box: per axis count and spacing so that the spacing is at most step
  * (voxel_size / sqrt(3): every voxel whose inscribed ball lies in the box holds a sample). */
 static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_gripper_box *b,
-                        const double T[16], double step) {
+                        const double T[16], double step, int floor_solid) {
   const fg_voxel_grid *g = &gf->grid;
   int n[3];
   double d[3];
@@ -79,6 +79,7 @@ static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_g
           const double x = T[4 * a] * p[0] + T[4 * a + 1] * p[1] + T[4 * a + 2] * p[2] +
                            T[4 * a + 3];
           const double u = floor((x - g->min[a]) / g->voxel_size);
+          if (a == 2 && floor_solid && u < 0) return 1; /* under the table */
           if (!(u >= 0 && u < na[a])) inside = 0;
           else idx[a] = (int)u;
         }
@@ -90,10 +91,12 @@ static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_g
 
 /* Fingers first: they are small and meet the object first, so colliding poses exit early. */
 static int gripper_collides(const fg_grasp_field *gf, const uint8_t *occ,
-                            const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16]) {
+                            const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16],
+                            int floor_solid) {
   const double step = gf->grid.voxel_size / sqrt(3.0);
-  return box_collides(gf, occ, &boxes[1], T, step) || box_collides(gf, occ, &boxes[2], T, step) ||
-         box_collides(gf, occ, &boxes[0], T, step);
+  return box_collides(gf, occ, &boxes[1], T, step, floor_solid) ||
+         box_collides(gf, occ, &boxes[2], T, step, floor_solid) ||
+         box_collides(gf, occ, &boxes[0], T, step, floor_solid);
 }
 
 /* The check before optimising: only the palm, on a lattice of one voxel. A candidate sits on
@@ -101,8 +104,18 @@ static int gripper_collides(const fg_grasp_field *gf, const uint8_t *occ,
  * graze the object that the optimisation then moves them clear of; a palm in the scene means
  * the approach itself is blocked. */
 static int palm_collides(const fg_grasp_field *gf, const uint8_t *occ,
-                         const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16]) {
-  return box_collides(gf, occ, &boxes[0], T, gf->grid.voxel_size);
+                         const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16],
+                         int floor_solid) {
+  return box_collides(gf, occ, &boxes[0], T, gf->grid.voxel_size, floor_solid);
+}
+
+/* Whether the robot may be sent to T: cone, box, approach and lift (motion/limits.h). */
+static int within_limits(const fg_grasp_options *o, const double T[16]) {
+  if (!o->limits) return 1;
+  double p[3], q[4];
+  fg_pose_to_quat(T, p, q);
+  return fg_motion_check_pose(o->limits, p, q, o->approach_m, o->retreat_m, FG_RETREAT_UP,
+                              NULL) == 0;
 }
 
 static uint8_t *occupancy(const fg_grasp_field *gf, float alpha_min) {
@@ -118,7 +131,7 @@ int fg_grasp_collides(const fg_grasp_field *gf, fg_gripper_model m, double width
   FG_TRY(fg_gripper_boxes(m, width_m, boxes));
   uint8_t *occ = occupancy(gf, alpha_min);
   if (!occ) return fg_fail(FG_ENOMEM, "grasp: out of memory");
-  const int hit = gripper_collides(gf, occ, boxes, T_world_gripper);
+  const int hit = gripper_collides(gf, occ, boxes, T_world_gripper, 0);
   free(occ);
   return hit;
 }
@@ -416,8 +429,12 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
     double R[9], tr[3], T[16];
     candidate_pose(gf, &b, n_rot, (uint32_t)id, R, tr);
     fg_pose_from_rotmat(R, tr, T);
-    b.sc[id].cost = fg_grasp_cost_fast(gf, &b.coarse, T, NULL, NULL, NULL, NULL,
-                                       &b.scratch[omp_get_thread_num()]);
+    /* a rotation the cone refuses is never kept: the tool's +z (R's third column) */
+    b.sc[id].cost = o.limits && o.limits->cone_rad < M_PI &&
+                            acos(fmax(-1.0, fmin(1.0, -R[8]))) > o.limits->cone_rad
+                        ? INFINITY
+                        : fg_grasp_cost_fast(gf, &b.coarse, T, NULL, NULL, NULL, NULL,
+                                             &b.scratch[omp_get_thread_num()]);
     b.sc[id].id = (uint32_t)id;
   }
   st->evaluations += n_poses;
@@ -426,8 +443,8 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   /* the best collision-free ones, checked a chunk at a time in parallel */
   b.ps = malloc((size_t)o.n_keep * sizeof *b.ps);
   if (!b.ps) goto nomem;
-  int n_keep = 0;
-  for (size_t s0 = 0; s0 < n_poses && n_keep < o.n_keep; s0 += SCORE_CHUNK) {
+  int n_keep = 0, cone_end = 0;
+  for (size_t s0 = 0; s0 < n_poses && n_keep < o.n_keep && !cone_end; s0 += SCORE_CHUNK) {
     const int m = (int)(n_poses - s0 < SCORE_CHUNK ? n_poses - s0 : SCORE_CHUNK);
     if (o.check_collisions) {
 #pragma omp parallel for num_threads(b.nt) schedule(dynamic, 4)
@@ -435,11 +452,16 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
         double R[9], tr[3], T[16];
         candidate_pose(gf, &b, n_rot, b.sc[s0 + k].id, R, tr);
         fg_pose_from_rotmat(R, tr, T);
-        b.hit[k] = (uint8_t)palm_collides(gf, b.occ, boxes, T);
+        b.hit[k] = (uint8_t)palm_collides(gf, b.occ, boxes, T, o.floor_solid);
       }
       st->collision_checks += (size_t)m;
     }
     for (int k = 0; k < m && n_keep < o.n_keep; k++) {
+      if (isinf(b.sc[s0 + k].cost)) { /* sorted last: only cone-refused poses remain */
+        st->rejected_limits += n_poses - s0 - (size_t)k;
+        cone_end = 1;
+        break;
+      }
       if (o.check_collisions && b.hit[k]) {
         st->rejected_collisions++;
         continue;
@@ -452,7 +474,9 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
     }
   }
   if (n_keep == 0) {
-    out->reason = "every candidate pose collides with the scene";
+    out->reason = st->rejected_limits ? "every candidate pose collides with the scene or "
+                                        "approaches from outside the robot's approach cone"
+                                      : "every candidate pose collides with the scene";
     goto done;
   }
   st->poses_optimised = (size_t)n_keep;
@@ -473,9 +497,13 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
       st->evaluations++;
     }
     if (!(p->cosv > 0.0)) continue; /* no likeness to the task */
+    if (!within_limits(&o, T)) {
+      st->rejected_limits++;
+      continue;
+    }
     if (o.check_collisions) {
       st->collision_checks++;
-      if (gripper_collides(gf, b.occ, boxes, T)) {
+      if (gripper_collides(gf, b.occ, boxes, T, o.floor_solid)) {
         st->rejected_collisions++;
         continue;
       }
@@ -503,9 +531,10 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   if (out->n == 0) {
     free(out->poses);
     out->poses = NULL;
-    out->reason = o.check_collisions ? "every optimised pose collides with the scene or is "
-                                       "unlike the task"
-                                     : "no pose is like the task";
+    out->reason = o.check_collisions ? "every optimised pose collides with the scene, lies "
+                                       "outside the robot's motion limits, or is unlike the "
+                                       "task"
+                                     : "no pose is like the task or within the motion limits";
   }
 done:
   st->seconds = fg_mono_s() - t0;

@@ -378,6 +378,52 @@ static void test_search_synthetic(void) {
   }
   fg_grasp_result_release(&r1);
 
+  /* motion limits: only approaches within the cone, paths within the box, nothing through
+   * the floor */
+  fg_motion_limits lim = {.has_box = 1, .cone_rad = 30 * M_PI / 180, .max_force_n = 100,
+                          .max_speed_mps = 1, .max_width_m = 0.085};
+  for (int a = 0; a < 3; a++) {
+    lim.box_min_m[a] = s.g.min[a] - 1;
+    lim.box_max_m[a] = s.g.max[a] + 1;
+  }
+  o.limits = &lim;
+  o.approach_m = 0.10;
+  o.retreat_m = 0.10;
+  o.floor_solid = 1;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT(r1.n >= 1);
+  ASSERT(r1.stats.rejected_limits > 0); /* most of the cover points elsewhere */
+  fg_gripper_box boxes[FG_GRIPPER_N_BOXES];
+  ASSERT_OK(fg_gripper_boxes(o.gripper, o.width_m, boxes));
+  for (int k = 0; k < r1.n; k++) {
+    const double *T = r1.poses[k].T_world_gripper;
+    ASSERT(acos(-T[10]) <= lim.cone_rad + 1e-9);
+    for (int b = 0; b < FG_GRIPPER_N_BOXES; b++) /* every corner above the grid's floor */
+      for (int corner = 0; corner < 8; corner++) {
+        const double pc[3] = {boxes[b].centre_m[0] + (corner & 1 ? 1 : -1) * boxes[b].half_m[0],
+                              boxes[b].centre_m[1] + (corner & 2 ? 1 : -1) * boxes[b].half_m[1],
+                              boxes[b].centre_m[2] + (corner & 4 ? 1 : -1) * boxes[b].half_m[2]};
+        double pw[3];
+        fg_pose_apply(T, pc, pw);
+        ASSERT(pw[2] >= s.g.min[2] - s.g.voxel_size);
+      }
+  }
+  fg_grasp_result_release(&r1);
+  /* a box whose top lies below the approach's start: no grasp, and the reason says why */
+  lim.box_max_m[2] = T_demo[11] + 0.05;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT_EQ(r1.n, 0);
+  ASSERT(strstr(r1.reason, "limits") != NULL);
+  fg_grasp_result_release(&r1);
+  o.approach_m = 0;
+  o.retreat_m = 0;
+  ASSERT_OK(fg_grasp_search(gf, &t, &o, &r1));
+  ASSERT(r1.n >= 1);
+  for (int k = 0; k < r1.n; k++) ASSERT(r1.poses[k].T_world_gripper[11] <= lim.box_max_m[2]);
+  fg_grasp_result_release(&r1);
+  o.limits = NULL;
+  o.floor_solid = 0;
+
   /* the language weight: q along the post's feature raises its poses' weight */
   float fpost[64];
   ASSERT_OK(fg_voxel_features_feature(vf, ((size_t)(A[2] + 3) * NY + A[1]) * NX + A[0] + 3,
