@@ -18,8 +18,12 @@ void r_config(int robot_port, const char *robot_extra, int gripper_port,
   if (robot_port)
     n += snprintf(text + n, sizeof text - n,
                   "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n"
-                  "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n%s\n",
-                  robot_port, robot_extra ? robot_extra : "");
+                  "%s%s\n",
+                  robot_port,
+                  robot_extra && strstr(robot_extra, "limit_min")
+                      ? ""
+                      : "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n",
+                  robot_extra ? robot_extra : "");
   if (gripper_port)
     n += snprintf(text + n, sizeof text - n,
                   "[gripper.modbus]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\n"

@@ -7,7 +7,7 @@
 
 /* Writes a configuration with [robot] on robot_port and [gripper.modbus] on gripper_port
  * (0 leaves the section out), model robotiq-2f85, a position box of [-1.5, 1.5] m in x and
- * y and [-0.5, 1.5] m in z (robot_extra must not set limit_min or limit_max), plus extra lines appended to [robot]
+ * y and [-0.5, 1.5] m in z unless robot_extra sets limit_min and limit_max, plus extra lines appended to [robot]
  * (robot_extra) and [gripper.modbus] (gripper_extra), either may be NULL. */
 void r_config(int robot_port, const char *robot_extra, int gripper_port,
               const char *gripper_extra);
