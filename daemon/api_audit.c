@@ -79,6 +79,8 @@ static json_t *request_entry(const fg_req *req, const fg_resp *resp, json_t *bod
   json_t *e = json_pack("{s:s, s:s}", "kind", "request", "route", req->path);
   const char *command = NULL;
   if (strncmp(req->path, "/v1/gripper/", 12) == 0) command = req->params[0];
+  if (strcmp(req->path, "/v1/robot/stop") == 0) command = "stop";
+  if (strcmp(req->path, "/v1/robot/reset") == 0) command = "reset";
   if (!command) command = json_string_value(json_object_get(body, "command"));
   if (!command) command = json_string_value(json_object_get(cmd, "command"));
   json_object_set_new(e, "command", command ? json_string(command) : json_null());
@@ -95,10 +97,15 @@ static json_t *request_entry(const fg_req *req, const fg_resp *resp, json_t *bod
   json_object_set_new(e, "wait", json_boolean(!json_is_false(wait)));
 
   const char *state = json_string_value(json_object_get(cmd, "state"));
+  const int latch_route =
+      command && (strcmp(command, "stop") == 0 || strcmp(command, "reset") == 0);
   const char *outcome = json_is_true(json_object_get(answer, "replayed")) ? "replayed"
                         : state                                          ? state
+                        : resp->status < 400 && latch_route             ? "done"
                         : resp->status < 400                             ? "planned"
                                                                          : "refused";
+  json_t *reason = json_object_get(body, "reason");
+  if (latch_route && json_is_string(reason)) json_object_set(e, "reason", reason);
   json_object_set_new(e, "outcome", json_string(outcome));
   if (state && strcmp(outcome, "replayed") == 0) json_object_set_new(e, "state", json_string(state));
   json_object_set_new(e, "http_status", json_integer(resp->status));
@@ -161,6 +168,28 @@ static int audited(fg_req *req, fg_resp *resp, fg_handler handler) {
   json_decref(body);
   header_add(resp, rid);
   return 0;
+}
+
+/* A stop and a reset are recorded but never refused for want of the log: a stop must always
+ * go through, and a reset moves nothing (motions after it still need the log). */
+static int recorded(fg_req *req, fg_resp *resp, fg_handler handler) {
+  char rid[REQUEST_ID_MAX + 1], client[80];
+  request_id(req, rid);
+  fg_req_client(req, client, sizeof client);
+  json_t *body = body_object(req);
+  handler(req, resp);
+  record(req, resp, body, client, rid);
+  json_decref(body);
+  header_add(resp, rid);
+  return 0;
+}
+
+int fg_api_audit_robot_stop(fg_req *req, fg_resp *resp) {
+  return recorded(req, resp, fg_api_robot_stop);
+}
+
+int fg_api_audit_robot_reset(fg_req *req, fg_resp *resp) {
+  return recorded(req, resp, fg_api_robot_reset);
 }
 
 int fg_api_audit_robot_command(fg_req *req, fg_resp *resp) {

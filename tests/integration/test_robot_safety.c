@@ -193,6 +193,21 @@ static void check_stop(void) {
   ASSERT_EQ(JINT(r->json, "stopped_command"), id);
   h_resp_free(r);
   wait_state(id, "stopped");
+  /* the stop is in the audit log with its reason, beside the pick it stopped */
+  r = h_get("/v1/robot/log?limit=5");
+  json_t *entries = JGET(r->json, "entries"), *e;
+  size_t i;
+  int stop_seen = 0;
+  json_array_foreach(entries, i, e) {
+    const char *cmd = json_string_value(json_object_get(e, "command"));
+    if (cmd && strcmp(cmd, "stop") == 0) {
+      ASSERT_STREQ(JSTR(e, "outcome"), "done");
+      ASSERT_STREQ(JSTR(e, "reason"), "a person in the cell");
+      stop_seen = 1;
+    }
+  }
+  ASSERT(stop_seen);
+  h_resp_free(r);
   /* the simulator halted on its way: between where it started and the approach's start */
   char *line = last_event(&sim, "stop ");
   ASSERT(line != NULL);
