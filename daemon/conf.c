@@ -578,7 +578,7 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
   }
   case K_UNIT_ID: return parse_int(st, name, v, 0, 247, &m->unit_id);
   case K_TIMEOUT_MS: return parse_int(st, name, v, 1, 60000, &m->timeout_ms);
-  case K_BASE: return parse_int(st, name, v, 0, 65535 - 20, &m->base);
+  case K_BASE: return parse_int(st, name, v, 0, 65535 - 26, &m->base); /* the float32 span */
   case K_ENCODING:
     if (!parse_enum(st, name, v, encoding_names, &x)) return 0;
     m->encoding = (fg_encoding)x;
@@ -607,7 +607,7 @@ static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name
   case K_LIMIT_MAX: return parse_vec3(st, name, v, "x y z in metres", m->limit_max);
   case K_LIMIT_MARGIN: return parse_bounded(st, name, v, 0, 0, 10, &m->limit_margin_m);
   case K_APPROACH_CONE_DEG: return parse_bounded(st, name, v, 0, 0, 180, &m->approach_cone_deg);
-  case K_MAX_FORCE_N: return parse_bounded(st, name, v, 0, 1, 65535, &m->max_force_n);
+  case K_MAX_FORCE_N: return parse_bounded(st, name, v, 0, 0, 65535, &m->max_force_n);
   case K_MAX_SPEED_MPS: return parse_bounded(st, name, v, 0, 1, 10, &m->max_speed_mps);
   case K_SPEED_MPS: return parse_bounded(st, name, v, 0, 1, 10, &m->speed_mps);
   case K_APPROACH_M: return parse_bounded(st, name, v, 0, 0, 1, &m->approach_m);

@@ -275,7 +275,7 @@ static void test_values(void) {
       "parity = e\n"
       "unit_id = 247\n"
       "timeout_ms = 60000\n"
-      "base = 65515\n"
+      "base = 65509\n"
       "encoding = float32\n"
       "ack_timeout_ms = 600000\n"
       "done_timeout_ms = 3600000\n"
@@ -309,7 +309,7 @@ static void test_values(void) {
   ASSERT_EQ(c->robot.parity, 'E');
   ASSERT_EQ(c->robot.unit_id, 247);
   ASSERT_EQ(c->robot.timeout_ms, 60000);
-  ASSERT_EQ(c->robot.base, 65515);
+  ASSERT_EQ(c->robot.base, 65509);
   ASSERT_EQ(c->robot.encoding, FG_ENCODING_FLOAT32);
   ASSERT_EQ(c->robot.ack_timeout_ms, 600000);
   ASSERT_EQ(c->gripper_modbus.transport, FG_TRANSPORT_TCP);
@@ -664,7 +664,15 @@ static void test_errors(void) {
                "[http] header_timeout_s:", "duplicate key");
   EXPECT_ERROR("[robot]\nport = 0\n", 2, "[robot] port:", "1 to 65535");
   EXPECT_ERROR("[robot]\nunit_id = 248\n", 2, "[robot] unit_id:", "0 to 247");
-  EXPECT_ERROR("[robot]\nbase = 65516\n", 2, "[robot] base:", "0 to 65515");
+  EXPECT_ERROR("[robot]\nbase = 65510\n", 2, "[robot] base:", "0 to 65509");
+  EXPECT_ERROR("[robot]\nlimit_min = 0 0 0\n", 2, "[robot] limit_max:", "needs both");
+  EXPECT_ERROR("[robot]\nlimit_min = 0 0 1\nlimit_max = 1 1 1\n", 2, "[robot] limit_min:",
+               "below limit_max");
+  EXPECT_ERROR("[robot]\napproach_cone_deg = 181\n", 2, "[robot] approach_cone_deg:",
+               "at most 180");
+  EXPECT_ERROR("[robot]\nmax_speed_mps = 0\n", 2, "[robot] max_speed_mps:", "above 0");
+  EXPECT_ERROR("[robot]\nspeed_mps = 0.5\n", 2, "[robot] speed_mps:", "above max_speed_mps");
+  EXPECT_ERROR("[robot]\napproach_m = 1.5\n", 2, "[robot] approach_m:", "at most 1");
   EXPECT_ERROR("[robot]\ntimeout_ms = 0\n", 2, "[robot] timeout_ms:", NULL);
   EXPECT_ERROR("[robot]\nack_timeout_ms = 600001\n", 2, "[robot] ack_timeout_ms:", NULL);
   EXPECT_ERROR("[gripper.modbus]\nbaud = fast\n", 2, "[gripper.modbus] baud:", NULL);
@@ -844,6 +852,14 @@ static void test_shipped(void) {
   ASSERT_EQ(c->audit_max_bytes, d->audit_max_bytes);
   ASSERT_EQ(c->audit_keep, d->audit_keep);
   ASSERT(c->lock_dir == NULL && d->lock_dir == NULL);
+  ASSERT_EQ(c->motion.has_box, 0);
+  ASSERT(c->motion.limit_margin_m == d->motion.limit_margin_m &&
+         c->motion.approach_cone_deg == d->motion.approach_cone_deg &&
+         c->motion.max_force_n == d->motion.max_force_n &&
+         c->motion.max_speed_mps == d->motion.max_speed_mps &&
+         c->motion.speed_mps == d->motion.speed_mps &&
+         c->motion.approach_m == d->motion.approach_m &&
+         c->motion.retreat_m == d->motion.retreat_m);
   fg_conf_free(c);
   fg_conf_free(d);
   snprintf(path, sizeof path, "%s/config/demo.conf", src);
