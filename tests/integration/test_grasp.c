@@ -74,6 +74,8 @@ static int check_reply(const h_resp *r, const char *task, int top_k, double appr
     matrix_of(JGET(g, "pose"), T);
     matrix_of(JGET(g, "pre_grasp"), P);
     ASSERT_OK(fg_pose_validate(T));
+    /* within [robot]'s default approach cone: the tool's +z within 60 degrees of down */
+    ASSERT(-T[10] >= cos(60 * M_PI / 180) - 1e-9);
     for (int k = 0; k < 3; k++) {
       ASSERT_NEAR(P[4 * k + 3], T[4 * k + 3] - approach * T[4 * k + 2], 1e-9);
       const char idx[2] = {(char)('0' + k), 0};
@@ -286,7 +288,8 @@ int main(int argc, char **argv) {
   r_expect(r, 200, NULL);
   ASSERT_STREQ(JSTR(r->json, "command"), "pick");
   uint16_t w[32];
-  ASSERT_EQ(r_robot_words(r, w, 32), 10);
+  ASSERT_EQ(r_robot_words(r, w, 32), 13);
+  ASSERT_EQ(w[10], 1000); /* the task's approach: the robot comes in from its pre_grasp */
   double p[3], q[4], rv[3];
   fg_pose_to_quat(T, p, q);
   fg_rotvec_from_quat(q, rv);
