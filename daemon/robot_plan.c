@@ -10,9 +10,14 @@
 
 /* ---------------------------------------------------------------- planning */
 
+/* The force of a request that gives none: 40 N, or the limit when that is lower. */
+static double default_force(const fg_robot_svc *svc) {
+  return fmin(DEFAULT_FORCE_N, floor(svc->lim.max_force_n));
+}
+
 /* A gripper step moving to position at the request's speed and force. */
 int robot_plan_gripper(fg_robot_svc *svc, const fg_robot_request *req, const char *name,
-                        int position, fg_robot_step *st) {
+                       int position, fg_robot_step *st) {
   memset(st, 0, sizeof *st);
   st->kind = FG_STEP_GRIPPER;
   st->name = name;
@@ -20,7 +25,7 @@ int robot_plan_gripper(fg_robot_svc *svc, const fg_robot_request *req, const cha
   const fg_robotiq_model *m = svc->model;
   FG_TRY(fg_robotiq_speed_to_byte(m, req->has_speed ? req->speed_mps : m->speed_max_mps,
                                   &st->speed));
-  FG_TRY(fg_robotiq_force_to_byte(m, req->has_force ? req->force_n : DEFAULT_FORCE_N,
+  FG_TRY(fg_robotiq_force_to_byte(m, req->has_force ? req->force_n : default_force(svc),
                                   &st->force));
   fg_robotiq_request(FG_ROBOTIQ_ACT | FG_ROBOTIQ_GTO, position, st->speed, st->force, st->words);
   st->n_words = FG_ROBOTIQ_WORDS;
@@ -86,7 +91,7 @@ static int path_length(int has, double asked, double dflt, const char *name, dou
  * Without a gripper of its own the robot program actuates the tool and retreats itself: the
  * block carries the retreat and no robot_retreat step follows. */
 int robot_plan_locked(fg_robot_svc *svc, const fg_motion_limits *lim,
-                       const fg_robot_request *req, fg_robot_cmd_view *v) {
+                      const fg_robot_request *req, fg_robot_cmd_view *v) {
   memset(v, 0, sizeof *v);
   v->command = req->command;
   v->req = *req;
@@ -129,7 +134,7 @@ int robot_plan_locked(fg_robot_svc *svc, const fg_motion_limits *lim,
   FG_TRY(path_length(req->has_retreat, req->retreat_m, c == FG_ROBOT_MOVE ? 0 : svc->retreat_m,
                      "retreat", &retreat));
   const double speed = req->has_speed ? req->speed_mps : svc->speed_mps;
-  const double force = req->has_force ? req->force_n : DEFAULT_FORCE_N;
+  const double force = req->has_force ? req->force_n : default_force(svc);
   const fg_retreat_kind rk = c == FG_ROBOT_PICK    ? FG_RETREAT_UP
                              : c == FG_ROBOT_PLACE ? FG_RETREAT_BACK
                                                    : FG_RETREAT_NONE;

@@ -4,7 +4,8 @@
  * motion_limit naming the limit and sending nothing; the position box taken from the scenes
  * when [robot] sets none; the approach and the speed in the block and followed by the
  * simulator; a stop in the middle of a pick (the simulator halts where it is), the latch that
- * refuses motion and gripper actions until a reset; a stop with nothing running.
+ * refuses motion and gripper actions until a reset, and the stop in the audit log; a stop
+ * with nothing running; the default force held to a lower limit.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
 #include "simproc.h"
@@ -139,7 +140,7 @@ static void check_limits(void) {
 
   /* without limit_min/limit_max the box is the scenes' workspaces grown by limit_margin */
   char *conf = h_fmt("[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\n"
-                     "timeout_ms = 300\nlimit_margin = 0.05\n", sim.port);
+                     "timeout_ms = 300\nlimit_margin = 0.05\nmax_force_n = 30\n", sim.port);
   h_write_config(conf);
   free(conf);
   h_start();
@@ -152,6 +153,8 @@ static void check_limits(void) {
   r = pick(0.4, 0.0, 0.05, NULL);
   r_expect(r, 200, NULL);
   h_resp_free(r);
+  const int n = robot_writes(&sim);
+  ASSERT_EQ(g_w[n - 1].words[9], 30); /* the default force (40 N) is held to the limit */
   expect_limit(pick(0.9, 0.0, 0.05, NULL), "position_box"); /* 0.85 is the edge */
   r = h_get("/v1/robot");
   ASSERT_NEAR(JNUM(r->json, "limits.position_box.max.2"), 0.40, 1e-9);
