@@ -79,7 +79,17 @@ static void check_no_ack(void) {
   ASSERT(json_is_true(json_object_get(r->json, "replayed")));
   h_resp_free(r);
   /* the block, then a no-op under the next seq: a robot program that comes back later finds
-   * nothing armed */
+   * nothing armed (written by the robot's worker once the command has answered: wait for
+   * the latch to say so) */
+  for (int i = 0;; i++) {
+    r = h_get("/v1/robot");
+    json_t *l = json_object_get(r->json, "latched");
+    const int cleared = json_is_object(l) && json_is_false(json_object_get(l, "clear_pending"));
+    h_resp_free(r);
+    if (cleared) break;
+    ASSERT(i < 1000); /* 10 s */
+    h_sleep_ms(10);
+  }
   ASSERT_EQ(simproc_writes(&sim, 1, g_w, 64), 2);
   ASSERT_EQ(g_w[0].words[1], 5);
   ASSERT_EQ(g_w[1].words[0], g_w[0].words[0] + 1);
