@@ -306,10 +306,10 @@ int fg_api_scene_grasps(fg_req *req, fg_resp *resp) {
   o->n_threads = threads;
   /* only poses the robot may be sent to, and never through the table */
   fg_motion_limits lim;
-  double retreat_m, speed_mps;
+  double approach_m, retreat_m, speed_mps; /* the robot's defaults: only the retreat counts */
   fg_robot_limits_get(req->app->robot, &lim);
-  fg_robot_path_defaults(req->app->robot, &o->approach_m, &retreat_m, &speed_mps);
-  o->approach_m = task->approach_m;
+  fg_robot_path_defaults(req->app->robot, &approach_m, &retreat_m, &speed_mps);
+  o->approach_m = task->approach_m; /* the pre_grasp this task returns */
   o->retreat_m = task->kind == FG_TASK_PLACE ? 0 : retreat_m;
   o->limits = &lim;
   o->floor_solid = 1;

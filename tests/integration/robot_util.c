@@ -101,3 +101,17 @@ int r_robot_words(const h_resp *r, uint16_t *w, int max) {
     w[i] = (uint16_t)json_integer_value(json_array_get(words, i));
   return n;
 }
+
+int r_wait_state(long long id, const char *want, double timeout_s) {
+  char path[64];
+  snprintf(path, sizeof path, "/v1/robot/commands/%lld", id);
+  for (int i = 0; i < (int)(timeout_s * 100); i++) {
+    h_resp *r = h_get(path);
+    const char *state = json_string_value(json_object_get(r->json, "state"));
+    const int there = r->status == 200 && state && strcmp(state, want) == 0;
+    h_resp_free(r);
+    if (there) return 1;
+    h_sleep_ms(10);
+  }
+  return 0;
+}

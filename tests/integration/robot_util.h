@@ -24,6 +24,10 @@ int r_wait_true(const char *path, const char *key, double timeout_s);
  * alone says nothing about the registers. 1 when it did. */
 int r_wait_status(const char *path, double timeout_s);
 
+/* Polls GET /v1/robot/commands/{id} up to timeout_s until its state is want. 1 when it
+ * got there. */
+int r_wait_state(long long id, const char *want, double timeout_s);
+
 /* Asserts r's status, and for an error its code. */
 void r_expect_at(const char *file, int line, const h_resp *r, long status, const char *code);
 #define r_expect(r, status, code) r_expect_at(__FILE__, __LINE__, (r), (status), (code))

@@ -32,21 +32,6 @@ static const char *state_of(const h_resp *r) {
   return json_string_value(json_object_get(r_command(r), "state"));
 }
 
-/* Polls GET /v1/robot/commands/{id} until its state is want; 1 when it got there. */
-static int wait_state(json_int_t id, const char *want, double timeout_s) {
-  char path[64];
-  snprintf(path, sizeof path, "/v1/robot/commands/%lld", (long long)id);
-  for (int i = 0; i < (int)(timeout_s * 50); i++) {
-    h_resp *r = h_get(path);
-    int ok = r->status == 200 && strcmp(state_of(r), want) == 0;
-    h_resp_free(r);
-    if (ok) return 1;
-    const struct timespec ts = {0, 20000000};
-    nanosleep(&ts, NULL);
-  }
-  return 0;
-}
-
 /* A loopback port nobody listens on. */
 static int closed_port(void) {
   int s = socket(AF_INET, SOCK_STREAM, 0);
@@ -72,7 +57,7 @@ static void check_no_ack(void) {
                 "not sent again"));
   const json_int_t id = json_integer_value(json_object_get(r_command(r), "id"));
   h_resp_free(r);
-  ASSERT(wait_state(id, "unknown", 1));
+  ASSERT(r_wait_state(id, "unknown", 1));
   /* the retry with its key is the same answer, and nothing is sent again */
   r = send_move(NULL, "k-noack");
   r_expect(r, 504, "ack_timeout");
@@ -246,7 +231,7 @@ static void check_killed_mid_command(void) {
   h_resp_free(r);
 
   simproc_kill(&sim);
-  ASSERT(wait_state(id, "unknown", 5));
+  ASSERT(r_wait_state(id, "unknown", 5));
   /* the poll that found the connection gone is a transport error, not a failed connect */
   ASSERT(h_metric("fieldgrip_modbus_errors_total{peer=\"robot\",kind=\"transport\"}") >= 1);
   /* its key answered at the acknowledgement; a retry now gets the command as it ended */

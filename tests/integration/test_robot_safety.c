@@ -163,20 +163,6 @@ static void check_limits(void) {
   simproc_stop(&sim);
 }
 
-/* Waits (hang guard 20 s) until GET /v1/robot/commands/{id} is in state want. */
-static void wait_state(long long id, const char *want) {
-  char *path = h_fmt("/v1/robot/commands/%lld", id);
-  for (int i = 0;; i++) {
-    h_resp *r = h_get(path);
-    const int there = strcmp(JSTR(r->json, "state"), want) == 0;
-    h_resp_free(r);
-    if (there) break;
-    ASSERT(i < 2000);
-    h_sleep_ms(10);
-  }
-  free(path);
-}
-
 static void check_stop(void) {
   simproc sim;
   /* real time: a slow pick takes seconds, time enough to stop it */
@@ -195,7 +181,7 @@ static void check_stop(void) {
   ASSERT(json_is_true(JGET(r->json, "stop_written")));
   ASSERT_EQ(JINT(r->json, "stopped_command"), id);
   h_resp_free(r);
-  wait_state(id, "stopped");
+  ASSERT(r_wait_state(id, "stopped", 20));
   /* the stop is in the audit log with its reason, beside the pick it stopped */
   r = h_get("/v1/robot/log?limit=5");
   json_t *entries = JGET(r->json, "entries"), *e;
@@ -242,8 +228,8 @@ static void check_stop(void) {
   r_expect(r, 200, NULL);
   h_resp_free(r);
   /* the simulator logs the stop register's return to 0 just after it answered the write */
-  for (int i = 0; !(line = last_event(&sim, "run")); i++) {
-    ASSERT(i < 1000); /* 10 s */
+  for (int k = 0; !(line = last_event(&sim, "run")); k++) {
+    ASSERT(k < 1000); /* 10 s */
     h_sleep_ms(10);
   }
   free(line);
