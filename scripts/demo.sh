@@ -78,7 +78,7 @@ fi
 
 daemon=$build/daemon/fieldgripd
 scenegen=$build/tests/scenegen/fieldgrip-scenegen
-sim=$build/tests/sim/fieldgrip-sim
+sim=$build/sim/fieldgrip-sim
 for prog in "$daemon" "$scenegen" "$sim"; do
   [ -x "$prog" ] || die "no $prog: build first (meson compile -C $build)"
 done

@@ -465,7 +465,7 @@ bench_heatmap() {
 }
 
 bench_robot() {
-  local dir=$tmp/robot sim=$build/tests/sim/fieldgrip-sim bin=$build/tests/bench/bench_robot
+  local dir=$tmp/robot sim=$build/sim/fieldgrip-sim bin=$build/tests/bench/bench_robot
   local n=${BENCH_ROBOT_N:-1000} sim_pid port= out rc=0 line p99 pass
   if [ ! -x "$sim" ] || [ ! -x "$bin" ]; then
     echo "bench=robot_execute error=not_built hint=meson_compile_bench_robot_fieldgrip-sim pass=no"

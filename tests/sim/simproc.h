@@ -1,4 +1,4 @@
-/* Modbus server processes for the tests: fieldgrip-sim (tests/sim) or another server program
+/* Modbus server processes for the tests: fieldgrip-sim (sim/) or another server program
  * run as a child process on a loopback port with --port-file and --log, killed at exit (also
  * after a failed ASSERT, which calls exit), and the writes it logged, one line per write
  * request: "write unit=U fn=F addr=A n=N words=W1,W2,...".

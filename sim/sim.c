@@ -17,7 +17,8 @@
  *
  * Time is kept lazily: before every request the simulated state is advanced to the monotonic
  * clock, and the poll loop wakes at the next due event. Several clients may be connected at
- * once (fieldgripd opens one connection per peer). Only used by tests and demo setups. */
+ * once (fieldgripd opens one connection per peer). Installed beside fieldgripd, for rehearsing
+ * a cell before the hardware arrives; the demo and the tests run it too. */
 #include <arpa/inet.h>
 #include <errno.h>
 #include <fcntl.h>
