@@ -40,6 +40,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "cell.h"
+
 #define SIM_MAX_CLIENTS 32
 #define SIM_NEVER INT64_MAX
 
@@ -69,6 +71,8 @@ typedef struct {
   double object_width_mm;  /* < 0: no object */
   double stroke_mm;
   const char *rtu_device;  /* also serve the gripper unit on this serial line; NULL: none */
+  const char *report_path; /* the physics cell's report; NULL: none */
+  sim_cell_config cell;    /* cell.scene_path != NULL: the physics mode */
 } sim_config;
 
 /* The robot block, its pending acknowledgement, and the TCP that the robot program moves:
@@ -90,6 +94,7 @@ typedef struct {
   double speed_mps;
   uint16_t seq;            /* the command in progress */
   FILE *log;               /* the request log, or NULL */
+  sim_cell *cell;          /* the physics mode's cell, or NULL */
 } sim_robot;
 
 /* The gripper: status bits, finger position and the motion in progress. */
@@ -105,6 +110,7 @@ typedef struct {
   double p0, stop;
   double rate;             /* position units per ms */
   int obj_pos;             /* finger position at the object; -1 without an object */
+  sim_cell *cell;          /* the physics mode's cell (which moves the fingers), or NULL */
 } sim_gripper;
 
 typedef struct {
@@ -118,6 +124,8 @@ typedef struct {
   int n_clients;
   long n_requests;         /* received so far, over all connections */
   FILE *log;
+  sim_cell *cell;          /* the physics mode: the cell; NULL in the kinematic mode */
+  FILE *report;            /* --report */
 } sim_state;
 
 /* A request as received, for logging and for the simulated side effects. */
@@ -153,7 +161,17 @@ static void usage(FILE *f) {
           "  --object-width-mm W    an object of width W mm between the fingers\n"
           "  --stroke-mm S          gripper stroke in mm (default 85)\n"
           "  --rtu DEVICE           also serve the gripper unit over Modbus RTU on DEVICE\n"
-          "                         (115200 8N1; e.g. one end of a socat pty pair)\n");
+          "                         (115200 8N1; e.g. one end of a socat pty pair)\n"
+          "physics mode (MuJoCo): the robot program and the gripper act in a simulated cell\n"
+          "  --scene FILE           the cell's MJCF file: a geom named table, objects as\n"
+          "                         bodies with a free joint (fieldgrip-scenegen writes one)\n"
+          "  --gripper MODEL        panda | robotiq-2f85 | robotiq-2f140 (default robotiq-2f85)\n"
+          "  --report FILE          append one JSON line per command's outcome: what the\n"
+          "                         fingers touch, what was lifted, what moved\n"
+          "  --approach-m M         pick and place without an approach come in this far\n"
+          "                         (default 0.10)\n"
+          "  --lift-m M             pick without a retreat lifts this far (default 0.10)\n"
+          "  --reach-m M            refuse poses farther from the base (default 0.85)\n");
 }
 
 /* ---------------------------------------------------------------- time */
@@ -194,6 +212,18 @@ static int parse_mm(const char *opt, const char *s, double *out) {
   double v = strtod(s, &end);
   if (errno || end == s || *end || !isfinite(v) || v < 0 || v > 1000) {
     fprintf(stderr, "fieldgrip-sim: %s wants millimetres in 0..1000, got \"%s\"\n", opt, s);
+    return -1;
+  }
+  *out = v;
+  return 0;
+}
+
+static int parse_metres(const char *opt, const char *s, double lo, double hi, double *out) {
+  char *end;
+  errno = 0;
+  double v = strtod(s, &end);
+  if (errno || end == s || *end || !(v >= lo && v <= hi)) {
+    fprintf(stderr, "fieldgrip-sim: %s wants metres in %g..%g, got \"%s\"\n", opt, lo, hi, s);
     return -1;
   }
   *out = v;
@@ -253,6 +283,12 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"object-width-mm", required_argument, NULL, 'o'},
       {"stroke-mm", required_argument, NULL, 'S'},
       {"rtu", required_argument, NULL, 'R'},
+      {"scene", required_argument, NULL, 'C'},
+      {"gripper", required_argument, NULL, 'G'},
+      {"report", required_argument, NULL, 'P'},
+      {"approach-m", required_argument, NULL, 1001},
+      {"lift-m", required_argument, NULL, 1002},
+      {"reach-m", required_argument, NULL, 1003},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -265,7 +301,8 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   cfg->stroke_ms = 200;
   cfg->object_width_mm = -1;
   cfg->stroke_mm = 85;
-  int have_listen = 0, rc = 0, c;
+  sim_cell_config_default(&cfg->cell);
+  int have_listen = 0, have_object = 0, rc = 0, c;
   const int max_ms = 3600000;
   opterr = 0;
   while ((c = getopt_long(argc, argv, "", opts, NULL)) != -1) {
@@ -310,9 +347,24 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     case 'D': rc = parse_long("--drop-after", optarg, 1, LONG_MAX, &cfg->drop_after); break;
     case 'A': rc = parse_int("--activation-ms", optarg, 0, max_ms, &cfg->activation_ms); break;
     case 's': rc = parse_int("--stroke-ms", optarg, 1, max_ms, &cfg->stroke_ms); break;
-    case 'o': rc = parse_mm("--object-width-mm", optarg, &cfg->object_width_mm); break;
+    case 'o':
+      rc = parse_mm("--object-width-mm", optarg, &cfg->object_width_mm);
+      have_object = 1;
+      break;
     case 'S': rc = parse_mm("--stroke-mm", optarg, &cfg->stroke_mm); break;
     case 'R': cfg->rtu_device = optarg; break;
+    case 'C': cfg->cell.scene_path = optarg; break;
+    case 'G':
+      if (fg_gripper_model_parse(optarg, &cfg->cell.gripper) != 0) {
+        fprintf(stderr, "fieldgrip-sim: --gripper wants panda, robotiq-2f85 or robotiq-2f140, "
+                "got \"%s\"\n", optarg);
+        rc = -1;
+      }
+      break;
+    case 'P': cfg->report_path = optarg; break;
+    case 1001: rc = parse_metres("--approach-m", optarg, 0, 1, &cfg->cell.approach_m); break;
+    case 1002: rc = parse_metres("--lift-m", optarg, 0, 1, &cfg->cell.lift_m); break;
+    case 1003: rc = parse_metres("--reach-m", optarg, 0.1, 5, &cfg->cell.reach_m); break;
     case 'h': usage(stdout); return 1;
     default:
       fprintf(stderr, "fieldgrip-sim: unknown or incomplete option \"%s\"\n",
@@ -340,6 +392,16 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     fprintf(stderr, "fieldgrip-sim: --stroke-mm must be positive\n");
     return -1;
   }
+  if (cfg->cell.scene_path && have_object) {
+    fprintf(stderr, "fieldgrip-sim: --object-width-mm is of the kinematic mode; with --scene the "
+            "cell's objects are what the fingers meet\n");
+    return -1;
+  }
+  if (!cfg->cell.scene_path && cfg->report_path) {
+    fprintf(stderr, "fieldgrip-sim: --report needs --scene (the physics mode)\n");
+    return -1;
+  }
+  cfg->cell.time_scale = cfg->time_scale;
   if (cfg->object_width_mm > cfg->stroke_mm) {
     fprintf(stderr, "fieldgrip-sim: --object-width-mm %g is wider than the stroke (%g mm)\n",
             cfg->object_width_mm, cfg->stroke_mm);
@@ -379,7 +441,7 @@ static double f32_at(const uint16_t *w) {
 /* The block as the robot program reads it. */
 typedef struct {
   int command;
-  double p[3], rv[3], approach, retreat, speed;
+  double p[3], rv[3], width, force, approach, retreat, speed;
 } sim_block;
 
 static void block_read(const sim_robot *r, const sim_config *cfg, sim_block *b) {
@@ -390,6 +452,8 @@ static void block_read(const sim_robot *r, const sim_config *cfg, sim_block *b) 
       b->p[i] = f32_at(&w[2 + 2 * i]);
       b->rv[i] = f32_at(&w[8 + 2 * i]);
     }
+    b->width = f32_at(&w[14]);
+    b->force = w[16];
     b->approach = f32_at(&w[17]);
     b->retreat = f32_at(&w[19]);
     b->speed = f32_at(&w[21]);
@@ -399,6 +463,8 @@ static void block_read(const sim_robot *r, const sim_config *cfg, sim_block *b) 
     b->p[i] = (int16_t)w[2 + i] * 1e-4;
     b->rv[i] = (int16_t)w[5 + i] * 1e-3;
   }
+  b->width = w[8] * 1e-4;
+  b->force = w[9];
   b->approach = w[10] * 1e-4;
   b->retreat = w[11] * 1e-4;
   b->speed = w[12] * 1e-3;
@@ -489,6 +555,14 @@ static int64_t robot_start(sim_robot *r, const sim_config *cfg, int64_t now) {
     fprintf(r->log, " speed=%.4f approach=%.4f retreat=%.4f\n", b.speed, b.approach, b.retreat);
     fflush(r->log);
   }
+  if (r->cell) {
+    /* the cell runs the program; robot_advance asks it when it ends */
+    const sim_cell_block cb = {r->map->tab_registers[0], b.command, {b.p[0], b.p[1], b.p[2]},
+                               {b.rv[0], b.rv[1], b.rv[2]}, b.width, b.force, b.approach,
+                               b.retreat, b.speed};
+    char why[256];
+    return sim_cell_program_start(r->cell, &cb, now, why, sizeof why) != 0 ? -1 : SIM_NEVER;
+  }
   if (!posed || path_length(r) == 0) return 0;
   if (!(b.speed > 0)) return -1;
   return (int64_t)(path_length(r) / b.speed * 1e9 * cfg->time_scale);
@@ -511,7 +585,17 @@ static void robot_advance(sim_robot *r, const sim_config *cfg, int64_t now) {
       r->done_due_ns = SIM_NEVER;
     } else {
       r->moving = 1;
-      r->done_due_ns = t + run + ms_to_ns(cfg->done_delay_ms);
+      r->done_due_ns = run == SIM_NEVER ? SIM_NEVER : t + run + ms_to_ns(cfg->done_delay_ms);
+    }
+  }
+  if (r->cell && r->moving && r->done_due_ns == SIM_NEVER &&
+      !sim_cell_program_running(r->cell)) {
+    /* the cell's program ended: done, or failed; --done-delay-ms counts from here */
+    r->done_due_ns = now + ms_to_ns(cfg->done_delay_ms);
+    if (sim_cell_program_result(r->cell) == 3) {
+      reg[r->status_off] = 3;
+      r->moving = 0;
+      r->done_due_ns = SIM_NEVER;
     }
   }
   if (now >= r->done_due_ns) {
@@ -529,6 +613,7 @@ static void robot_stop(sim_robot *r, const sim_config *cfg, int64_t now) {
   r->stopped = 1;
   r->pending = 0;
   r->ack_due_ns = SIM_NEVER;
+  if (r->cell) sim_cell_program_stop(r->cell, now);
   if (r->moving) {
     tcp_at(r, cfg, now, r->tcp);
     r->moving = 0;
@@ -585,6 +670,11 @@ static int gripper_init(sim_gripper *g, const sim_config *cfg) {
 
 /* Finger position at time t (0 open .. 255 closed). */
 static double gripper_pos_at(const sim_gripper *g, int64_t t) {
+  if (g->cell) {
+    int pos, moving, obj;
+    sim_cell_fingers_status(g->cell, &pos, &moving, &obj);
+    return pos;
+  }
   if (!g->moving) return g->pos;
   double travel = fabs(g->stop - g->p0);
   double done = g->rate * (double)(t - g->t0_ns) * 1e-6;
@@ -595,6 +685,7 @@ static double gripper_pos_at(const sim_gripper *g, int64_t t) {
 /* Freezes the fingers where they are at t. */
 static void gripper_halt(sim_gripper *g, int64_t t) {
   g->pos = gripper_pos_at(g, t);
+  if (g->cell && g->moving) sim_cell_fingers_goto(g->cell, (int)g->pos, 255, g->force, t);
   g->moving = 0;
 }
 
@@ -613,6 +704,14 @@ static void gripper_start_move(sim_gripper *g, const sim_config *cfg, int target
   gripper_halt(g, t);
   g->pr = target;
   g->force = force;
+  if (g->cell) {
+    sim_cell_fingers_goto(g->cell, target, speed, force, t);
+    g->moving = 1;
+    g->obj = 0;
+    g->cu = 0;
+    g->arrive_ns = SIM_NEVER;
+    return;
+  }
   g->rate = 255.0 / cfg->stroke_ms * (0.25 + 0.75 * speed / 255.0);
   g->stop = target;
   g->contact = 0;
@@ -642,12 +741,25 @@ static void gripper_advance(sim_gripper *g, const sim_config *cfg, int64_t now) 
     g->act = 1;
     g->pos = 0; /* activation ends with the fingers fully open */
     g->moving = 0;
+    if (g->cell) sim_cell_fingers_goto(g->cell, 0, 255, 0, t);
     const uint16_t *reg = g->map->tab_registers;
     if ((reg[0] >> 8) & 0x08) {
       /* A go-to that waited for the activation runs now. */
       g->flt = 0;
       gripper_start_move(g, cfg, reg[1] & 0xFF, reg[2] >> 8, reg[2] & 0xFF, t);
     }
+  }
+  if (g->cell && g->moving) {
+    /* the cell's fingers stop at the position or on something */
+    int pos, moving, obj;
+    sim_cell_fingers_status(g->cell, &pos, &moving, &obj);
+    if (!moving) {
+      g->stop = pos;
+      g->contact = obj == 2 || obj == 1;
+      gripper_arrive(g);
+      g->obj = obj;
+    }
+    return;
   }
   if (g->moving && now >= g->arrive_ns) gripper_arrive(g);
 }
@@ -702,6 +814,7 @@ static void gripper_publish(sim_gripper *g, int64_t now) {
 /* ---------------------------------------------------------------- state and events */
 
 static void sim_advance(sim_state *s, int64_t now) {
+  if (s->cell) sim_cell_advance(s->cell, now);
   robot_advance(&s->robot, &s->cfg, now);
   gripper_advance(&s->grip, &s->cfg, now);
 }
@@ -712,6 +825,11 @@ static int sim_poll_timeout(const sim_state *s, int64_t now) {
   if (s->robot.done_due_ns < due) due = s->robot.done_due_ns;
   if (s->grip.act_due_ns < due) due = s->grip.act_due_ns;
   if (s->grip.moving && s->grip.arrive_ns < due) due = s->grip.arrive_ns;
+  if (s->cell && sim_cell_busy(s->cell)) {
+    /* the cell steps while something moves: at once, or every 2 ms */
+    const int64_t tick = now + (s->cfg.time_scale > 0 ? ms_to_ns(2) : 0);
+    if (tick < due) due = tick;
+  }
   if (due == SIM_NEVER) return -1;
   if (due <= now) return 0;
   int64_t ms = (due - now + 999999) / 1000000;
@@ -905,6 +1023,29 @@ static int log_open(sim_state *s) {
 
 /* Sets up the mappings, the signal fd, the log and the listening socket; returns 0 or -1
  * after a message. */
+/* The physics mode: the report, then the cell, whose objects settle before the port opens. */
+static int cell_open(sim_state *s) {
+  if (!s->cfg.cell.scene_path) return 0;
+  if (s->cfg.report_path) {
+    s->report = fopen(s->cfg.report_path, "a");
+    if (!s->report) {
+      fprintf(stderr, "fieldgrip-sim: cannot open report %s: %s\n", s->cfg.report_path,
+              strerror(errno));
+      return -1;
+    }
+    s->cfg.cell.report = s->report;
+  }
+  char err[1536];
+  s->cell = sim_cell_open(&s->cfg.cell, err, sizeof err);
+  if (!s->cell) {
+    fprintf(stderr, "fieldgrip-sim: %s\n", err);
+    return -1;
+  }
+  s->robot.cell = s->cell;
+  s->grip.cell = s->cell;
+  return 0;
+}
+
 static int sim_open(sim_state *s) {
   s->listen_fd = -1;
   s->sig_fd = -1;
@@ -924,7 +1065,7 @@ static int sim_open(sim_state *s) {
     fprintf(stderr, "fieldgrip-sim: signalfd: %s\n", strerror(errno));
     return -1;
   }
-  if (log_open(s) != 0) return -1;
+  if (log_open(s) != 0 || cell_open(s) != 0) return -1;
 
   s->ctx = modbus_new_tcp_pi(s->cfg.host[0] ? s->cfg.host : NULL, s->cfg.service);
   if (!s->ctx) {
@@ -978,6 +1119,8 @@ static void sim_close(sim_state *s) {
   modbus_mapping_free(s->grip.map);
   if (s->log) fclose(s->log);
   if (s->robot.log) fclose(s->robot.log);
+  sim_cell_close(s->cell);
+  if (s->report) fclose(s->report);
 }
 
 /* Serves until SIGTERM or SIGINT; returns 0, or -1 when poll fails. */
