@@ -12,6 +12,8 @@
  *   DIR/transforms.json      training views; DIR/transforms_test.json the held-out ones
  *                            (view i when i % holdout == 0; absent when none is held out)
  *   DIR/gt.json              poses, shapes, grasps and class embeddings (layout in gt.h)
+ *   DIR/cell.xml             the table and the objects as a MuJoCo MJCF model, convex parts
+ *                            at the gt poses, for a simulator to grasp in (cell.h)
  *
  * The same arguments give the same bytes, whatever the number of threads. */
 #include <errno.h>
@@ -28,6 +30,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/half.h"
+#include "cell.h"
 #include "core/pose.h"
 #include "gt.h"
 #include "io/image.h"
@@ -421,6 +424,17 @@ static json_t *gt_json(const sg_scene *sc) {
   return root;
 }
 
+/* ---------------------------------------------------------------- cell.xml */
+
+static int write_cell(const sg_scene *sc, const char *dir) {
+  char *xml;
+  size_t len;
+  FG_TRY(sg_cell_xml(sc, &xml, &len));
+  int rc = write_in(dir, "cell.xml", xml, len);
+  free(xml);
+  return rc;
+}
+
 /* ---------------------------------------------------------------- main */
 
 static double now_s(void) {
@@ -508,7 +522,8 @@ static int generate(const sg_scene *sc, const char *dir) {
   j = gt_json(sc);
   rc = write_json(dir, "gt.json", j);
   json_decref(j);
-  return rc;
+  FG_TRY(rc);
+  return write_cell(sc, dir);
 }
 
 int main(int argc, char **argv) {

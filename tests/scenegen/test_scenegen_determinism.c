@@ -34,7 +34,8 @@ static void test_same_bytes(void) {
   char *b = generate("11", "4");
   char *d = generate("11", "2");
   char *c = generate("12", "2");
-  static const char *const files[] = {"gt.json", "transforms.json", "transforms_test.json"};
+  static const char *const files[] = {"gt.json", "transforms.json", "transforms_test.json",
+                                      "cell.xml"};
   for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
     if (!same_file(a, b, files[i]) || !same_file(a, d, files[i]))
       FG_TEST_FAIL("%s differs between runs", files[i]);
