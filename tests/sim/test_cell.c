@@ -16,30 +16,21 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "simproc.h"
+#include "cellproc.h"
 #include "test.h"
 
-#define BASE 128
-#define ROBOT 1
-#define GRIPPER 9
+#define BASE CELLPROC_BASE
 
 static char g_sim[PATH_MAX], g_cells[PATH_MAX], g_dir[PATH_MAX];
-static int g_reports;
 
 /* ---------------------------------------------------------------- helpers */
 
-static modbus_t *client(int port, int unit) {
-  modbus_t *c = modbus_new_tcp("127.0.0.1", port);
-  ASSERT(c != NULL);
-  ASSERT_EQ(modbus_set_slave(c, unit), 0);
-  ASSERT_EQ(modbus_set_response_timeout(c, 10, 0), 0);
-  if (modbus_connect(c) != 0) FG_TEST_FAIL("connect to %d: %s", port, modbus_strerror(errno));
-  return c;
-}
+typedef cellproc cell;
 
-static void client_free(modbus_t *c) {
-  modbus_close(c);
-  modbus_free(c);
+static void cell_start(cell *c, const char *scene, const char *encoding) {
+  char path[2 * PATH_MAX];
+  snprintf(path, sizeof path, "%s/%s", g_cells, scene);
+  cellproc_start(c, path, encoding, g_dir);
 }
 
 static void wr(modbus_t *c, int addr, int n, const uint16_t *w) {
@@ -47,89 +38,15 @@ static void wr(modbus_t *c, int addr, int n, const uint16_t *w) {
   if (rc != n) FG_TEST_FAIL("write %d x %d: %d (%s)", addr, n, rc, modbus_strerror(errno));
 }
 
-/* A started physics cell: the simulator on blocks.xml (or cell) with a new report file. */
-typedef struct {
-  simproc p;
-  modbus_t *robot, *grip;
-  char report[PATH_MAX + 32];
-} cell;
-
-static void cell_start(cell *c, const char *scene, const char *encoding) {
-  char path[2 * PATH_MAX];
-  snprintf(path, sizeof path, "%s/%s", g_cells, scene);
-  snprintf(c->report, sizeof c->report, "%s/report%d.jsonl", g_dir, g_reports++);
-  const char *const extra[] = {"--scene", path, "--report", c->report, "--time-scale", "0",
-                               "--encoding", encoding, NULL};
-  simproc_start(&c->p, 0, extra);
-  c->robot = client(c->p.port, ROBOT);
-  c->grip = client(c->p.port, GRIPPER);
-}
-
-static void cell_stop(cell *c) {
-  client_free(c->robot);
-  client_free(c->grip);
-  simproc_stop(&c->p);
-}
-
 /* Tool +z straight down, its +y (the closing axis) along world -y: a turn of pi about x. */
 static const double k_down[3] = {M_PI, 0, 0};
 
-/* Writes an int16 block (proto/modbus.md) and waits until its seq is acknowledged and its
- * status is no longer busy; returns the status (2 done, 3 failed). */
-static int command(cell *c, uint16_t seq, int cmd, double x, double y, double z, double width,
+static int command(cell *c, int seq, int cmd, double x, double y, double z, double width,
                    double approach, double retreat) {
-  const uint16_t w[13] = {seq, (uint16_t)cmd, (uint16_t)(int16_t)lround(x * 1e4),
-                          (uint16_t)(int16_t)lround(y * 1e4), (uint16_t)(int16_t)lround(z * 1e4),
-                          (uint16_t)(int16_t)lround(k_down[0] * 1e3), 0, 0,
-                          (uint16_t)lround(width * 1e4), 40, (uint16_t)lround(approach * 1e4),
-                          (uint16_t)lround(retreat * 1e4), 100};
-  wr(c->robot, BASE, 13, w);
-  const double deadline = simproc_now_ms() + 60000;
-  for (;;) {
-    uint16_t v[2];
-    ASSERT_EQ(modbus_read_registers(c->robot, BASE + 13, 2, v), 2);
-    if (v[0] == seq && v[1] != 1) return v[1];
-    ASSERT(simproc_now_ms() < deadline);
-    simproc_sleep_ms(1);
-  }
+  const double p[3] = {x, y, z};
+  return cellproc_command(c, seq, cmd, p, k_down, width, approach, retreat);
 }
 
-/* The report's line for seq (the last one with it), parsed; the caller decrefs. */
-static json_t *report_line(const cell *c, int seq) {
-  char *text = simproc_read(c->report);
-  ASSERT(text != NULL);
-  json_t *found = NULL;
-  for (char *line = strtok(text, "\n"); line; line = strtok(NULL, "\n")) {
-    json_error_t e;
-    json_t *j = json_loads(line, 0, &e);
-    if (!j) FG_TEST_FAIL("report line is not JSON (%s): %s", e.text, line);
-    if (json_integer_value(json_object_get(j, "seq")) == seq && json_object_get(j, "command")) {
-      json_decref(found);
-      found = j;
-    } else {
-      json_decref(j);
-    }
-  }
-  free(text);
-  if (!found) FG_TEST_FAIL("no report line for seq %d in %s", seq, c->report);
-  return found;
-}
-
-static json_t *report_object(json_t *line, const char *name) {
-  json_t *o;
-  size_t i;
-  json_array_foreach(json_object_get(line, "objects"), i, o)
-    if (strcmp(json_string_value(json_object_get(o, "name")), name) == 0) return o;
-  FG_TEST_FAIL("no object %s in the report", name);
-  return NULL;
-}
-
-static int flag(json_t *obj, const char *key) { return json_is_true(json_object_get(obj, key)); }
-static double num(json_t *obj, const char *key) { return json_number_value(json_object_get(obj, key)); }
-
-static int gobj(json_t *line) {
-  return (int)json_integer_value(json_object_get(json_object_get(line, "fingers"), "gobj"));
-}
 
 /* ---------------------------------------------------------------- cases */
 
@@ -138,33 +55,33 @@ static void test_pick_lifts_the_block(void) {
   cell c;
   cell_start(&c, "blocks.xml", "int16");
   ASSERT_EQ(command(&c, 1, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
-  json_t *r = report_line(&c, 1);
-  ASSERT_EQ(gobj(r), 2); /* the fingers stopped on it */
-  json_t *block = report_object(r, "block");
-  ASSERT(flag(block, "held"));
-  ASSERT(flag(block, "lifted"));
-  ASSERT(num(block, "dz_m") > 0.09 && num(block, "dz_m") < 0.11);
-  ASSERT(!flag(block, "collided"));
-  ASSERT(!flag(report_object(r, "tower"), "moved"));
+  json_t *r = cellproc_report(&c, 1);
+  ASSERT_EQ(cellproc_gobj(r), 2); /* the fingers stopped on it */
+  json_t *block = cellproc_object(r, "block");
+  ASSERT(cellproc_flag(block, "held"));
+  ASSERT(cellproc_flag(block, "lifted"));
+  ASSERT(cellproc_num(block, "dz_m") > 0.09 && cellproc_num(block, "dz_m") < 0.11);
+  ASSERT(!cellproc_flag(block, "collided"));
+  ASSERT(!cellproc_flag(cellproc_object(r, "tower"), "moved"));
   /* the fingers stand about 60 mm apart: pads pressed into the block by under 2 mm a side */
-  const double width = num(json_object_get(r, "fingers"), "width_m");
+  const double width = cellproc_num(json_object_get(r, "fingers"), "width_m");
   ASSERT(width > 0.056 && width < 0.0605);
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 static void test_pick_beside_closes_on_air(void) {
   cell c;
   cell_start(&c, "blocks.xml", "int16");
   ASSERT_EQ(command(&c, 1, 1, 0.48, 0, 0.05, 0.085, 0.10, 0), 2);
-  json_t *r = report_line(&c, 1);
-  ASSERT_EQ(gobj(r), 3); /* closed fully */
-  json_t *block = report_object(r, "block");
-  ASSERT(!flag(block, "lifted"));
-  ASSERT(!flag(block, "touched"));
-  ASSERT(fabs(num(block, "dz_m")) < 0.002);
+  json_t *r = cellproc_report(&c, 1);
+  ASSERT_EQ(cellproc_gobj(r), 3); /* closed fully */
+  json_t *block = cellproc_object(r, "block");
+  ASSERT(!cellproc_flag(block, "lifted"));
+  ASSERT(!cellproc_flag(block, "touched"));
+  ASSERT(fabs(cellproc_num(block, "dz_m")) < 0.002);
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 /* One finger comes down on the tower's top: the tower is pushed or knocked over, and the hand
@@ -173,27 +90,27 @@ static void test_pick_through_the_tower_moves_it(void) {
   cell c;
   cell_start(&c, "blocks.xml", "int16");
   command(&c, 1, 1, 0.45, 0.285, 0.10, 0.085, 0.10, 0);
-  json_t *r = report_line(&c, 1);
-  json_t *tower = report_object(r, "tower");
-  ASSERT(flag(tower, "collided"));
-  ASSERT(flag(tower, "moved") || flag(tower, "knocked_over") || flag(tower, "held"));
-  ASSERT(num(tower, "moved_m") > 0.005 || num(tower, "turned_deg") > 5);
-  ASSERT(!flag(report_object(r, "block"), "moved"));
+  json_t *r = cellproc_report(&c, 1);
+  json_t *tower = cellproc_object(r, "tower");
+  ASSERT(cellproc_flag(tower, "collided"));
+  ASSERT(cellproc_flag(tower, "moved") || cellproc_flag(tower, "knocked_over") || cellproc_flag(tower, "held"));
+  ASSERT(cellproc_num(tower, "moved_m") > 0.005 || cellproc_num(tower, "turned_deg") > 5);
+  ASSERT(!cellproc_flag(cellproc_object(r, "block"), "moved"));
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 static void test_pick_in_empty_space(void) {
   cell c;
   cell_start(&c, "blocks.xml", "int16");
   ASSERT_EQ(command(&c, 1, 1, 0.30, -0.25, 0.03, 0.085, 0.10, 0), 2);
-  json_t *r = report_line(&c, 1);
-  ASSERT_EQ(gobj(r), 3);
-  ASSERT(!flag(report_object(r, "block"), "lifted"));
-  ASSERT(!flag(report_object(r, "tower"), "lifted"));
-  ASSERT(!flag(report_object(r, "block"), "moved"));
+  json_t *r = cellproc_report(&c, 1);
+  ASSERT_EQ(cellproc_gobj(r), 3);
+  ASSERT(!cellproc_flag(cellproc_object(r, "block"), "lifted"));
+  ASSERT(!cellproc_flag(cellproc_object(r, "tower"), "lifted"));
+  ASSERT(!cellproc_flag(cellproc_object(r, "block"), "moved"));
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 static int grip_obj(modbus_t *g, int *po) {
@@ -212,8 +129,8 @@ static void test_registers_close_on_the_block(void) {
   wr(c.grip, 0x03E8, 3, reset);
   wr(c.grip, 0x03E8, 3, act);
   ASSERT_EQ(command(&c, 1, 5, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
-  json_t *r = report_line(&c, 1);
-  ASSERT(!flag(report_object(r, "block"), "touched"));
+  json_t *r = cellproc_report(&c, 1);
+  ASSERT(!cellproc_flag(cellproc_object(r, "block"), "touched"));
   json_decref(r);
   const double deadline = simproc_now_ms() + 60000;
   uint16_t in[3];
@@ -235,12 +152,12 @@ static void test_registers_close_on_the_block(void) {
    * contacts give up to 2 mm a side (87) */
   ASSERT(po > 72 && po < 92);
   ASSERT_EQ(command(&c, 2, 5, 0.45, 0, 0.15, 0, 0, 0), 2);
-  r = report_line(&c, 2);
-  json_t *block = report_object(r, "block");
-  ASSERT(flag(block, "lifted"));
-  ASSERT(num(block, "dz_m") > 0.09);
+  r = cellproc_report(&c, 2);
+  json_t *block = cellproc_object(r, "block");
+  ASSERT(cellproc_flag(block, "lifted"));
+  ASSERT(cellproc_num(block, "dz_m") > 0.09);
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 /* Out of reach and NaN: status 3 (failed), reported, and the next command runs. */
@@ -248,15 +165,15 @@ static void test_refused_poses(void) {
   cell c;
   cell_start(&c, "blocks.xml", "int16");
   ASSERT_EQ(command(&c, 1, 1, 0.95, 0, 0.05, 0.085, 0.10, 0), 3);
-  json_t *r = report_line(&c, 1);
+  json_t *r = cellproc_report(&c, 1);
   ASSERT_STREQ(json_string_value(json_object_get(r, "outcome")), "failed");
   ASSERT(strstr(json_string_value(json_object_get(r, "why")), "reach") != NULL);
   json_decref(r);
   ASSERT_EQ(command(&c, 2, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
-  r = report_line(&c, 2);
-  ASSERT(flag(report_object(r, "block"), "lifted"));
+  r = cellproc_report(&c, 2);
+  ASSERT(cellproc_flag(cellproc_object(r, "block"), "lifted"));
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 
   cell_start(&c, "blocks.xml", "float32");
   uint16_t w[23] = {1, 1};
@@ -280,10 +197,10 @@ static void test_refused_poses(void) {
     ASSERT_EQ(modbus_read_registers(c.robot, BASE + 23, 2, v), 2);
   } while (v[0] != 1 || v[1] == 1);
   ASSERT_EQ(v[1], 3);
-  r = report_line(&c, 1);
+  r = cellproc_report(&c, 1);
   ASSERT(strstr(json_string_value(json_object_get(r, "why")), "not finite") != NULL);
   json_decref(r);
-  cell_stop(&c);
+  cellproc_stop(&c);
 }
 
 /* Scenes the cell refuses: the exit status is 1 and stderr says why (and where). */
@@ -321,7 +238,7 @@ static void test_deterministic(void) {
     command(&c, 1, 1, 0.48, 0, 0.05, 0.085, 0.10, 0);
     command(&c, 2, 1, 0.45, 0.285, 0.10, 0.085, 0.10, 0);
     command(&c, 3, 1, 0.45, 0, 0.05, 0.085, 0.10, 0);
-    cell_stop(&c);
+    cellproc_stop(&c);
     text[k] = simproc_read(c.report);
     ASSERT(text[k] != NULL);
   }
