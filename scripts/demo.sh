@@ -9,8 +9,9 @@
 #   3. starts fieldgripd with config/demo.conf and, printing every curl command it runs:
 #      uploads the first scan's frames, trains, records two demos (how to pick up the box
 #      and the ball), uploads and trains the second scan, asks "where is the mug?" (heatmap
-#      PLY and PNG), asks for a grasp of the box by query, executes it and prints the
-#      gripper's report;
+#      PLY and PNG), asks for a grasp of the box by query, executes it in the simulator's
+#      physics cell of the second scan (MuJoCo) and prints the gripper's report and what
+#      physics says: the box lifted and by how much, or the miss;
 #   4. keeps the daemon and the simulator running for you to explore; Ctrl-C stops both.
 #
 # With [clip] in the configuration the questions are texts ("a mug") and the daemon computes
@@ -183,11 +184,12 @@ object_grasp() { jq -c --arg n "$2" '.objects[] | select(.name == $n) | .grasp' 
 
 # ---------------------------------------------------------------- simulator and daemon
 
-box_mm=$(object_grasp 0 box | jq '.width * 1000 | round')
 say "Starting the robot and gripper simulator on $sim_host:$sim_port"
 port_busy "$sim_host" "$sim_port" && die "$sim_host:$sim_port is taken: is a simulator or robot already there?"
-sim_args=(--listen "$sim_host:$sim_port" --object-width-mm "$box_mm")
-echo "${dim}\$ $(quote "$sim" "${sim_args[@]}") &${reset}   (the fingers stop on a ${box_mm} mm box when they close)"
+# The physics cell of the second scan (MuJoCo): its table and objects, the gripper and what
+# every command did to them, in $out/physics.jsonl
+sim_args=(--listen "$sim_host:$sim_port" --scene "$out/scan0/cell.xml" --report "$out/physics.jsonl")
+echo "${dim}\$ $(quote "$sim" "${sim_args[@]}") &${reset}   (the second scan's table and objects in physics)"
 "$sim" "${sim_args[@]}" >"$out/sim.log" 2>&1 &
 pids+=($!)
 
@@ -383,6 +385,19 @@ api_curl GET /v1/gripper
 expect 200
 jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
 [ "$(jq -r .object_detected <<<"$reply")" = true ] || miss "the gripper holds nothing: $reply"
+
+say "What physics says (the simulator's report of the last motion)"
+last=$(grep '"command"' "$out/physics.jsonl" | tail -n 1)
+jq -c '{command, outcome, fingers, objects: [.objects[] | select(.touched or .moved or .lifted)
+        | {name, held, lifted, dz_m, moved, knocked_over}]}' <<<"$last"
+lifted=$(jq -r '[.objects[] | select(.lifted) | .name] | join(",")' <<<"$last")
+if [ "$lifted" = box ]; then
+  echo "the box was lifted by $(jq -r '.objects[] | select(.name == "box") | .dz_m' <<<"$last") m, held between the fingers"
+elif [ -n "$lifted" ]; then
+  miss "physics: the pick lifted the $lifted, not the box"
+else
+  miss "physics: the pick lifted nothing ($(jq -c '[.objects[] | select(.moved or .knocked_over) | .name]' <<<"$last") moved)"
+fi
 
 say "Done: the loop ran through"
 echo "scans, heatmaps and logs: $out"
