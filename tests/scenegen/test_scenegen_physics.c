@@ -21,7 +21,7 @@ static void grasp_of(const sg_gt_object *o, double p[3], double rv[3]) {
 
 static json_t *pick(const char *cell, const char *dir, const double p[3], const double rv[3]) {
   cellproc c;
-  cellproc_start(&c, cell, "int16", dir);
+  cellproc_start(&c, cell, "int16", dir, NULL);
   ASSERT_EQ(cellproc_command(&c, 1, 1, p, rv, 0.085, 0.10, 0), 2);
   json_t *r = cellproc_report(&c, 1);
   cellproc_stop(&c);

@@ -21,12 +21,16 @@ static void client_free(modbus_t *c) {
   modbus_free(c);
 }
 
-void cellproc_start(cellproc *c, const char *scene, const char *encoding, const char *dir) {
+void cellproc_start(cellproc *c, const char *scene, const char *encoding, const char *dir,
+                    const char *const *extra) {
   static int n_reports;
   snprintf(c->report, sizeof c->report, "%s/report%d.jsonl", dir, n_reports++);
-  const char *const extra[] = {"--scene", scene, "--report", c->report, "--time-scale", "0",
-                               "--encoding", encoding, NULL};
-  simproc_start(&c->p, 0, extra);
+  const char *args[24] = {"--scene", scene, "--report", c->report, "--time-scale", "0",
+                          "--encoding", encoding};
+  int n = 8;
+  for (; extra && *extra && n < 23; extra++) args[n++] = *extra;
+  args[n] = NULL;
+  simproc_start(&c->p, 0, args);
   c->robot = client(c->p.port, 1);
   c->grip = client(c->p.port, 9);
 }

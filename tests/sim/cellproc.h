@@ -19,9 +19,10 @@ typedef struct cellproc {
   char report[PATH_MAX + 32];
 } cellproc;
 
-/* Starts the simulator on scene (a path) with encoding "int16" or "float32"; the report is a
- * new file in dir. */
-void cellproc_start(cellproc *c, const char *scene, const char *encoding, const char *dir);
+/* Starts the simulator on scene (a path) with encoding "int16" or "float32" and the options in
+ * extra (NULL-terminated; NULL: none); the report is a new file in dir. */
+void cellproc_start(cellproc *c, const char *scene, const char *encoding, const char *dir,
+                    const char *const *extra);
 
 /* Closes the clients and stops the simulator (which must exit with status 0). */
 void cellproc_stop(cellproc *c);

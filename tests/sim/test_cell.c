@@ -30,7 +30,7 @@ typedef cellproc cell;
 static void cell_start(cell *c, const char *scene, const char *encoding) {
   char path[2 * PATH_MAX];
   snprintf(path, sizeof path, "%s/%s", g_cells, scene);
-  cellproc_start(c, path, encoding, g_dir);
+  cellproc_start(c, path, encoding, g_dir, NULL);
 }
 
 static void wr(modbus_t *c, int addr, int n, const uint16_t *w) {
