@@ -1,7 +1,7 @@
 /* fieldgrip-sim: one Modbus TCP server that plays both peers of fieldgripd (proto/modbus.md):
  *
- *   unit --robot-unit (1)    profile pose-registers: holding registers base .. base + 11
- *                            (int16) or base .. base + 18 (float32); acknowledges each new
+ *   unit --robot-unit (1)    profile pose-registers: holding registers base .. base + 15
+ *                            (int16) or base .. base + 25 (float32); acknowledges each new
  *                            seq like the URScript program of proto/modbus.md
  *   unit --gripper-unit (9)  profile robotiq-2f: request registers 0x03E8..0x03EA (holding),
  *                            status registers 0x07D0..0x07D2 (input), with activation, finger
@@ -14,6 +14,11 @@
  * Others get exception 1, addresses outside a unit's registers exception 2, and unit ids that
  * are neither peer exception 0x0B (gateway target failed to respond), as a Modbus TCP gateway
  * in front of an RTU bus answers.
+ *
+ * With --scene the simulator runs in its physics mode (cell.h): the robot program and the
+ * gripper's fingers act on the table and objects of an MJCF file in MuJoCo, and the gripper's
+ * status comes from the finger joints. The registers, the failure modes and the logs are the
+ * same in both modes. The robot block is in robot.c, the gripper in gripper.c.
  *
  * Time is kept lazily: before every request the simulated state is advanced to the monotonic
  * clock, and the poll loop wakes at the next due event. Several clients may be connected at
@@ -40,78 +45,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "cell.h"
+#include "sim.h"
 
 #define SIM_MAX_CLIENTS 32
-#define SIM_NEVER INT64_MAX
-
-/* Robotiq register addresses (proto/modbus.md "Profile robotiq-2f"). */
-#define SIM_RQ_OUT 0x03E8
-#define SIM_RQ_IN 0x07D0
-#define SIM_RQ_FLT_NOT_ACTIVATED 0x07
-#define SIM_RQ_FLT_ACTION_DELAYED 0x05
-
-typedef struct {
-  char host[256];          /* without brackets; "" = any address */
-  int ipv6;                /* host was given as [v6] */
-  char service[8];         /* port as text, "0" = pick a free one */
-  const char *port_file;   /* NULL: none */
-  const char *log_path;    /* NULL: no request log */
-  const char *events_path; /* NULL: no log of the robot's motions and stops */
-  double time_scale;       /* motions take their length / speed times this (default 1) */
-  int robot_unit, gripper_unit;
-  int base;                /* first holding register of the robot block */
-  int float32;             /* 0 int16 layout (12 registers), 1 float32 layout (19) */
-  int ack_init;
-  int ack_delay_ms, done_delay_ms;
-  int never_ack, fail;
-  int exception;           /* 0 none, else the exception code for robot-block writes */
-  long drop_after;         /* 0 none, else the 1-based request number to drop */
-  int activation_ms, stroke_ms;
-  double object_width_mm;  /* < 0: no object */
-  double stroke_mm;
-  const char *rtu_device;  /* also serve the gripper unit on this serial line; NULL: none */
-  const char *report_path; /* the physics cell's report; NULL: none */
-  sim_cell_config cell;    /* cell.scene_path != NULL: the physics mode */
-} sim_config;
-
-/* The robot block, its pending acknowledgement, and the TCP that the robot program moves:
- * along a straight path from where it is to the pre-pose (approach back along the tool's -z),
- * down to the pose, then to the retreat point, at the block's speed. */
-typedef struct {
-  modbus_mapping_t *map;   /* holding registers base .. base + n_regs - 1 */
-  int n_regs, ack_off, status_off, stop_off;
-  int pending;             /* an acknowledgement of pending_seq is scheduled */
-  uint16_t pending_seq;
-  int64_t ack_due_ns;      /* SIM_NEVER when none */
-  int64_t done_due_ns;     /* SIM_NEVER when none */
-  int stopped;             /* the stop register holds 1 */
-  double tcp[3];           /* TCP position (metres) when not moving */
-  double way[4][3];        /* the path of the command in progress */
-  int n_way;
-  int moving;              /* between the ack and done_due_ns */
-  int64_t move_t0_ns;      /* the motion's start (the ack) */
-  double speed_mps;
-  uint16_t seq;            /* the command in progress */
-  FILE *log;               /* the request log, or NULL */
-  sim_cell *cell;          /* the physics mode's cell, or NULL */
-} sim_robot;
-
-/* The gripper: status bits, finger position and the motion in progress. */
-typedef struct {
-  modbus_mapping_t *map;   /* holding 0x03E8..0x03EA, input 0x07D0..0x07D2 */
-  int act, gto, sta, obj, flt, pr, cu;
-  double pos;              /* finger position, 0 open .. 255 closed, when not moving */
-  int64_t act_due_ns;      /* end of the activation in progress; SIM_NEVER when none */
-  int moving;              /* a motion from p0 (at t0_ns) toward stop is in progress */
-  int contact;             /* the motion ends on the object */
-  int force;               /* rFR of the motion in progress */
-  int64_t t0_ns, arrive_ns;
-  double p0, stop;
-  double rate;             /* position units per ms */
-  int obj_pos;             /* finger position at the object; -1 without an object */
-  sim_cell *cell;          /* the physics mode's cell (which moves the fingers), or NULL */
-} sim_gripper;
 
 typedef struct {
   sim_config cfg;
@@ -182,7 +118,6 @@ static int64_t now_ns(void) {
   return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
 }
 
-static int64_t ms_to_ns(double ms) { return (int64_t)llround(ms * 1e6); }
 
 /* ---------------------------------------------------------------- arguments */
 
@@ -410,413 +345,12 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   return 0;
 }
 
-/* ---------------------------------------------------------------- robot block */
-
-/* Register offsets of proto/modbus.md: the block fieldgrip writes, then ack, status, stop. */
-static int robot_init(sim_robot *r, const sim_config *cfg) {
-  memset(r, 0, sizeof *r);
-  const int words = cfg->float32 ? 23 : 13;
-  r->ack_off = words;
-  r->status_off = words + 1;
-  r->stop_off = words + 2;
-  r->n_regs = words + 3;
-  r->map = modbus_mapping_new_start_address(0, 0, 0, 0, (unsigned)cfg->base,
-                                            (unsigned)r->n_regs, 0, 0);
-  if (!r->map) return -1;
-  r->map->tab_registers[r->ack_off] = (uint16_t)cfg->ack_init;
-  r->ack_due_ns = SIM_NEVER;
-  r->done_due_ns = SIM_NEVER;
-  r->tcp[0] = 0.30; /* a home pose above the table, as a robot starts at one */
-  r->tcp[2] = 0.40;
-  return 0;
-}
-
-static double f32_at(const uint16_t *w) {
-  const uint32_t bits = (uint32_t)w[0] << 16 | w[1];
-  float f;
-  memcpy(&f, &bits, sizeof f);
-  return f;
-}
-
-/* The block as the robot program reads it. */
-typedef struct {
-  int command;
-  double p[3], rv[3], width, force, approach, retreat, speed;
-} sim_block;
-
-static void block_read(const sim_robot *r, const sim_config *cfg, sim_block *b) {
-  const uint16_t *w = r->map->tab_registers;
-  b->command = w[1];
-  if (cfg->float32) {
-    for (int i = 0; i < 3; i++) {
-      b->p[i] = f32_at(&w[2 + 2 * i]);
-      b->rv[i] = f32_at(&w[8 + 2 * i]);
-    }
-    b->width = f32_at(&w[14]);
-    b->force = w[16];
-    b->approach = f32_at(&w[17]);
-    b->retreat = f32_at(&w[19]);
-    b->speed = f32_at(&w[21]);
-    return;
-  }
-  for (int i = 0; i < 3; i++) {
-    b->p[i] = (int16_t)w[2 + i] * 1e-4;
-    b->rv[i] = (int16_t)w[5 + i] * 1e-3;
-  }
-  b->width = w[8] * 1e-4;
-  b->force = w[9];
-  b->approach = w[10] * 1e-4;
-  b->retreat = w[11] * 1e-4;
-  b->speed = w[12] * 1e-3;
-}
-
-/* The tool's +z in the base frame: R(rv) applied to (0, 0, 1) (Rodrigues). */
-static void tool_z(const double rv[3], double z[3]) {
-  const double th = sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]);
-  if (th < 1e-12) {
-    z[0] = z[1] = 0;
-    z[2] = 1;
-    return;
-  }
-  const double k[3] = {rv[0] / th, rv[1] / th, rv[2] / th}, c = cos(th), s = sin(th);
-  /* v cos + (k x v) sin + k (k . v)(1 - cos) with v = (0, 0, 1) */
-  z[0] = k[1] * s + k[0] * k[2] * (1 - c);
-  z[1] = -k[0] * s + k[1] * k[2] * (1 - c);
-  z[2] = c + k[2] * k[2] * (1 - c);
-}
-
-static double path_length(const sim_robot *r) {
-  double len = 0;
-  for (int i = 1; i < r->n_way; i++) {
-    double d2 = 0;
-    for (int k = 0; k < 3; k++) d2 += (r->way[i][k] - r->way[i - 1][k]) * (r->way[i][k] - r->way[i - 1][k]);
-    len += sqrt(d2);
-  }
-  return len;
-}
-
-/* Where the TCP is at time t of the motion in progress. */
-static void tcp_at(const sim_robot *r, const sim_config *cfg, int64_t t, double p[3]) {
-  if (cfg->time_scale == 0) { /* motions are instant: it is where it goes */
-    memcpy(p, r->way[r->n_way - 1], sizeof r->way[0]);
-    return;
-  }
-  double left = r->speed_mps * (double)(t - r->move_t0_ns) * 1e-9 / cfg->time_scale;
-  memcpy(p, r->way[0], sizeof r->way[0]);
-  for (int i = 1; i < r->n_way; i++) {
-    double d[3], len = 0;
-    for (int k = 0; k < 3; k++) {
-      d[k] = r->way[i][k] - r->way[i - 1][k];
-      len += d[k] * d[k];
-    }
-    len = sqrt(len);
-    if (left <= len) {
-      for (int k = 0; k < 3; k++) p[k] = r->way[i - 1][k] + (len > 0 ? d[k] * left / len : 0);
-      return;
-    }
-    left -= len;
-    memcpy(p, r->way[i], sizeof r->way[i]);
-  }
-}
-
-static void log_point(FILE *f, const char *name, const double p[3]) {
-  fprintf(f, " %s=%.4f,%.4f,%.4f", name, p[0], p[1], p[2]);
-}
-
-/* The robot program takes the block of seq: builds the path and says how long it runs
- * (ns), or -1 when it refuses the block (a motion without a speed). */
-static int64_t robot_start(sim_robot *r, const sim_config *cfg, int64_t now) {
-  sim_block b;
-  block_read(r, cfg, &b);
-  r->n_way = 1;
-  memcpy(r->way[0], r->tcp, sizeof r->tcp);
-  const int posed = b.command == 1 || b.command == 2 || b.command == 5;
-  if (posed) {
-    double z[3];
-    tool_z(b.rv, z);
-    for (int k = 0; k < 3; k++) {
-      r->way[1][k] = b.p[k] - b.approach * z[k];
-      r->way[2][k] = b.p[k];
-      r->way[3][k] = b.p[k] - (b.command == 2 ? b.retreat * z[k] : 0);
-    }
-    if (b.command == 1) r->way[3][2] += b.retreat;
-    r->n_way = 4;
-  }
-  r->speed_mps = b.speed;
-  r->move_t0_ns = now;
-  if (r->log) {
-    fprintf(r->log, "motion seq=%u cmd=%d", r->map->tab_registers[0], b.command);
-    log_point(r->log, "from", r->way[0]);
-    if (posed) {
-      log_point(r->log, "pre", r->way[1]);
-      log_point(r->log, "pose", r->way[2]);
-      log_point(r->log, "end", r->way[3]);
-    }
-    fprintf(r->log, " speed=%.4f approach=%.4f retreat=%.4f\n", b.speed, b.approach, b.retreat);
-    fflush(r->log);
-  }
-  if (r->cell) {
-    /* the cell runs the program; robot_advance asks it when it ends */
-    const sim_cell_block cb = {r->map->tab_registers[0], b.command, {b.p[0], b.p[1], b.p[2]},
-                               {b.rv[0], b.rv[1], b.rv[2]}, b.width, b.force, b.approach,
-                               b.retreat, b.speed};
-    char why[256];
-    return sim_cell_program_start(r->cell, &cb, now, why, sizeof why) != 0 ? -1 : SIM_NEVER;
-  }
-  if (!posed || path_length(r) == 0) return 0;
-  if (!(b.speed > 0)) return -1;
-  return (int64_t)(path_length(r) / b.speed * 1e9 * cfg->time_scale);
-}
-
-/* Applies the acknowledgement and the end of the command when they are due at now. */
-static void robot_advance(sim_robot *r, const sim_config *cfg, int64_t now) {
-  uint16_t *reg = r->map->tab_registers;
-  if (r->pending && now >= r->ack_due_ns) {
-    /* Both in one step, as one function-16 write of the robot program would. */
-    const int64_t t = r->ack_due_ns;
-    reg[r->status_off] = 1;
-    reg[r->ack_off] = r->pending_seq;
-    r->seq = r->pending_seq;
-    r->pending = 0;
-    r->ack_due_ns = SIM_NEVER;
-    const int64_t run = robot_start(r, cfg, t);
-    if (run < 0) {
-      reg[r->status_off] = 3;
-      r->done_due_ns = SIM_NEVER;
-    } else {
-      r->moving = 1;
-      r->done_due_ns = run == SIM_NEVER ? SIM_NEVER : t + run + ms_to_ns(cfg->done_delay_ms);
-    }
-  }
-  if (r->cell && r->moving && r->done_due_ns == SIM_NEVER &&
-      !sim_cell_program_running(r->cell)) {
-    /* the cell's program ended: done, or failed; --done-delay-ms counts from here */
-    r->done_due_ns = now + ms_to_ns(cfg->done_delay_ms);
-    if (sim_cell_program_result(r->cell) == 3) {
-      reg[r->status_off] = 3;
-      r->moving = 0;
-      r->done_due_ns = SIM_NEVER;
-    }
-  }
-  if (now >= r->done_due_ns) {
-    reg[r->status_off] = cfg->fail ? 3 : 2;
-    r->done_due_ns = SIM_NEVER;
-    if (r->moving) memcpy(r->tcp, r->way[r->n_way - 1], sizeof r->tcp);
-    r->moving = 0;
-  }
-}
-
-/* The stop register went to 1: the motion halts where it is (status 4) and nothing new
- * starts until it goes back to 0. */
-static void robot_stop(sim_robot *r, const sim_config *cfg, int64_t now) {
-  uint16_t *reg = r->map->tab_registers;
-  r->stopped = 1;
-  r->pending = 0;
-  r->ack_due_ns = SIM_NEVER;
-  if (r->cell) sim_cell_program_stop(r->cell, now);
-  if (r->moving) {
-    tcp_at(r, cfg, now, r->tcp);
-    r->moving = 0;
-    r->done_due_ns = SIM_NEVER;
-    reg[r->status_off] = 4;
-  }
-  if (r->log) {
-    fprintf(r->log, "stop seq=%u", r->seq);
-    log_point(r->log, "at", r->tcp);
-    fputc('\n', r->log);
-    fflush(r->log);
-  }
-}
-
-/* After a write that reached the block: the stop register first; then a seq that is nonzero,
- * not yet acknowledged and not already scheduled starts a new command, superseding one that
- * has not finished. */
-static void robot_on_write(sim_robot *r, const sim_config *cfg, int64_t now) {
-  const uint16_t *reg = r->map->tab_registers;
-  robot_advance(r, cfg, now);
-  if (reg[r->stop_off] && !r->stopped) robot_stop(r, cfg, now);
-  if (!reg[r->stop_off] && r->stopped) {
-    r->stopped = 0;
-    if (r->log) {
-      fprintf(r->log, "run\n");
-      fflush(r->log);
-    }
-  }
-  if (r->stopped) return;
-  uint16_t seq = reg[0];
-  if (cfg->never_ack || seq == 0 || seq == reg[r->ack_off]) return;
-  if (r->pending && seq == r->pending_seq) return;
-  if (r->moving) tcp_at(r, cfg, now, r->tcp); /* superseded: the new path starts here */
-  r->moving = 0;
-  r->pending = 1;
-  r->pending_seq = seq;
-  r->ack_due_ns = now + ms_to_ns(cfg->ack_delay_ms);
-  r->done_due_ns = SIM_NEVER;
-  robot_advance(r, cfg, now);
-}
-
-/* ---------------------------------------------------------------- gripper */
-
-static int gripper_init(sim_gripper *g, const sim_config *cfg) {
-  memset(g, 0, sizeof *g);
-  g->map = modbus_mapping_new_start_address(0, 0, 0, 0, SIM_RQ_OUT, 3, SIM_RQ_IN, 3);
-  if (!g->map) return -1;
-  g->act_due_ns = SIM_NEVER;
-  g->obj_pos = -1;
-  if (cfg->object_width_mm >= 0)
-    g->obj_pos = (int)lround(255.0 * (cfg->stroke_mm - cfg->object_width_mm) / cfg->stroke_mm);
-  return 0;
-}
-
-/* Finger position at time t (0 open .. 255 closed). */
-static double gripper_pos_at(const sim_gripper *g, int64_t t) {
-  if (g->cell) {
-    int pos, moving, obj;
-    sim_cell_fingers_status(g->cell, &pos, &moving, &obj);
-    return pos;
-  }
-  if (!g->moving) return g->pos;
-  double travel = fabs(g->stop - g->p0);
-  double done = g->rate * (double)(t - g->t0_ns) * 1e-6;
-  if (done > travel) done = travel;
-  return g->stop > g->p0 ? g->p0 + done : g->p0 - done;
-}
-
-/* Freezes the fingers where they are at t. */
-static void gripper_halt(sim_gripper *g, int64_t t) {
-  g->pos = gripper_pos_at(g, t);
-  if (g->cell && g->moving) sim_cell_fingers_goto(g->cell, (int)g->pos, 255, g->force, t);
-  g->moving = 0;
-}
-
-static void gripper_arrive(sim_gripper *g) {
-  g->pos = g->stop;
-  g->moving = 0;
-  g->obj = g->contact ? 2 : 3;
-  /* Holding an object draws current that grows with the force setting (x 10 mA). */
-  g->cu = g->contact ? 1 + g->force * 63 / 255 : 0;
-}
-
-/* Starts a motion at time t toward the requested position at the requested speed; closing
- * past the object stops at it. */
-static void gripper_start_move(sim_gripper *g, const sim_config *cfg, int target, int speed,
-                               int force, int64_t t) {
-  gripper_halt(g, t);
-  g->pr = target;
-  g->force = force;
-  if (g->cell) {
-    sim_cell_fingers_goto(g->cell, target, speed, force, t);
-    g->moving = 1;
-    g->obj = 0;
-    g->cu = 0;
-    g->arrive_ns = SIM_NEVER;
-    return;
-  }
-  g->rate = 255.0 / cfg->stroke_ms * (0.25 + 0.75 * speed / 255.0);
-  g->stop = target;
-  g->contact = 0;
-  if (g->obj_pos >= 0 && target > g->obj_pos && g->pos <= g->obj_pos) {
-    g->stop = g->obj_pos;
-    g->contact = 1;
-  }
-  g->p0 = g->pos;
-  g->t0_ns = t;
-  double travel = fabs(g->stop - g->p0);
-  if (travel < 1e-9) {
-    gripper_arrive(g);
-    return;
-  }
-  g->moving = 1;
-  g->obj = 0;
-  g->cu = 0;
-  g->arrive_ns = t + ms_to_ns(travel / g->rate);
-}
-
-/* Applies the end of the activation and the end of a motion when they are due at now. */
-static void gripper_advance(sim_gripper *g, const sim_config *cfg, int64_t now) {
-  if (now >= g->act_due_ns) {
-    int64_t t = g->act_due_ns;
-    g->act_due_ns = SIM_NEVER;
-    g->sta = 3;
-    g->act = 1;
-    g->pos = 0; /* activation ends with the fingers fully open */
-    g->moving = 0;
-    if (g->cell) sim_cell_fingers_goto(g->cell, 0, 255, 0, t);
-    const uint16_t *reg = g->map->tab_registers;
-    if ((reg[0] >> 8) & 0x08) {
-      /* A go-to that waited for the activation runs now. */
-      g->flt = 0;
-      gripper_start_move(g, cfg, reg[1] & 0xFF, reg[2] >> 8, reg[2] & 0xFF, t);
-    }
-  }
-  if (g->cell && g->moving) {
-    /* the cell's fingers stop at the position or on something */
-    int pos, moving, obj;
-    sim_cell_fingers_status(g->cell, &pos, &moving, &obj);
-    if (!moving) {
-      g->stop = pos;
-      g->contact = obj == 2 || obj == 1;
-      gripper_arrive(g);
-      g->obj = obj;
-    }
-    return;
-  }
-  if (g->moving && now >= g->arrive_ns) gripper_arrive(g);
-}
-
-/* After a write that reached the request registers: reset, activation or a go-to. */
-static void gripper_on_write(sim_gripper *g, const sim_config *cfg, int64_t now) {
-  const uint16_t *reg = g->map->tab_registers;
-  int action = reg[0] >> 8;
-  int ract = action & 0x01, rgto = (action >> 3) & 0x01;
-  g->gto = rgto;
-  if (!ract) {
-    gripper_halt(g, now);
-    g->act = 0;
-    g->sta = 0;
-    g->obj = 0;
-    g->cu = 0;
-    g->act_due_ns = SIM_NEVER;
-    g->flt = rgto ? SIM_RQ_FLT_NOT_ACTIVATED : 0;
-    return;
-  }
-  if (g->sta == 0) {
-    gripper_halt(g, now);
-    g->act = 1; /* gACT echoes rACT; gSTA tells when the activation is complete */
-    g->sta = 1;
-    g->obj = 0;
-    g->act_due_ns = now + ms_to_ns(cfg->activation_ms);
-  }
-  if (g->sta == 1) {
-    g->flt = rgto ? SIM_RQ_FLT_ACTION_DELAYED : 0;
-    gripper_advance(g, cfg, now); /* an activation of 0 ms completes at once */
-    return;
-  }
-  g->flt = 0;
-  if (rgto)
-    gripper_start_move(g, cfg, reg[1] & 0xFF, reg[2] >> 8, reg[2] & 0xFF, now);
-  else
-    gripper_halt(g, now);
-}
-
-/* Writes the status (input) registers from the state at now. */
-static void gripper_publish(sim_gripper *g, int64_t now) {
-  uint16_t *in = g->map->tab_input_registers;
-  int status = g->act | g->gto << 3 | g->sta << 4 | g->obj << 6;
-  long po = lround(gripper_pos_at(g, now));
-  if (po < 0) po = 0;
-  if (po > 255) po = 255;
-  in[0] = (uint16_t)(status << 8);
-  in[1] = (uint16_t)(g->flt << 8 | g->pr);
-  in[2] = (uint16_t)(po << 8 | g->cu);
-}
-
 /* ---------------------------------------------------------------- state and events */
 
 static void sim_advance(sim_state *s, int64_t now) {
   if (s->cell) sim_cell_advance(s->cell, now);
-  robot_advance(&s->robot, &s->cfg, now);
-  gripper_advance(&s->grip, &s->cfg, now);
+  sim_robot_advance(&s->robot, &s->cfg, now);
+  sim_gripper_advance(&s->grip, &s->cfg, now);
 }
 
 /* Milliseconds until the next due event (rounded up), or -1 when nothing is scheduled. */
@@ -827,7 +361,7 @@ static int sim_poll_timeout(const sim_state *s, int64_t now) {
   if (s->grip.moving && s->grip.arrive_ns < due) due = s->grip.arrive_ns;
   if (s->cell && sim_cell_busy(s->cell)) {
     /* the cell steps while something moves: at once, or every 2 ms */
-    const int64_t tick = now + (s->cfg.time_scale > 0 ? ms_to_ns(2) : 0);
+    const int64_t tick = now + (s->cfg.time_scale > 0 ? sim_ms_to_ns(2) : 0);
     if (tick < due) due = tick;
   }
   if (due == SIM_NEVER) return -1;
@@ -922,7 +456,7 @@ static int sim_handle(sim_state *s, modbus_t *ctx, const uint8_t *req, int len) 
   }
 
   modbus_mapping_t *map = robot ? s->robot.map : s->grip.map;
-  if (gripper) gripper_publish(&s->grip, now);
+  if (gripper) sim_gripper_publish(&s->grip, now);
   int applied = is_write(r.fn) && write_fits(map, &r);
   if (drop) {
     if (applied) write_apply(map, &r);
@@ -931,9 +465,9 @@ static int sim_handle(sim_state *s, modbus_t *ctx, const uint8_t *req, int len) 
   }
   if (applied) {
     if (robot)
-      robot_on_write(&s->robot, &s->cfg, now);
+      sim_robot_on_write(&s->robot, &s->cfg, now);
     else
-      gripper_on_write(&s->grip, &s->cfg, now);
+      sim_gripper_on_write(&s->grip, &s->cfg, now);
   }
   return drop ? -1 : 0;
 }
@@ -1049,7 +583,7 @@ static int cell_open(sim_state *s) {
 static int sim_open(sim_state *s) {
   s->listen_fd = -1;
   s->sig_fd = -1;
-  if (robot_init(&s->robot, &s->cfg) != 0 || gripper_init(&s->grip, &s->cfg) != 0) {
+  if (sim_robot_init(&s->robot, &s->cfg) != 0 || sim_gripper_init(&s->grip, &s->cfg) != 0) {
     fprintf(stderr, "fieldgrip-sim: out of memory\n");
     return -1;
   }
