@@ -57,6 +57,14 @@ static void test_pick_lifts_the_block(void) {
   ASSERT_EQ(command(&c, 1, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
   json_t *r = cellproc_report(&c, 1);
   ASSERT_EQ(cellproc_gobj(r), 2); /* the fingers stopped on it */
+  /* SPEC.md's fields */
+  ASSERT_STREQ(json_string_value(json_object_get(r, "lifted")), "block");
+  ASSERT(cellproc_num(r, "lift_m") > 0.09);
+  ASSERT(json_is_true(json_object_get(r, "object_detected")));
+  ASSERT_EQ(json_array_size(json_object_get(r, "touched")), 1);
+  ASSERT_STREQ(json_string_value(json_array_get(json_object_get(r, "touched"), 0)), "block");
+  ASSERT_EQ(json_array_size(json_object_get(r, "moved")), 0);
+  ASSERT_EQ(json_array_size(json_object_get(json_object_get(r, "pose"), "quaternion")), 4);
   json_t *block = cellproc_object(r, "block");
   ASSERT(cellproc_flag(block, "held"));
   ASSERT(cellproc_flag(block, "lifted"));
@@ -76,6 +84,10 @@ static void test_pick_beside_closes_on_air(void) {
   ASSERT_EQ(command(&c, 1, 1, 0.48, 0, 0.05, 0.085, 0.10, 0), 2);
   json_t *r = cellproc_report(&c, 1);
   ASSERT_EQ(cellproc_gobj(r), 3); /* closed fully */
+  ASSERT(json_is_null(json_object_get(r, "lifted")));
+  ASSERT(json_is_null(json_object_get(r, "lift_m")));
+  ASSERT(json_is_false(json_object_get(r, "object_detected")));
+  ASSERT_EQ(json_array_size(json_object_get(r, "touched")), 0);
   json_t *block = cellproc_object(r, "block");
   ASSERT(!cellproc_flag(block, "lifted"));
   ASSERT(!cellproc_flag(block, "touched"));
@@ -95,6 +107,13 @@ static void test_pick_through_the_tower_moves_it(void) {
   ASSERT(cellproc_flag(tower, "collided"));
   ASSERT(cellproc_flag(tower, "moved") || cellproc_flag(tower, "knocked_over") || cellproc_flag(tower, "held"));
   ASSERT(cellproc_num(tower, "moved_m") > 0.005 || cellproc_num(tower, "turned_deg") > 5);
+  if (!cellproc_flag(tower, "held")) { /* SPEC.md's list of what moved */
+    json_t *moved = json_object_get(r, "moved");
+    ASSERT_EQ(json_array_size(moved), 1);
+    ASSERT_STREQ(json_string_value(json_object_get(json_array_get(moved, 0), "name")), "tower");
+    ASSERT(cellproc_num(json_array_get(moved, 0), "distance_m") > 0 ||
+           cellproc_num(json_array_get(moved, 0), "tilt_deg") > 5);
+  }
   ASSERT(!cellproc_flag(cellproc_object(r, "block"), "moved"));
   json_decref(r);
   cellproc_stop(&c);
