@@ -78,6 +78,7 @@ struct sim_cell {
   double f_target, f_ramp, f_speed, f_force; /* per finger: m, m, m/s, N */
   int f_moving, f_obj;
   double f_win_t, f_win_q; /* where the fingers were at the start of the stall window */
+  double f_deadline;       /* a motion not over by then ends where it is */
   /* program */
   phase ph[CELL_MAX_PHASES];
   int n_ph, i_ph;
@@ -349,6 +350,7 @@ static void fingers_set(sim_cell *c, double q, double width_speed, double force)
   c->f_obj = 0;
   c->f_win_t = c->d->time;
   c->f_win_q = finger_q(c);
+  c->f_deadline = c->d->time + fabs(c->f_target - c->f_ramp) / c->f_speed + 2.0;
 }
 
 /* The servo of one step: the ramp moves toward the target at the speed; each finger's motor
@@ -376,6 +378,11 @@ static void fingers_control(sim_cell *c) {
    * the servo lags more than 2 mm behind (contacts make the velocity chatter; the position
    * over a window does not) */
   const double t = c->d->time;
+  if (t > c->f_deadline) { /* never settled (fingers chattering on something): it ends here */
+    c->f_moving = 0;
+    c->f_obj = fabs(c->f_target - q) < 0.002 ? 3 : c->f_target > q ? 2 : 1;
+    return;
+  }
   if (t - c->f_win_t < 0.05) return;
   if (fabs(q - c->f_win_q) < 0.0005 && fabs(c->f_ramp - q) > 0.002) {
     c->f_moving = 0;
@@ -464,10 +471,12 @@ static void update_rest(sim_cell *c) {
 
 void sim_cell_advance(sim_cell *c, int64_t now_ns) {
   if (sim_cell_busy(c)) {
+    /* at time scale 0 up to a minute of the cell's time per call, so that the server answers
+     * even if something never comes to rest */
     const double until = c->cfg.time_scale > 0
                              ? c->anchor_sim + (double)(now_ns - c->anchor_wall_ns) * 1e-9 /
                                                    c->cfg.time_scale
-                             : INFINITY;
+                             : c->d->time + 60;
     while (c->d->time < until) {
       step(c);
       update_rest(c);
