@@ -75,6 +75,46 @@ static void test_query_points(void) {
   free(b);
 }
 
+/* The box layout: a fixed sequence (the same floats for the same arguments, a prefix of any
+ * longer draw), every point inside the box, spread evenly (each axis's mean at the centre,
+ * each eighth of the box holding its share). */
+static void test_query_points_box(void) {
+  enum { N = 1000 };
+  float *a = malloc(N * 3 * sizeof *a), *b = malloc(N * 3 * sizeof *b);
+  const double mean[3] = {0.01, -0.02, 0.03}, size[3] = {0.027, 0.11, 0.04};
+  ASSERT_OK(fg_grasp_query_points_box(N, mean, size, a));
+  ASSERT_OK(fg_grasp_query_points_box(N, mean, size, b));
+  ASSERT(memcmp(a, b, N * 3 * sizeof *a) == 0);
+  ASSERT_OK(fg_grasp_query_points_box(100, mean, size, b));
+  ASSERT(memcmp(a, b, 100 * 3 * sizeof *a) == 0);
+  int octant[8] = {0};
+  for (int ax = 0; ax < 3; ax++) {
+    double s = 0.0;
+    for (int i = 0; i < N; i++) {
+      const double u = (a[3 * i + ax] - mean[ax]) / size[ax];
+      ASSERT(u > -0.5 && u < 0.5);
+      s += u;
+    }
+    ASSERT_NEAR(s / N, 0.0, 0.005);
+  }
+  for (int i = 0; i < N; i++)
+    octant[(a[3 * i] > mean[0]) + 2 * (a[3 * i + 1] > mean[1]) + 4 * (a[3 * i + 2] > mean[2])]++;
+  for (int o = 0; o < 8; o++) ASSERT(abs(octant[o] - N / 8) <= 5);
+  /* point 3 is Halton's 4th: (1/8, 4/9, 4/5) of the box */
+  const double zero[3] = {0, 0, 0}, unit[3] = {1, 1, 1};
+  ASSERT_OK(fg_grasp_query_points_box(4, zero, unit, b));
+  ASSERT_EQ(b[9], -0.375f);
+  ASSERT_EQ(b[10], (float)(4.0 / 9.0 - 0.5));
+  ASSERT_EQ(b[11], 0.3f);
+  ASSERT_ERR(fg_grasp_query_points_box(0, mean, size, a), FG_EINVAL, "1..1000");
+  const double flat[3] = {0.01, 0.0, 0.01}, huge[3] = {0.01, 2.0, 0.01}, far[3] = {0, 0, 1.5};
+  ASSERT_ERR(fg_grasp_query_points_box(10, mean, flat, a), FG_EINVAL, "size");
+  ASSERT_ERR(fg_grasp_query_points_box(10, mean, huge, a), FG_EINVAL, "size");
+  ASSERT_ERR(fg_grasp_query_points_box(10, far, size, a), FG_EINVAL, "mean");
+  free(a);
+  free(b);
+}
+
 /* ---------------------------------------------------------------- gripper models */
 
 static void test_gripper(void) {
@@ -466,6 +506,7 @@ static void test_search_synthetic(void) {
 
 int main(void) {
   test_query_points();
+  test_query_points_box();
   test_gripper();
   test_so3();
   test_cost();
