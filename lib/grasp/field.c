@@ -80,6 +80,23 @@ int fg_grasp_query_points_layout(fg_grasp_qp_layout layout, int n, const double 
                                    : fg_grasp_query_points(n, mean_m, std_m, p_gripper);
 }
 
+int fg_grasp_query_box_default(fg_gripper_model m, double width_m, double mean_m[3],
+                               double size_m[3]) {
+  fg_gripper_box b[FG_GRIPPER_N_BOXES];
+  FG_TRY(fg_gripper_boxes(m, width_m, b));
+  if (!(width_m > 0))
+    return fg_fail(FG_EINVAL, "the query points' default box needs a width above 0, got %g m",
+                   width_m);
+  const fg_gripper_box *pad = &b[FG_GRIPPER_BOX_PAD_PLUS_Y];
+  mean_m[0] = 0.0;
+  mean_m[1] = 0.0;
+  mean_m[2] = pad->centre_m[2];
+  size_m[0] = 2.0 * pad->half_m[0];
+  size_m[1] = width_m;
+  size_m[2] = 2.0 * pad->half_m[2];
+  return 0;
+}
+
 /* ---------------------------------------------------------------- building */
 
 /* W (D, 64) = Q R by modified Gram-Schmidt, applied twice for orthogonality, in double.

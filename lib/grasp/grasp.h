@@ -4,7 +4,9 @@
  * Query points. A task samples the field at N_q points p_i in the gripper frame (gripper.h),
  * in one of two layouts, each a fixed sequence so that the same parameters give the same
  * points on every machine, and the first n points of a longer draw are those of n:
- *   box       spread evenly over a box (a Halton sequence in bases 2, 3, 5). A box's faces
+ *   box       spread evenly over a box (a Halton sequence in bases 2, 3, 5), by default the
+ *             region the fingers close on: between the pads' faces across y, the pads' width
+ *             along x and their height along z (fg_grasp_query_box_default). A box's faces
  *             and a handle's opening lie 2 to 7 cm from the TCP, where few points of a
  *             Gaussian of a centimetre reach: a box's yaw and a handle's hole are seen only
  *             by points that reach what the fingers will touch.
@@ -98,6 +100,14 @@ int fg_grasp_query_points_box(int n, const double mean_m[3], const double size_m
  * not read. */
 int fg_grasp_query_points_layout(fg_grasp_qp_layout layout, int n, const double mean_m[3],
                                  double std_m, const double size_m[3], float *p_gripper);
+
+/* The default box of the query points for gripper m open to width_m (metres, in (0, stroke]):
+ * what its fingers close on, into mean_m and size_m (gripper frame, metres): across y the
+ * opening between the pads' faces, along x the pads' width, along z the pads' height, where
+ * the pads stand at that width (gripper.h: a Robotiq's pads stand further along +z the more
+ * they are closed). FG_EINVAL for an unknown model or a width outside (0, stroke]. */
+int fg_grasp_query_box_default(fg_gripper_model m, double width_m, double mean_m[3],
+                               double size_m[3]);
 
 /* ---- the grasp field ------------------------------------------------------------------ */
 
