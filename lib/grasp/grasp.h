@@ -75,8 +75,8 @@
 /* ---- query points --------------------------------------------------------------------- */
 
 typedef enum {
-  FG_GRASP_QP_GAUSSIAN = 0, /* N(mean, std^2 I): F3RM's */
-  FG_GRASP_QP_BOX = 1,      /* evenly over mean +- size / 2 */
+  FG_GRASP_QP_GAUSSIAN = 0, /* N(mean, std^2 I): F3RM's, and every task's before the box */
+  FG_GRASP_QP_BOX = 1,      /* evenly over mean +- size / 2: the default */
 } fg_grasp_qp_layout;
 
 /* n points of the Gaussian N(mean_m, std_m^2 I) in the gripper frame (metres) into p_gripper
