@@ -129,9 +129,10 @@ int fg_api_parse_demo(json_t *body, const fg_conf *conf, const fg_task *t, fg_ta
                       fg_resp *resp);
 
 /* The "query_points" of a demo's body into d, over t's (or the defaults when t is NULL or
- * has no demos). 0, or -1 after answering 400. */
-int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
-                              fg_resp *resp);
+ * has no demos: the box between the pads of gripper `model` open to d->width_m, which the
+ * caller sets first). 0, or -1 after answering 400. */
+int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_gripper_model model,
+                              fg_task_demo_new *d, fg_resp *resp);
 
 /* POST /v1/scenes/{s}/frames: the pose (into T, camera-to-world, OpenGL) and camera (into
  * *camera; its file_path is a static "upload") of the upload's meta part. 0, or -1 after

@@ -174,19 +174,20 @@ static json_t *grasp_json(const fg_grasp_entry *e, const fg_grasp_result_pose *p
                    "width", e->width_m, "collision_free", p->collision_free);
 }
 
-/* The gripper the grasps were checked with: the [gripper] model's boxes (palm, finger at -y,
- * finger at +y) at the grasps' width, in the gripper frame, so that a client draws exactly
- * what the collision check saw. */
+/* The gripper the grasps were checked with: the [gripper] model's boxes (lib/grasp/gripper.h:
+ * the palm, then per finger its pad, holder and link) at the grasps' width, in the gripper
+ * frame, each with the part it belongs to, so that a client draws exactly what the collision
+ * check saw. */
 static json_t *gripper_json(fg_gripper_model model, double width_m) {
   fg_gripper_box b[FG_GRIPPER_N_BOXES];
   if (fg_gripper_boxes(model, width_m, b) != 0) return json_null();
-  static const char *const names[FG_GRIPPER_N_BOXES] = {"palm", "finger_minus_y",
-                                                        "finger_plus_y"};
   json_t *boxes = json_array();
   for (int i = 0; i < FG_GRIPPER_N_BOXES; i++)
-    json_array_append_new(boxes, json_pack("{s:s, s:o, s:o}", "name", names[i], "centre",
-                                           fg_json_from_vec(b[i].centre_m, 3), "half_size",
-                                           fg_json_from_vec(b[i].half_m, 3)));
+    json_array_append_new(boxes, json_pack("{s:s, s:s, s:b, s:o, s:o}", "name",
+                                           fg_gripper_box_name(i), "part",
+                                           fg_gripper_part_name(b[i].part), "pad", b[i].pad,
+                                           "centre", fg_json_from_vec(b[i].centre_m, 3),
+                                           "half_size", fg_json_from_vec(b[i].half_m, 3)));
   return json_pack("{s:s, s:f, s:o}", "model", fg_gripper_spec_get(model)->name, "width",
                    width_m, "boxes", boxes);
 }

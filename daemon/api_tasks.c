@@ -36,11 +36,10 @@ static json_t *demo_json(const fg_task_demo *d) {
 static json_t *task_json(const fg_task *t, int with_demos) {
   const int has = t->n_demos > 0;
   json_t *o = json_pack(
-      "{s:s, s:o, s:o, s:{s:i, s:f, s:o}, s:o, s:o, s:i, s:o}", "name", t->name, "kind",
+      "{s:s, s:o, s:o, s:o, s:o, s:o, s:i, s:o}", "name", t->name, "kind",
       has ? json_string(fg_task_kind_name(t->kind)) : json_null(), "dim",
-      has ? json_integer(t->dim) : json_null(), "query_points", "n", t->n_points, "std",
-      t->qp_std_m, "mean", fg_json_from_vec(t->qp_mean_m, 3), "width",
-      has ? json_real(t->width_m) : json_null(), "approach",
+      has ? json_integer(t->dim) : json_null(), "query_points", fg_task_query_points_json(t),
+      "width", has ? json_real(t->width_m) : json_null(), "approach",
       has ? json_real(t->approach_m) : json_null(), "n_demos", t->n_demos, "created",
       time_json(t->created_ms));
   if (o && with_demos) {
@@ -125,23 +124,25 @@ int fg_api_task_demo_delete(fg_req *req, fg_resp *resp) {
 static const char *const demo_keys[] = {"scene", "pose", "kind", "width", "approach",
                                         "query_points", NULL};
 
-/* Reads "query_points" ({"n", "std", "mean"}, each optional: the task's, else the defaults)
- * into d. Answers 400 itself and returns -1 when they are wrong. */
-int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *d,
-                              fg_resp *resp) {
+/* Reads "query_points" ({"n", "layout", "std", "size", "mean"}, each optional) into d, over
+ * the task's when it has demos, else over the defaults: 100 points in the box between the
+ * pads of `model` open to d->width_m (set before). "std" alone means the Gaussian layout,
+ * "size" alone the box; "layout": "gaussian" without a std takes FG_GRASP_DEFAULT_STD_M, the
+ * Gaussian's default before the box. Answers 400 itself and returns -1 when they are wrong. */
+int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_gripper_model model,
+                              fg_task_demo_new *d, fg_resp *resp) {
   const int from_task = t && t->n_demos > 0;
-  d->n_points = from_task ? t->n_points : FG_GRASP_DEFAULT_QUERY_POINTS;
-  d->qp_std_m = from_task ? t->qp_std_m : FG_GRASP_DEFAULT_STD_M;
-  for (int k = 0; k < 3; k++) d->qp_mean_m[k] = from_task ? t->qp_mean_m[k] : 0.0;
   json_t *qp = json_object_get(body, "query_points");
-  if (!qp || json_is_null(qp)) return 0;
   const char *key;
   json_t *v;
-  if (!json_is_object(qp))
-    goto bad;
+  if (qp && json_is_null(qp)) qp = NULL;
+  if (qp && !json_is_object(qp)) goto bad;
   json_object_foreach(qp, key, v) {
-    if (strcmp(key, "n") && strcmp(key, "std") && strcmp(key, "mean")) goto bad;
+    if (strcmp(key, "n") && strcmp(key, "layout") && strcmp(key, "std") &&
+        strcmp(key, "size") && strcmp(key, "mean"))
+      goto bad;
   }
+  d->n_points = from_task ? t->n_points : FG_GRASP_DEFAULT_QUERY_POINTS;
   v = json_object_get(qp, "n");
   if (v) {
     if (!json_is_integer(v) || json_integer_value(v) < 1 ||
@@ -149,16 +150,45 @@ int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *
       goto bad;
     d->n_points = (int)json_integer_value(v);
   }
-  v = json_object_get(qp, "std");
-  if (v) {
-    if (!json_is_number(v) || !(json_number_value(v) > 0) || !(json_number_value(v) <= 1))
-      goto bad;
-    d->qp_std_m = json_number_value(v);
+  json_t *jl = json_object_get(qp, "layout"), *js = json_object_get(qp, "std"),
+         *jz = json_object_get(qp, "size"), *jm = json_object_get(qp, "mean");
+  const char *ls = json_string_value(jl); /* NULL unless a string */
+  if (jl && !(ls && (!strcmp(ls, "gaussian") || !strcmp(ls, "box")))) goto bad;
+  const int layout = ls   ? (!strcmp(ls, "box") ? FG_GRASP_QP_BOX : FG_GRASP_QP_GAUSSIAN)
+                     : js ? FG_GRASP_QP_GAUSSIAN
+                     : jz ? FG_GRASP_QP_BOX
+                     : from_task ? t->qp_layout
+                                 : FG_GRASP_QP_BOX;
+  if ((js && layout != FG_GRASP_QP_GAUSSIAN) || (jz && layout != FG_GRASP_QP_BOX)) goto bad;
+  /* the task's parameters of this layout, else the layout's defaults ... */
+  d->qp_layout = layout;
+  d->qp_std_m = 0.0;
+  for (int k = 0; k < 3; k++) d->qp_mean_m[k] = d->qp_size_m[k] = 0.0;
+  if (from_task && t->qp_layout == layout) {
+    d->qp_std_m = t->qp_std_m;
+    memcpy(d->qp_mean_m, t->qp_mean_m, sizeof d->qp_mean_m);
+    memcpy(d->qp_size_m, t->qp_size_m, sizeof d->qp_size_m);
+  } else if (layout == FG_GRASP_QP_GAUSSIAN) {
+    d->qp_std_m = FG_GRASP_DEFAULT_STD_M;
+  } else if (fg_grasp_query_box_default(model, d->width_m, d->qp_mean_m, d->qp_size_m) != 0) {
+    return fg_resp_error(resp, 400, "invalid_query_points", "%s", fg_error_detail()), -1;
   }
-  v = json_object_get(qp, "mean");
-  if (v) {
+  /* ... with the request's on top */
+  if (js) {
+    if (!json_is_number(js) || !(json_number_value(js) > 0) || !(json_number_value(js) <= 1))
+      goto bad;
+    d->qp_std_m = json_number_value(js);
+  }
+  if (jz) {
+    double z[3];
+    if (fg_json_vec(jz, z, 3, "query_points.size") != 0) goto bad;
+    for (int k = 0; k < 3; k++)
+      if (!(z[k] > 0 && z[k] <= 1)) goto bad;
+    memcpy(d->qp_size_m, z, sizeof z);
+  }
+  if (jm) {
     double m[3];
-    if (fg_json_vec(v, m, 3, "query_points.mean") != 0 ||
+    if (fg_json_vec(jm, m, 3, "query_points.mean") != 0 ||
         sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]) > 1)
       goto bad;
     memcpy(d->qp_mean_m, m, sizeof m);
@@ -166,11 +196,12 @@ int fg_api_parse_query_points(json_t *body, const fg_task *t, fg_task_demo_new *
   return 0;
 bad:
   return fg_resp_error(resp, 400, "invalid_query_points", "\"query_points\" must be {\"n\": "
-                       "1..%d points, \"std\": metres > 0 and <= 1, \"mean\": [x, y, z] metres "
-                       "in the gripper frame, within 1 m}, each optional (default {\"n\": %d, "
-                       "\"std\": %g, \"mean\": [0, 0, 0]}, or the task's)",
-                       FG_GRASP_MAX_QUERY_POINTS, FG_GRASP_DEFAULT_QUERY_POINTS,
-                       FG_GRASP_DEFAULT_STD_M), -1;
+                       "1..%d points, \"layout\": \"box\" or \"gaussian\", \"size\": the box's "
+                       "[x, y, z] edges, metres > 0 and <= 1, or \"std\": the Gaussian's, metres > "
+                       "0 and <= 1, \"mean\": [x, y, z] metres in the gripper frame, within 1 m}, "
+                       "each optional (default %d points in the box between the pads of the "
+                       "[gripper] model at the demo's width, or the task's)",
+                       FG_GRASP_MAX_QUERY_POINTS, FG_GRASP_DEFAULT_QUERY_POINTS), -1;
 }
 
 /* Reads the demo's keys but its z into d (scene name, pose, kind, width, approach, query
@@ -218,7 +249,7 @@ int fg_api_parse_demo(json_t *body, const fg_conf *conf, const fg_task *t,
     return fg_resp_error(resp, 400, "invalid_request", "\"approach\" must be the pre-grasp "
                          "distance in metres along the gripper's -z, 0 to 1 (default %g)",
                          FG_TASK_DEFAULT_APPROACH_M), -1;
-  return fg_api_parse_query_points(body, t, d, resp);
+  return fg_api_parse_query_points(body, t, conf->gripper_model, d, resp);
 }
 
 /* The 409 of a demo that does not fit its task (fg_task_check_demo's detail). */
@@ -307,7 +338,8 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
                   "%s", info.name, fg_error_detail());
     goto out;
   }
-  if (fg_grasp_query_points(d.n_points, d.qp_mean_m, d.qp_std_m, p) != 0 ||
+  if (fg_grasp_query_points_layout(d.qp_layout, d.n_points, d.qp_mean_m, d.qp_std_m,
+                                   d.qp_size_m, p) != 0 ||
       fg_grasp_sample(gf, T, p, d.n_points, z) != 0) {
     fg_resp_error(resp, 400, "invalid_query_points", "%s", fg_error_detail());
     goto out;

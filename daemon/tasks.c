@@ -104,7 +104,8 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
     obj_free(o);
     return fg_fail(FG_ENOMEM, "out of memory");
   }
-  int rc = fg_grasp_query_points(nq, base->qp_mean_m, base->qp_std_m, o->p_gripper);
+  int rc = fg_grasp_query_points_layout(base->qp_layout, nq, base->qp_mean_m, base->qp_std_m,
+                                        base->qp_size_m, o->p_gripper);
   if (rc != 0) {
     obj_free(o);
     return rc;
@@ -162,6 +163,15 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
 
 /* ---------------------------------------------------------------- task.json */
 
+json_t *fg_task_query_points_json(const fg_task *t) {
+  if (t->qp_layout == FG_GRASP_QP_BOX)
+    return json_pack("{s:i, s:s, s:o, s:o}", "n", t->n_points, "layout", "box", "size",
+                     fg_json_from_vec(t->qp_size_m, 3), "mean",
+                     fg_json_from_vec(t->qp_mean_m, 3));
+  return json_pack("{s:i, s:s, s:f, s:o}", "n", t->n_points, "layout", "gaussian", "std",
+                   t->qp_std_m, "mean", fg_json_from_vec(t->qp_mean_m, 3));
+}
+
 static json_t *task_file_json(const fg_task *t) {
   json_t *demos = json_array();
   for (int i = 0; demos && i < t->n_demos; i++) {
@@ -172,11 +182,10 @@ static json_t *task_file_json(const fg_task *t) {
                          "kind", fg_task_kind_name(d->kind), "width", d->width_m, "approach",
                          d->approach_m, "created_ms", (json_int_t)d->created_ms));
   }
-  return json_pack("{s:i, s:s, s:s, s:i, s:{s:i, s:f, s:o}, s:f, s:f, s:i, s:I, s:o}",
-                   "format", TASK_FORMAT, "name", t->name, "kind", fg_task_kind_name(t->kind),
-                   "dim", t->dim, "query_points", "n", t->n_points, "std", t->qp_std_m, "mean",
-                   fg_json_from_vec(t->qp_mean_m, 3), "width", t->width_m, "approach",
-                   t->approach_m, "next_id", t->next_id, "created_ms",
+  return json_pack("{s:i, s:s, s:s, s:i, s:o, s:f, s:f, s:i, s:I, s:o}", "format",
+                   TASK_FORMAT, "name", t->name, "kind", fg_task_kind_name(t->kind), "dim",
+                   t->dim, "query_points", fg_task_query_points_json(t), "width", t->width_m,
+                   "approach", t->approach_m, "next_id", t->next_id, "created_ms",
                    (json_int_t)t->created_ms, "demos", demos);
 }
 
@@ -266,6 +275,26 @@ static int read_demo_npy(const fg_tasks *ts, const char *name, int id, int nq, i
   return rc;
 }
 
+/* The query points of a task.json into base: a file without "layout" holds a Gaussian (every
+ * task before the box layout). */
+static int parse_query_points(json_t *qp, fg_task *base) {
+  const char *layout = "gaussian";
+  if (fg_json_string(qp, "layout", &layout) < 0 ||
+      (strcmp(layout, "gaussian") && strcmp(layout, "box")))
+    return fg_fail(FG_EFORMAT, "\"query_points.layout\" must be \"gaussian\" or \"box\"");
+  base->qp_layout = strcmp(layout, "box") == 0 ? FG_GRASP_QP_BOX : FG_GRASP_QP_GAUSSIAN;
+  FG_TRY(json_int_in(qp, "n", 1, FG_GRASP_MAX_QUERY_POINTS, &base->n_points));
+  if (base->qp_layout == FG_GRASP_QP_BOX) {
+    if (fg_json_vec(json_object_get(qp, "size"), base->qp_size_m, 3, "query_points.size") != 0)
+      return FG_EFORMAT;
+  } else {
+    FG_TRY(json_num(qp, "std", &base->qp_std_m));
+  }
+  if (fg_json_vec(json_object_get(qp, "mean"), base->qp_mean_m, 3, "query_points.mean") != 0)
+    return FG_EFORMAT;
+  return 0;
+}
+
 /* Loads task `name` from its folder into *out. */
 static int load_task(const fg_tasks *ts, const char *name, task_obj **out) {
   *out = NULL;
@@ -300,13 +329,8 @@ static int load_task(const fg_tasks *ts, const char *name, task_obj **out) {
   if ((rc = parse_kind(o, &base.kind)) != 0 ||
       (rc = json_int_in(o, "dim", 0, 1 << 20, &base.dim)) != 0 ||
       (rc = json_int_in(o, "next_id", 1, 1 << 30, &base.next_id)) != 0 ||
-      (rc = json_int_in(qp, "n", 1, FG_GRASP_MAX_QUERY_POINTS, &base.n_points)) != 0 ||
-      (rc = json_num(qp, "std", &base.qp_std_m)) != 0)
+      (rc = parse_query_points(qp, &base)) != 0)
     goto out;
-  if (fg_json_vec(json_object_get(qp, "mean"), base.qp_mean_m, 3, "query_points.mean") != 0) {
-    rc = FG_EFORMAT;
-    goto out;
-  }
   json_t *jc = json_object_get(o, "created_ms");
   created = json_is_integer(jc) ? json_integer_value(jc) : 0;
   base.created_ms = created;
@@ -544,14 +568,18 @@ fg_task_fit fg_task_check_demo(const fg_task *t, const fg_task_demo_new *d) {
     return fg_fail(FG_ERANGE, "task '%s' has %d demos, the most it keeps; delete one "
                    "(DELETE /v1/tasks/%s/demos/{id}) first", t->name, t->n_demos, t->name),
            FG_TASK_FULL;
-  if (d->n_points != t->n_points || d->qp_std_m != t->qp_std_m ||
-      memcmp(d->qp_mean_m, t->qp_mean_m, sizeof d->qp_mean_m) != 0)
-    return fg_fail(FG_EINVAL, "task '%s' samples the field at query points {\"n\": %d, "
-                   "\"std\": %.17g, \"mean\": [%.17g, %.17g, %.17g]}, fixed by its first demo; "
-                   "leave \"query_points\" out (or give those) to add a demo to it, or name "
-                   "another task", t->name, t->n_points, t->qp_std_m, t->qp_mean_m[0],
-                   t->qp_mean_m[1], t->qp_mean_m[2]),
-           FG_TASK_QUERY_POINTS_DIFFER;
+  if (d->n_points != t->n_points || d->qp_layout != t->qp_layout ||
+      d->qp_std_m != t->qp_std_m || memcmp(d->qp_size_m, t->qp_size_m, sizeof d->qp_size_m) ||
+      memcmp(d->qp_mean_m, t->qp_mean_m, sizeof d->qp_mean_m) != 0) {
+    json_t *qp = fg_task_query_points_json(t);
+    char *text = qp ? json_dumps(qp, JSON_COMPACT | JSON_REAL_PRECISION(17)) : NULL;
+    fg_fail(FG_EINVAL, "task '%s' samples the field at query points %s, fixed by its first "
+            "demo; leave \"query_points\" out (or give those) to add a demo to it, or name "
+            "another task", t->name, text ? text : "(out of memory)");
+    free(text);
+    json_decref(qp);
+    return FG_TASK_QUERY_POINTS_DIFFER;
+  }
   if (d->kind != t->kind)
     return fg_fail(FG_EINVAL, "task '%s' is a %s task; a %s demo belongs to another task",
                    t->name, fg_task_kind_name(t->kind), fg_task_kind_name(d->kind)),
@@ -596,8 +624,10 @@ int fg_tasks_add_demo(fg_tasks *ts, const char *name, const fg_task_demo_new *d,
   }
   if (n_old == 0) { /* the first demo fixes the query points, the kind and D */
     base.n_points = d->n_points;
+    base.qp_layout = d->qp_layout;
     memcpy(base.qp_mean_m, d->qp_mean_m, sizeof base.qp_mean_m);
     base.qp_std_m = d->qp_std_m;
+    memcpy(base.qp_size_m, d->qp_size_m, sizeof base.qp_size_m);
     base.kind = d->kind;
     base.dim = d->dim;
   }

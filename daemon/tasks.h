@@ -24,6 +24,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include <jansson.h>
+
 #include "conf.h" /* FG_SCENE_NAME_MAX: task names follow the scene name rules */
 
 #define FG_TASK_MAX_DEMOS 256
@@ -51,8 +53,10 @@ typedef struct fg_task {
   fg_task_kind kind;         /* its demos' (all alike) */
   int dim;                   /* D of its demos' z; 0 while it has none */
   int n_points;              /* N_q */
-  double qp_mean_m[3];       /* query points: mean (gripper frame) and std, metres */
-  double qp_std_m;
+  int qp_layout;             /* query points (grasp.h): fg_grasp_qp_layout, gripper frame ... */
+  double qp_mean_m[3];       /* ... the centre, metres; */
+  double qp_std_m;           /* the Gaussian's std (FG_GRASP_QP_GAUSSIAN), or */
+  double qp_size_m[3];       /* the box's edges (FG_GRASP_QP_BOX); the other is 0 */
   const float *p_gripper;    /* (n_points, 3) */
   double width_m;            /* mean of the demos' widths; 0 without demos */
   double approach_m;         /* mean of the demos' approach distances; 0 without demos */
@@ -89,7 +93,8 @@ typedef struct fg_task_demo_new {
   fg_task_kind kind;
   double width_m, approach_m;
   int n_points;
-  double qp_mean_m[3], qp_std_m;
+  int qp_layout;  /* as fg_task's */
+  double qp_mean_m[3], qp_std_m, qp_size_m[3];
   int dim;
   const float *z; /* (n_points, dim), the caller's */
 } fg_task_demo_new;
@@ -102,6 +107,11 @@ typedef enum {
   FG_TASK_DIM_DIFFERS,         /* a scene of another feature dimension */
   FG_TASK_FULL,                /* FG_TASK_MAX_DEMOS demos already */
 } fg_task_fit;
+
+/* The query points of task t as the API and task.json show them: {"n", "layout":
+ * "gaussian", "std", "mean"} or {"n", "layout": "box", "size", "mean"}. NULL when out of
+ * memory; the caller owns the reference. */
+json_t *fg_task_query_points_json(const fg_task *t);
 
 /* Whether demo d fits task t (NULL: a new task, which any demo fits; a task without demos
  * takes everything from its next demo). When it does not, records a detail that says why and

@@ -293,13 +293,13 @@ train tabletop-demos
 # person would show it by jogging the robot there), the scene it is in, and the width the
 # gripper opens to before it closes: all of the 2F-85's 85 mm, since a briefly trained
 # field's surfaces stand a little proud of the objects' and a tighter opening collides. The
-# query points spread as far as the object needs: inside a box the features are the same
-# everywhere, so its pose shows only in the points that reach its faces, 3 cm from the TCP.
-demo() { # TASK OBJECT QUERY_STD_M
+# query points are the default: spread over what the fingers close on, between the pads
+# (inside a box the features are the same everywhere, so its pose shows only in the points
+# that reach its faces, 3 cm from the TCP).
+demo() { # TASK OBJECT
   local body
-  body=$(object_grasp 1 "$2" | jq -c --arg s tabletop-demos --argjson std "$3" '{scene: $s,
-           pose: {position: .position, quaternion: .quaternion}, width: 0.085,
-           query_points: {std: $std}}')
+  body=$(object_grasp 1 "$2" | jq -c --arg s tabletop-demos '{scene: $s,
+           pose: {position: .position, quaternion: .quaternion}, width: 0.085}')
   api_json POST "/v1/tasks/$1/demos" "$body"
   expect 201 200
   jq -c '{demo: {id: .demo.id, scene: .demo.scene}, task: {name: .task.name, kind: .task.kind, n_demos: .task.n_demos}}' <<<"$reply"
@@ -308,8 +308,8 @@ say "Recording demos on tabletop-demos: how to pick up a box, and a ball"
 for task in box ball; do
   show=0; api_curl DELETE "/v1/tasks/$task"; show=1
 done
-demo box box 0.02
-demo ball ball 0.0075
+demo box box
+demo ball ball
 
 # ---------------------------------------------------------------- the questions
 

@@ -45,6 +45,58 @@ int fg_grasp_query_points(int n, const double mean_m[3], double std_m, float *p_
   return 0;
 }
 
+/* The radical inverse of k in base b: k's digits mirrored behind the point. */
+static double radical_inverse(uint64_t k, unsigned b) {
+  double r = 0.0, f = 1.0 / b;
+  for (; k; k /= b, f /= b) r += f * (double)(k % b);
+  return r;
+}
+
+int fg_grasp_query_points_box(int n, const double mean_m[3], const double size_m[3],
+                              float *p_gripper) {
+  if (!mean_m || !size_m || !p_gripper) return fg_fail(FG_EINVAL, "query points: NULL argument");
+  if (n < 1 || n > FG_GRASP_MAX_QUERY_POINTS)
+    return fg_fail(FG_EINVAL, "query_points.n must be in 1..%d, got %d",
+                   FG_GRASP_MAX_QUERY_POINTS, n);
+  for (int a = 0; a < 3; a++) {
+    if (!isfinite(size_m[a]) || size_m[a] <= 0 || size_m[a] > 1.0)
+      return fg_fail(FG_EINVAL, "query_points.size must be 3 lengths in metres in (0, 1], got "
+                     "[%g, %g, %g]", size_m[0], size_m[1], size_m[2]);
+    if (!isfinite(mean_m[a]) || fabs(mean_m[a]) > 1.0)
+      return fg_fail(FG_EINVAL, "query_points.mean must be 3 finite values within 1 m of the "
+                     "TCP (metres, gripper frame)");
+  }
+  static const unsigned base[3] = {2, 3, 5};
+  for (int i = 0; i < n; i++)
+    for (int a = 0; a < 3; a++)
+      p_gripper[3 * i + a] =
+          (float)(mean_m[a] + size_m[a] * (radical_inverse((uint64_t)i + 1, base[a]) - 0.5));
+  return 0;
+}
+
+int fg_grasp_query_points_layout(fg_grasp_qp_layout layout, int n, const double mean_m[3],
+                                 double std_m, const double size_m[3], float *p_gripper) {
+  return layout == FG_GRASP_QP_BOX ? fg_grasp_query_points_box(n, mean_m, size_m, p_gripper)
+                                   : fg_grasp_query_points(n, mean_m, std_m, p_gripper);
+}
+
+int fg_grasp_query_box_default(fg_gripper_model m, double width_m, double mean_m[3],
+                               double size_m[3]) {
+  fg_gripper_box b[FG_GRIPPER_N_BOXES];
+  FG_TRY(fg_gripper_boxes(m, width_m, b));
+  if (!(width_m > 0))
+    return fg_fail(FG_EINVAL, "the query points' default box needs a width above 0, got %g m",
+                   width_m);
+  const fg_gripper_box *pad = &b[FG_GRIPPER_BOX_PAD_PLUS_Y];
+  mean_m[0] = 0.0;
+  mean_m[1] = 0.0;
+  mean_m[2] = pad->centre_m[2];
+  size_m[0] = 2.0 * pad->half_m[0];
+  size_m[1] = width_m;
+  size_m[2] = 2.0 * pad->half_m[2];
+  return 0;
+}
+
 /* ---------------------------------------------------------------- building */
 
 /* W (D, 64) = Q R by modified Gram-Schmidt, applied twice for orthogonality, in double.

@@ -1,10 +1,17 @@
 /* 6-DOF grasps (and placements) from demonstrations, F3RM's method on the voxel features of a
  * trained field (query/heatmap.h).
  *
- * Query points. A task samples the field at N_q points p_i of a Gaussian in the gripper frame
- * (gripper.h): mean mu, isotropic std sigma, drawn from a fixed seed so that the same (N_q,
- * mu, sigma) give the same points on every machine. At a gripper pose T = T_world_gripper the
- * points sit at x_i = T p_i in the world.
+ * Query points. A task samples the field at N_q points p_i in the gripper frame (gripper.h),
+ * in one of two layouts, each a fixed sequence so that the same parameters give the same
+ * points on every machine, and the first n points of a longer draw are those of n:
+ *   box       spread evenly over a box (a Halton sequence in bases 2, 3, 5), by default the
+ *             region the fingers close on: between the pads' faces across y, the pads' width
+ *             along x and their height along z (fg_grasp_query_box_default). A box's faces
+ *             and a handle's opening lie 2 to 7 cm from the TCP, where few points of a
+ *             Gaussian of a centimetre reach: a box's yaw and a handle's hole are seen only
+ *             by points that reach what the fingers will touch.
+ *   gaussian  F3RM's: mean mu, isotropic std sigma, drawn from a fixed seed.
+ * At a gripper pose T = T_world_gripper the points sit at x_i = T p_i in the world.
  *
  * Field samples. F3RM describes a pose by z_T = [alpha(x_i) f(x_i)]_i, the alpha-weighted
  * features at the query points (N_q x D). Here alpha f is interpolated trilinearly between the
@@ -59,13 +66,18 @@
 
 #define FG_GRASP_MAX_QUERY_POINTS 1000
 #define FG_GRASP_DEFAULT_QUERY_POINTS 100
-#define FG_GRASP_DEFAULT_STD_M 0.0075
-#define FG_GRASP_QUERY_SEED 0x6772617370ULL /* "grasp": the query points' fixed stream */
+#define FG_GRASP_DEFAULT_STD_M 0.0075 /* the Gaussian layout's std when none is given */
+#define FG_GRASP_QUERY_SEED 0x6772617370ULL /* "grasp": the Gaussian points' fixed stream */
 #define FG_GRASP_MAX_TOP_K 100
 #define FG_GRASP_MIN_ROTATIONS 8
 #define FG_GRASP_MAX_ROTATIONS 4096
 
 /* ---- query points --------------------------------------------------------------------- */
+
+typedef enum {
+  FG_GRASP_QP_GAUSSIAN = 0, /* N(mean, std^2 I): F3RM's, and every task's before the box */
+  FG_GRASP_QP_BOX = 1,      /* evenly over mean +- size / 2: the default */
+} fg_grasp_qp_layout;
 
 /* n points of the Gaussian N(mean_m, std_m^2 I) in the gripper frame (metres) into p_gripper
  * (n, 3), the caller's buffer, from stream FG_GRASP_QUERY_SEED (Box-Muller over a
@@ -73,6 +85,29 @@
  * with a detail for n outside 1..FG_GRASP_MAX_QUERY_POINTS, std_m not finite or <= 0 (or
  * above 1 m), a mean not finite or farther than 1 m. */
 int fg_grasp_query_points(int n, const double mean_m[3], double std_m, float *p_gripper);
+
+/* n points spread evenly over the box centred on mean_m with edge lengths size_m (x, y, z;
+ * gripper frame, metres) into p_gripper (n, 3), the caller's buffer: point i is the (i+1)-th
+ * of the Halton sequence in bases 2, 3 and 5 scaled to the box, in double, then rounded to
+ * float, so the same arguments give the same floats everywhere. FG_EINVAL with a detail for
+ * n outside 1..FG_GRASP_MAX_QUERY_POINTS, a size not finite or outside (0, 1] m, a mean not
+ * finite or farther than 1 m along an axis. */
+int fg_grasp_query_points_box(int n, const double mean_m[3], const double size_m[3],
+                              float *p_gripper);
+
+/* The points of either layout: fg_grasp_query_points_box(n, mean_m, size_m, ...) for
+ * FG_GRASP_QP_BOX, else fg_grasp_query_points(n, mean_m, std_m, ...); the other parameter is
+ * not read. */
+int fg_grasp_query_points_layout(fg_grasp_qp_layout layout, int n, const double mean_m[3],
+                                 double std_m, const double size_m[3], float *p_gripper);
+
+/* The default box of the query points for gripper m open to width_m (metres, in (0, stroke]):
+ * what its fingers close on, into mean_m and size_m (gripper frame, metres): across y the
+ * opening between the pads' faces, along x the pads' width, along z the pads' height, where
+ * the pads stand at that width (gripper.h: a Robotiq's pads stand further along +z the more
+ * they are closed). FG_EINVAL for an unknown model or a width outside (0, stroke]. */
+int fg_grasp_query_box_default(fg_gripper_model m, double width_m, double mean_m[3],
+                               double size_m[3]);
 
 /* ---- the grasp field ------------------------------------------------------------------ */
 

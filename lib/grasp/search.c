@@ -89,14 +89,15 @@ static int box_collides(const fg_grasp_field *gf, const uint8_t *occ, const fg_g
   return 0;
 }
 
-/* Fingers first: they are small and meet the object first, so colliding poses exit early. */
+/* Fingers first, from the pads back (FG_GRIPPER_BOX_* order, the palm last): they are small
+ * and meet the object first, so colliding poses exit early. */
 static int gripper_collides(const fg_grasp_field *gf, const uint8_t *occ,
                             const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16],
                             int floor_solid) {
   const double step = gf->grid.voxel_size / sqrt(3.0);
-  return box_collides(gf, occ, &boxes[1], T, step, floor_solid) ||
-         box_collides(gf, occ, &boxes[2], T, step, floor_solid) ||
-         box_collides(gf, occ, &boxes[0], T, step, floor_solid);
+  for (int i = 1; i <= FG_GRIPPER_N_BOXES; i++)
+    if (box_collides(gf, occ, &boxes[i % FG_GRIPPER_N_BOXES], T, step, floor_solid)) return 1;
+  return 0;
 }
 
 /* The check before optimising: only the palm, on a lattice of one voxel. A candidate sits on
@@ -106,7 +107,8 @@ static int gripper_collides(const fg_grasp_field *gf, const uint8_t *occ,
 static int palm_collides(const fg_grasp_field *gf, const uint8_t *occ,
                          const fg_gripper_box boxes[FG_GRIPPER_N_BOXES], const double T[16],
                          int floor_solid) {
-  return box_collides(gf, occ, &boxes[0], T, gf->grid.voxel_size, floor_solid);
+  return box_collides(gf, occ, &boxes[FG_GRIPPER_BOX_PALM], T, gf->grid.voxel_size,
+                      floor_solid);
 }
 
 /* Whether the robot may be sent to T: cone, box, approach and lift (motion/limits.h). */

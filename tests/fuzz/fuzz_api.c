@@ -164,7 +164,8 @@ static void robot(json_t *body) {
 }
 
 static void demo(json_t *body) {
-  /* a new task (defaults) and one with demos (its query points are the defaults) */
+  /* a new task (defaults: the box) and one with demos of a Gaussian (its query points are
+   * the defaults) */
   fg_task with_demos;
   memset(&with_demos, 0, sizeof with_demos);
   with_demos.n_demos = 1;
@@ -181,10 +182,17 @@ static void demo(json_t *body) {
     if (rc == 0) {
       finite_or_die(d.T_world_gripper, 16);
       finite_or_die(d.qp_mean_m, 3);
+      finite_or_die(d.qp_size_m, 3);
       if (!d.scene || !(d.width_m > 0 && d.width_m <= stroke + 1e-12) ||
           !(d.approach_m >= 0 && d.approach_m <= 1) || d.n_points < 1 ||
-          d.n_points > FG_GRASP_MAX_QUERY_POINTS || !(d.qp_std_m > 0 && d.qp_std_m <= 1))
+          d.n_points > FG_GRASP_MAX_QUERY_POINTS)
         abort();
+      if (d.qp_layout == FG_GRASP_QP_BOX) {
+        for (int a = 0; a < 3; a++)
+          if (!(d.qp_size_m[a] > 0 && d.qp_size_m[a] <= 1)) abort();
+      } else if (d.qp_layout != FG_GRASP_QP_GAUSSIAN || !(d.qp_std_m > 0 && d.qp_std_m <= 1)) {
+        abort();
+      }
     }
     check_resp(&resp, rc);
   }

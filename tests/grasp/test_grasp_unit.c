@@ -75,30 +75,228 @@ static void test_query_points(void) {
   free(b);
 }
 
+/* The box layout: a fixed sequence (the same floats for the same arguments, a prefix of any
+ * longer draw), every point inside the box, spread evenly (each axis's mean at the centre,
+ * each eighth of the box holding its share), and the default box between the pads. */
+static void test_query_points_box(void) {
+  enum { N = 1000 };
+  float *a = malloc(N * 3 * sizeof *a), *b = malloc(N * 3 * sizeof *b);
+  const double mean[3] = {0.01, -0.02, 0.03}, size[3] = {0.027, 0.11, 0.04};
+  ASSERT_OK(fg_grasp_query_points_box(N, mean, size, a));
+  ASSERT_OK(fg_grasp_query_points_box(N, mean, size, b));
+  ASSERT(memcmp(a, b, N * 3 * sizeof *a) == 0);
+  ASSERT_OK(fg_grasp_query_points_box(100, mean, size, b));
+  ASSERT(memcmp(a, b, 100 * 3 * sizeof *a) == 0);
+  int octant[8] = {0};
+  for (int ax = 0; ax < 3; ax++) {
+    double s = 0.0;
+    for (int i = 0; i < N; i++) {
+      const double u = (a[3 * i + ax] - mean[ax]) / size[ax];
+      ASSERT(u > -0.5 && u < 0.5);
+      s += u;
+    }
+    ASSERT_NEAR(s / N, 0.0, 0.005);
+  }
+  for (int i = 0; i < N; i++)
+    octant[(a[3 * i] > mean[0]) + 2 * (a[3 * i + 1] > mean[1]) + 4 * (a[3 * i + 2] > mean[2])]++;
+  for (int o = 0; o < 8; o++) ASSERT(abs(octant[o] - N / 8) <= 5);
+  /* point 3 is Halton's 4th: (1/8, 4/9, 4/5) of the box */
+  const double zero[3] = {0, 0, 0}, unit[3] = {1, 1, 1};
+  ASSERT_OK(fg_grasp_query_points_box(4, zero, unit, b));
+  ASSERT_EQ(b[9], -0.375f);
+  ASSERT_EQ(b[10], (float)(4.0 / 9.0 - 0.5));
+  ASSERT_EQ(b[11], 0.3f);
+  ASSERT_ERR(fg_grasp_query_points_box(0, mean, size, a), FG_EINVAL, "1..1000");
+  const double flat[3] = {0.01, 0.0, 0.01}, huge[3] = {0.01, 2.0, 0.01}, far[3] = {0, 0, 1.5};
+  ASSERT_ERR(fg_grasp_query_points_box(10, mean, flat, a), FG_EINVAL, "size");
+  ASSERT_ERR(fg_grasp_query_points_box(10, mean, huge, a), FG_EINVAL, "size");
+  ASSERT_ERR(fg_grasp_query_points_box(10, far, size, a), FG_EINVAL, "mean");
+  /* the default: between the pads, as wide as they are, over their height */
+  for (int k = 0; k < FG_GRIPPER_N_MODELS; k++) {
+    const fg_gripper_model m = (fg_gripper_model)k;
+    const double w = 0.05;
+    double mu[3], sz[3];
+    ASSERT_OK(fg_grasp_query_box_default(m, w, mu, sz));
+    fg_gripper_box g[FG_GRIPPER_N_BOXES];
+    ASSERT_OK(fg_gripper_boxes(m, w, g));
+    const fg_gripper_box *pad = &g[FG_GRIPPER_BOX_PAD_MINUS_Y];
+    ASSERT_NEAR(sz[0], 2 * pad->half_m[0], 1e-12);
+    ASSERT_NEAR(sz[1], w, 1e-12);
+    ASSERT_NEAR(sz[2], 2 * pad->half_m[2], 1e-12);
+    ASSERT_NEAR(mu[0], 0.0, 0.0);
+    ASSERT_NEAR(mu[1], 0.0, 0.0);
+    ASSERT_NEAR(mu[2], pad->centre_m[2], 1e-12);
+    ASSERT_OK(fg_grasp_query_points_box(N, mu, sz, a));
+    ASSERT_ERR(fg_grasp_query_box_default(m, 0.0, mu, sz), FG_EINVAL, "width");
+    ASSERT_ERR(fg_grasp_query_box_default(m, 0.3, mu, sz), FG_EINVAL, "stroke");
+  }
+  free(a);
+  free(b);
+}
+
 /* ---------------------------------------------------------------- gripper models */
 
+static double box_lo(const fg_gripper_box *b, int a) { return b->centre_m[a] - b->half_m[a]; }
+static double box_hi(const fg_gripper_box *b, int a) { return b->centre_m[a] + b->half_m[a]; }
+
+/* The layout of every model at several widths: the parts and pad flags in FG_GRIPPER_BOX_*
+ * order, the finger at -y the mirror image of the one at +y, pads' faces width / 2 from the
+ * TCP, from the tip back towards the palm pad, holder and link stacked along z (the pads
+ * nearest the object), the palm behind the fingers and the same at every width, the tips on
+ * the linkage's arc. */
 static void test_gripper(void) {
   fg_gripper_model m;
   ASSERT_OK(fg_gripper_model_parse("robotiq-2f85", &m));
   ASSERT_EQ(m, FG_GRIPPER_ROBOTIQ_2F85);
   ASSERT_ERR(fg_gripper_model_parse("suction", &m), FG_EINVAL, "panda");
+  ASSERT_STREQ(fg_gripper_box_name(FG_GRIPPER_BOX_PAD_MINUS_Y), "pad_minus_y");
+  ASSERT_STREQ(fg_gripper_box_name(FG_GRIPPER_BOX_LINK_PLUS_Y), "link_plus_y");
+  ASSERT(fg_gripper_box_name(FG_GRIPPER_N_BOXES) == NULL);
+  ASSERT_STREQ(fg_gripper_part_name(FG_GRIPPER_FINGER_MINUS_Y), "finger_minus_y");
   for (int k = 0; k < FG_GRIPPER_N_MODELS; k++) {
-    const fg_gripper_spec *s = fg_gripper_spec_get((fg_gripper_model)k);
+    const fg_gripper_model mk = (fg_gripper_model)k;
+    const fg_gripper_spec *s = fg_gripper_spec_get(mk);
+    fg_gripper_box palm0[1] = {{{0}}};
+    double rise_prev = INFINITY;
+    for (int step = 0; step <= 4; step++) {
+      const double w = s->stroke_m * step / 4;
+      fg_gripper_box b[FG_GRIPPER_N_BOXES];
+      ASSERT_OK(fg_gripper_boxes(mk, w, b));
+      ASSERT_EQ(b[FG_GRIPPER_BOX_PALM].part, FG_GRIPPER_PALM);
+      ASSERT_EQ(b[FG_GRIPPER_BOX_PALM].pad, 0);
+      for (int i = 1; i < FG_GRIPPER_N_BOXES; i += 2) { /* (minus, plus) pairs */
+        const fg_gripper_box *mi = &b[i], *pl = &b[i + 1];
+        ASSERT_EQ(mi->part, FG_GRIPPER_FINGER_MINUS_Y);
+        ASSERT_EQ(pl->part, FG_GRIPPER_FINGER_PLUS_Y);
+        ASSERT_EQ(mi->pad, i == FG_GRIPPER_BOX_PAD_MINUS_Y);
+        ASSERT_EQ(pl->pad, mi->pad);
+        ASSERT_NEAR(mi->centre_m[1], -pl->centre_m[1], 1e-15);
+        for (int a = 0; a < 3; a++) {
+          ASSERT(pl->half_m[a] > 0);
+          ASSERT_NEAR(mi->half_m[a], pl->half_m[a], 0.0);
+          if (a != 1) ASSERT_NEAR(mi->centre_m[a], pl->centre_m[a], 0.0);
+        }
+      }
+      const fg_gripper_box *pad = &b[FG_GRIPPER_BOX_PAD_PLUS_Y],
+                           *holder = &b[FG_GRIPPER_BOX_HOLDER_PLUS_Y],
+                           *link = &b[FG_GRIPPER_BOX_LINK_PLUS_Y], *palm = &b[FG_GRIPPER_BOX_PALM];
+      /* the pad's face and the holder's at width / 2, the link at most that far inwards */
+      ASSERT_NEAR(box_lo(pad, 1), w / 2, 1e-12);
+      ASSERT_NEAR(box_lo(holder, 1), w / 2, 1e-12);
+      ASSERT(box_lo(link, 1) <= w / 2 + 1e-12 && box_lo(link, 1) >= 0);
+      /* a thin pad, thicker parts behind it */
+      ASSERT(2 * pad->half_m[1] < 0.020);
+      ASSERT(holder->half_m[1] > pad->half_m[1]);
+      ASSERT(box_hi(link, 1) > box_hi(holder, 1));
+      /* stacked along z: the pad nearest the object, the link nearest the palm */
+      const double rise = fg_gripper_tip_rise(mk, w);
+      ASSERT_NEAR(box_hi(pad, 2), s->tip_beyond_tcp_m + rise, 1e-12);
+      ASSERT_NEAR(box_lo(pad, 2), box_hi(holder, 2), 1e-12);
+      ASSERT_NEAR(box_lo(holder, 2), box_hi(link, 2), 1e-12);
+      ASSERT(box_lo(link, 2) < box_hi(link, 2));
+      ASSERT(box_hi(palm, 2) < box_lo(holder, 2));
+      ASSERT(palm->centre_m[2] < 0 && palm->half_m[1] >= palm->half_m[0]);
+      if (step == 0)
+        palm0[0] = *palm;
+      else
+        ASSERT(memcmp(palm, &palm0[0], sizeof *palm) == 0);
+      /* the tips rise as the fingers close: not at all for a Franka finger, which slides */
+      ASSERT(rise >= 0 && rise <= rise_prev);
+      rise_prev = rise;
+      if (step == 4) { /* fully open: the TCP lies between the pads */
+        ASSERT_NEAR(rise, 0.0, 1e-12);
+        ASSERT(box_lo(pad, 2) < 0 && box_hi(pad, 2) > 0);
+        ASSERT_NEAR(box_lo(pad, 1), s->stroke_m / 2, 1e-12);
+      }
+    }
+    printf("gripper %s: tips rise %.1f mm closing\n", s->name,
+           1e3 * fg_gripper_tip_rise(mk, 0.0));
+    ASSERT(k == FG_GRIPPER_PANDA ? fg_gripper_tip_rise(mk, 0.0) == 0.0
+                                 : fg_gripper_tip_rise(mk, 0.0) > 0.010);
     fg_gripper_box b[FG_GRIPPER_N_BOXES];
-    ASSERT_OK(fg_gripper_boxes((fg_gripper_model)k, 0.05, b));
-    /* inner finger faces at +-width/2, symmetric, reaching just past the TCP */
-    ASSERT_NEAR(b[2].centre_m[1] - b[2].half_m[1], 0.025, 1e-12);
-    ASSERT_NEAR(b[1].centre_m[1] + b[1].half_m[1], -0.025, 1e-12);
-    ASSERT_NEAR(b[1].centre_m[2] + b[1].half_m[2], s->tip_beyond_tcp_m, 1e-12);
-    /* the palm ends where the fingers start, behind the TCP */
-    ASSERT_NEAR(b[0].centre_m[2] + b[0].half_m[2], b[1].centre_m[2] - b[1].half_m[2], 1e-12);
-    ASSERT(b[0].centre_m[2] < 0);
-    ASSERT_ERR(fg_gripper_boxes((fg_gripper_model)k, s->stroke_m + 0.001, b), FG_EINVAL,
-               "stroke");
-    ASSERT_ERR(fg_gripper_boxes((fg_gripper_model)k, -0.001, b), FG_EINVAL, "stroke");
+    ASSERT_ERR(fg_gripper_boxes(mk, s->stroke_m + 0.001, b), FG_EINVAL, "stroke");
+    ASSERT_ERR(fg_gripper_boxes(mk, -0.001, b), FG_EINVAL, "stroke");
+    ASSERT_ERR(fg_gripper_boxes(mk, NAN, b), FG_EINVAL, "stroke");
   }
+  ASSERT(isnan(fg_gripper_tip_rise(FG_GRIPPER_N_MODELS, 0.05)));
   ASSERT_NEAR(fg_gripper_spec_get(FG_GRIPPER_PANDA)->stroke_m, 0.08, 1e-12);
   ASSERT_NEAR(fg_gripper_spec_get(FG_GRIPPER_ROBOTIQ_2F140)->stroke_m, 0.14, 1e-12);
+}
+
+/* The ring: a handle lying flat on 2 mm voxels, its opening 20 mm across (y) and 40 mm long
+ * (x), 12 mm deep, walls 18 mm thick. Every model, approaching from above 4 cm open, puts
+ * its -y pad into the opening and its +y pad outside the ring: free. 6 mm either way along y,
+ * the pad meets a wall. The three-box model before this one had 20 and 30 mm thick fingers
+ * reaching 45 to 100 mm back from the TCP, so its Robotiq fingers could not enter. */
+#define RING_VS 0.002
+#define RING_NX 60
+#define RING_NY 70
+#define RING_NZ 20
+
+static void test_gripper_ring(void) {
+  const double mn[3] = {-0.06, -0.06, 0.0};
+  const double mx[3] = {mn[0] + RING_NX * RING_VS, mn[1] + RING_NY * RING_VS,
+                        mn[2] + RING_NZ * RING_VS};
+  fg_voxel_grid g;
+  ASSERT_OK(fg_voxel_grid_init(&g, mn, mx, RING_VS));
+  const size_t N = fg_voxel_grid_count(&g);
+  const int D = 8;
+  float *alpha = calloc(N, sizeof *alpha), *h = calloc(N * HID, sizeof *h);
+  float *W = malloc((size_t)D * HID * sizeof *W);
+  ASSERT(alpha && h && W);
+  /* a head of its own, leaving urand()'s stream to the tests after this one */
+  for (int i = 0; i < D * HID; i++) W[i] = (float)sin(1.0 + i);
+  /* the opening spans x -0.020..0.020, y -0.010..0.010 around the origin, the ring around it
+   * x -0.038..0.038, y -0.028..0.028; z 0.010..0.022 */
+  for (int iz = 0; iz < RING_NZ; iz++)
+    for (int iy = 0; iy < RING_NY; iy++)
+      for (int ix = 0; ix < RING_NX; ix++) {
+        double c[3];
+        fg_voxel_grid_centre(&g, ix, iy, iz, c);
+        const int in_ring = fabs(c[0]) < 0.038 && fabs(c[1]) < 0.028 && c[2] > 0.010 &&
+                            c[2] < 0.022;
+        const int in_hole = fabs(c[0]) < 0.020 && fabs(c[1]) < 0.010;
+        if (!in_ring || in_hole) continue;
+        const size_t idx = ((size_t)iz * RING_NY + iy) * RING_NX + ix;
+        alpha[idx] = 0.95f;
+        for (int j = 0; j < HID; j++) h[idx * HID + j] = 1.0f;
+      }
+  fg_voxel_features *vf = NULL;
+  ASSERT_OK(fg_voxel_features_from_arrays(&vf, &g, D, alpha, h, W));
+  fg_grasp_field *gf = NULL;
+  ASSERT_OK(fg_grasp_field_new(&gf, vf, 1));
+  const double w = 0.04;
+  for (int k = 0; k < FG_GRIPPER_N_MODELS; k++) {
+    const fg_gripper_model mk = (fg_gripper_model)k;
+    fg_gripper_box b[FG_GRIPPER_N_BOXES];
+    ASSERT_OK(fg_gripper_boxes(mk, w, b));
+    const fg_gripper_box *pad = &b[FG_GRIPPER_BOX_PAD_MINUS_Y];
+    const double t = 2 * pad->half_m[1], tip = box_hi(pad, 2);
+    /* the -y pad centred in the opening, its tip 2 mm above the ring's underside, so the
+     * ring's 12 mm lie within the pad's height */
+    ASSERT(2 * pad->half_m[2] > 0.012 + 0.002);
+    ASSERT(2 * pad->half_m[0] < 0.040);
+    double T[16] = {-1, 0, 0, 0, 0, 1, 0, w / 2 + t / 2, 0, 0, -1, 0.012 + tip, 0, 0, 0, 1};
+    ASSERT_EQ(fg_grasp_collides(gf, mk, w, T, 0.5f), 0);
+    for (int side = -1; side <= 1; side += 2) {
+      double Ts[16];
+      memcpy(Ts, T, sizeof Ts);
+      Ts[7] += side * 0.006;
+      ASSERT_EQ(fg_grasp_collides(gf, mk, w, Ts, 0.5f), 1);
+    }
+    /* the old envelope: 30 mm (Robotiq) or 20 mm (Franka) thick from the face inwards of
+     * the opening's far wall at -0.010 */
+    const double old_thick = k == FG_GRIPPER_PANDA ? 0.020 : 0.030;
+    printf("ring, %s: a pad %.0f mm thick enters the 20 mm opening; the old %.0f mm finger "
+           "%s\n", fg_gripper_spec_get(mk)->name, 1e3 * t, 1e3 * old_thick,
+           T[7] - w / 2 - old_thick < -0.010 ? "did not" : "did");
+    if (k != FG_GRIPPER_PANDA) ASSERT(T[7] - w / 2 - old_thick < -0.010);
+  }
+  fg_grasp_field_free(gf);
+  fg_voxel_features_free(vf);
+  free(alpha);
+  free(h);
+  free(W);
 }
 
 /* ---------------------------------------------------------------- SO(3) cover */
@@ -466,7 +664,9 @@ static void test_search_synthetic(void) {
 
 int main(void) {
   test_query_points();
+  test_query_points_box();
   test_gripper();
+  test_gripper_ring();
   test_so3();
   test_cost();
   test_search_synthetic();

@@ -1,14 +1,19 @@
 /* The demonstration library over HTTP (GET/DELETE /v1/tasks..., POST /v1/tasks/{t}/demos) on
  * a trained scenegen tabletop:
  *   - every bad demo answers its JSON error and stores nothing (no task, no file);
- *   - demos create tasks, fix their query points, kind and D, list, read and delete;
+ *   - demos create tasks, fix their query points (by default the box between the pads of
+ *     the configured gripper, the Gaussian when asked for), kind and D, list, read and
+ *     delete;
  *   - demo files are float32 [N_q, D] .npy files beside task.json;
  *   - tasks survive a clean restart and a kill -9, and a demo survives its scene;
+ *   - a task.json written before the box layout (a Gaussian without "layout") loads and
+ *     takes demos at its own query points;
  *   - a task folder that does not load is logged and skipped, and its name refused.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-scenegen. */
 #include "grasp_util.h"
 
 #include "core/error.h"
+#include "grasp/grasp.h"
 #include "io/npy.h"
 
 #include <sys/stat.h>
@@ -117,7 +122,12 @@ static void bad_inputs(void) {
   static const char *const qps[] = {"{\"n\": 0}", "{\"n\": -3}", "{\"n\": 1001}",
                                     "{\"std\": 0}", "{\"std\": -0.01}", "{\"std\": \"wide\"}",
                                     "{\"n\": 2.5}", "{\"mean\": [0, 0]}", "{\"spread\": 1}",
-                                    "7"};
+                                    "7", "{\"layout\": \"cone\"}", "{\"layout\": 1}",
+                                    "{\"std\": 0.01, \"size\": [0.02, 0.05, 0.02]}",
+                                    "{\"layout\": \"box\", \"std\": 0.01}",
+                                    "{\"layout\": \"gaussian\", \"size\": [0.02, 0.05, 0.02]}",
+                                    "{\"size\": [0.02, 0, 0.02]}", "{\"size\": [0.02, 0.05]}",
+                                    "{\"size\": [0.02, 2, 0.02]}"};
   for (size_t i = 0; i < sizeof qps / sizeof qps[0]; i++) {
     b = h_fmt("{\"scene\": \"sg\", \"pose\": {\"position\": %s, \"quaternion\": [0, 1, 0, 0]}, "
               "\"query_points\": %s}", pos, qps[i]);
@@ -155,6 +165,54 @@ static void bad_inputs(void) {
   free(b);
   free(pos);
   free(good);
+}
+
+/* A task written before the box layout: ball's demo 1 under a task.json whose query points
+ * are {"n", "std", "mean"} without "layout". It loads as the Gaussian it was, and a demo
+ * without query points joins it at those points. Deleted again at the end. */
+static void legacy_task(const char *ball) {
+  char *src = h_fmt("%s/tasks/ball", h_state_dir());
+  char *dir = h_fmt("%s/tasks/legacy", h_state_dir());
+  char *src_json = h_fmt("%s/task.json", src), *src_npy = h_fmt("%s/demo-1.npy", src);
+  json_error_t e;
+  json_t *tj = json_load_file(src_json, 0, &e);
+  ASSERT(tj);
+  json_t *demos = JGET(tj, "demos");
+  while (json_array_size(demos) > 1) json_array_remove(demos, 1);
+  json_object_set_new(tj, "name", json_string("legacy"));
+  json_object_set_new(tj, "next_id", json_integer(2));
+  json_object_set_new(tj, "query_points", json_pack("{s:i, s:f, s:[f, f, f]}", "n", G_NQ, "std",
+                                                    0.012, "mean", 0.0, 0.0, 0.0));
+  h_mkdirs(dir);
+  char *dst_json = h_fmt("%s/task.json", dir), *dst_npy = h_fmt("%s/demo-1.npy", dir);
+  ASSERT_EQ(json_dump_file(tj, dst_json, 0), 0);
+  json_decref(tj);
+  size_t len = 0;
+  char *npy = h_read_file(src_npy, &len);
+  ASSERT(npy);
+  h_write_file(dst_npy, npy, len);
+  free(npy);
+  h_stop();
+  h_start();
+  json_t *t = task_get("legacy");
+  ASSERT_EQ(JINT(t, "n_demos"), 1);
+  ASSERT_STREQ(JSTR(t, "query_points.layout"), "gaussian");
+  ASSERT_NEAR(JNUM(t, "query_points.std"), 0.012, 1e-12);
+  json_decref(t);
+  h_resp *r = add_demo("legacy", ball);
+  ASSERT_EQ(JINT(r->json, "demo.id"), 2);
+  ASSERT_STREQ(JSTR(r->json, "task.query_points.layout"), "gaussian");
+  ASSERT_NEAR(JNUM(r->json, "task.query_points.std"), 0.012, 1e-12);
+  h_resp_free(r);
+  r = h_delete("/v1/tasks/legacy");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  free(src);
+  free(dir);
+  free(src_json);
+  free(src_npy);
+  free(dst_json);
+  free(dst_npy);
 }
 
 int main(int argc, char **argv) {
@@ -201,7 +259,15 @@ int main(int argc, char **argv) {
   ASSERT_EQ(JINT(r->json, "task.dim"), G_DIM);
   ASSERT_EQ(JINT(r->json, "task.n_demos"), 1);
   ASSERT_EQ(JINT(r->json, "task.query_points.n"), G_NQ);
-  ASSERT_NEAR(JNUM(r->json, "task.query_points.std"), 0.0075, 1e-12);
+  { /* by default the box the fingers close on: the pads of the panda at the demo's width */
+    double mean[3], size[3];
+    ASSERT_OK(fg_grasp_query_box_default(FG_GRIPPER_PANDA, JNUM(r->json, "demo.width"), mean,
+                                         size));
+    ASSERT_STREQ(JSTR(r->json, "task.query_points.layout"), "box");
+    ASSERT_VEC(JGET(r->json, "task.query_points.size"), size, 3, 1e-12);
+    ASSERT_VEC(JGET(r->json, "task.query_points.mean"), mean, 3, 1e-12);
+    ASSERT(json_object_get(JGET(r->json, "task.query_points"), "std") == NULL);
+  }
   ASSERT_NEAR(JNUM(r->json, "task.approach"), 0.10, 1e-12);
   /* the pose comes back as given (quaternion, position) and as a matrix */
   json_t *g = JGET(g_object("ball"), "grasp");
@@ -234,9 +300,14 @@ int main(int argc, char **argv) {
   char *box = g_demo_body("sg", "box", "");
   r = add_demo("box", box);
   h_resp_free(r);
-  char *place = g_demo_body("sg", "mug", "\"kind\": \"place\"");
+  /* the Gaussian, asked for: F3RM's, with the former default std */
+  char *place = g_demo_body_qp("sg", "mug", "{\"n\": 32, \"layout\": \"gaussian\"}",
+                               "\"kind\": \"place\"");
   r = add_demo("mug_place", place);
   ASSERT_STREQ(JSTR(r->json, "task.kind"), "place");
+  ASSERT_STREQ(JSTR(r->json, "task.query_points.layout"), "gaussian");
+  ASSERT_NEAR(JNUM(r->json, "task.query_points.std"), FG_GRASP_DEFAULT_STD_M, 1e-12);
+  ASSERT_VEC(JGET(r->json, "task.query_points.mean"), ((double[]){0, 0, 0}), 3, 0.0);
   h_resp_free(r);
 
   /* List (by name), read, files. */
@@ -309,6 +380,8 @@ int main(int argc, char **argv) {
   struct stat st;
   ASSERT(stat(mp, &st) != 0);
   free(mp);
+
+  legacy_task(ball);
 
   /* A task folder that does not load: logged, skipped, its name refused; the rest serves. */
   char *bd = h_fmt("%s/tasks/broken", h_state_dir());
