@@ -2,8 +2,9 @@
  * carries them out, against the ground truth's own.
  *
  * Layouts. Question layouts from scenegen seeds 101, 102, ... (--layouts N of them, default
- * 10; no test uses a seed from 101 up), four objects each (mug, bowl, box, ball); demos on
- * the quality test's two demo layouts, seeds 1 and 3. All share layout 0's class embeddings
+ * 10: 101-110), four objects each (mug, bowl, box, ball); the tests and scripts/demo.sh use
+ * seeds 0, 1, 2, 3, 5, 7, 9, 11, 12 and 23 only. Demos on the quality test's two demo
+ * layouts, seeds 1 and 3. All share layout 0's class embeddings
  * (--embedding-seed 0), as frames of one feature extractor do. Each layout is trained
  * in-process as tests/quality/layout.h does (30 views of 160 x 120, 32-d features in
  * 4-pixel patches, 2^15 samples a step, every view trained) for --steps steps on --threads
