@@ -69,7 +69,7 @@
 #           (bench_grasp_physics; about 30 minutes on 2 cores): BENCH_GRASP_PHYSICS_LAYOUTS
 #           (default 10) question layouts, scenegen seeds 101 up, demos on seeds 1 and 3, each
 #           trained in-process as tests/quality's layouts for BENCH_GRASP_PHYSICS_STEPS steps
-#           (default 900), with and without depth maps (BENCH_GRASP_PHYSICS_DEPTH both, with
+#           (default 1200), with and without depth maps (BENCH_GRASP_PHYSICS_DEPTH both, with
 #           or without). Per object of each layout the top grasp by task and by language query,
 #           each picked by the Robotiq 2F-85 in a fresh cell; success = the object held 5 cm
 #           up and nothing knocked over. The success rate overall, per object, per kind and
@@ -644,7 +644,7 @@ run_self_checked() {
 bench_grasp_physics() {
   run_self_checked grasp_physics 'grasp_physics_layout|grasp_physics_grasp|grasp_physics_depth' \
     grasp_physics --scenegen "$build/tests/scenegen/fieldgrip-scenegen" \
-    --layouts "${BENCH_GRASP_PHYSICS_LAYOUTS:-10}" --steps "${BENCH_GRASP_PHYSICS_STEPS:-900}" \
+    --layouts "${BENCH_GRASP_PHYSICS_LAYOUTS:-10}" --steps "${BENCH_GRASP_PHYSICS_STEPS:-1200}" \
     --depth "${BENCH_GRASP_PHYSICS_DEPTH:-both}" --threads 2
 }
 
