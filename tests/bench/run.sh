@@ -2,10 +2,11 @@
 # fieldgrip benchmarks. Not part of `meson test`; run them by hand or with `ninja -C BUILD bench`.
 #
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
-#                           [busy] [clip] [heatmap] [robot] [grasp] [geometry]
-#                           [depth_throughput] [fox] [http_idle] [load] [soak] [viewer]
-#   (no names: all of them but fox; train takes about 6 minutes, throughput about 3; grasp several,
-#   most of them in the PyTorch peer)
+#                           [busy] [clip] [heatmap] [robot] [grasp] [grasp_physics]
+#                           [geometry] [depth_throughput] [fox] [http_idle] [load] [soak]
+#                           [viewer]
+#   (no names: all of them but fox and grasp_physics; train takes about 6 minutes, throughput
+#   about 3; grasp several, most of them in the PyTorch peer; grasp_physics about 30)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
@@ -64,6 +65,19 @@
 #           candidates after fewer steps) change the run; pass is only meaningful at the
 #           defaults. ratio_per_evaluation compares the seconds per cost evaluation, since
 #           the peer, without collision checks, may optimise more poses than ours
+#   grasp_physics  inferred grasps executed in the MuJoCo cell of sim/cell.h
+#           (bench_grasp_physics; about 30 minutes on 2 cores): BENCH_GRASP_PHYSICS_LAYOUTS
+#           (default 10) question layouts, scenegen seeds 101 up, demos on seeds 1 and 3, each
+#           trained in-process as tests/quality's layouts for BENCH_GRASP_PHYSICS_STEPS steps
+#           (default 1200), with and without depth maps (BENCH_GRASP_PHYSICS_DEPTH both, with
+#           or without). Per object of each layout the top grasp by task and by language query,
+#           each picked by the Robotiq 2F-85 in a fresh cell; success = the object held 5 cm
+#           up and nothing knocked over. The success rate overall, per object, per kind and
+#           with and without depth, the control (every ground-truth grasp, must be near
+#           100 %), failures by cause, p50 and mean seconds per grasp request; one
+#           grasp_physics_grasp line per pick for studying failures. Targets: rate with depth
+#           >= 0.90, control >= 0.95. A smoke run: BENCH_GRASP_PHYSICS_LAYOUTS=1
+#           BENCH_GRASP_PHYSICS_STEPS=100
 #   geometry  issue 13: a scenegen tabletop with 16-bit PNG depth maps (36 views at 240x180,
 #           every 10th held out), trained in-process (bench_geometry, BENCH_GEOMETRY_STEPS
 #           steps, default 2000, the trainer's 2^17 samples per step, 2 threads) four ways
@@ -114,7 +128,7 @@
 set -euo pipefail
 
 if [ $# -lt 1 ]; then
-  sed -n '2,112p' "$0" >&2
+  sed -n '2,127p' "$0" >&2
   exit 2
 fi
 build=$(realpath "$1")
@@ -627,6 +641,13 @@ run_self_checked() {
   [ "$(field pass "$line")" = yes ] || failed=1
 }
 
+bench_grasp_physics() {
+  run_self_checked grasp_physics 'grasp_physics_layout|grasp_physics_grasp|grasp_physics_depth' \
+    grasp_physics --scenegen "$build/tests/scenegen/fieldgrip-scenegen" \
+    --layouts "${BENCH_GRASP_PHYSICS_LAYOUTS:-10}" --steps "${BENCH_GRASP_PHYSICS_STEPS:-1200}" \
+    --depth "${BENCH_GRASP_PHYSICS_DEPTH:-both}" --threads 2
+}
+
 bench_load() {
   run_self_checked load load load_summary "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" \
     --seconds "${BENCH_LOAD_SECONDS:-30}"
@@ -672,6 +693,7 @@ for b in "${benches[@]}"; do
     heatmap) bench_heatmap ;;
     robot) bench_robot ;;
     grasp) bench_grasp ;;
+    grasp_physics) bench_grasp_physics ;;
     geometry) bench_geometry ;;
     depth_throughput) bench_depth_throughput ;;
     fox) bench_fox ;;
@@ -679,7 +701,7 @@ for b in "${benches[@]}"; do
     load) bench_load ;;
     soak) bench_soak ;;
     viewer) bench_viewer ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, geometry, depth_throughput, fox, http_idle, load, soak, viewer)" >&2; exit 2 ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

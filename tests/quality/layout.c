@@ -22,7 +22,9 @@ void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout
   ASSERT_OK(sg_gt_load(gt_path, &L->gt));
   memcpy(L->background, L->gt.background_rgb, sizeof L->background);
   fg_ingest_opts io = {.background_rgb = {L->background[0], L->background[1], L->background[2]}};
-  ASSERT_OK(fg_dataset_load(transforms, &io, 2, &L->frames, &L->n_frames));
+  const int threads = spec->threads > 0 ? spec->threads : SG_LAYOUT_THREADS;
+  const int steps = spec->steps > 0 ? spec->steps : SG_LAYOUT_STEPS;
+  ASSERT_OK(fg_dataset_load(transforms, &io, threads, &L->frames, &L->n_frames));
   ASSERT_EQ(L->n_frames, SG_LAYOUT_VIEWS);
 
   fg_field_config cfg;
@@ -30,7 +32,7 @@ void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout
   ASSERT_OK(fg_field_new(&L->field, &cfg, 1));
   fg_train_opts o;
   fg_train_opts_default(&o);
-  o.n_threads = 2;
+  o.n_threads = threads;
   o.holdout_every = spec->holdout_every;
   o.target_samples = 1 << 15;
   memcpy(o.background, L->background, sizeof o.background);
@@ -38,16 +40,16 @@ void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout
   ASSERT_OK(fg_trainer_new(&t, L->field, L->frames, L->n_frames, &o));
   fg_train_stats st;
   const double t0 = fg_mono_s();
-  for (int s = 0; s < SG_LAYOUT_STEPS; s++) ASSERT_OK(fg_trainer_step(t, &st));
-  const double train_s = fg_mono_s() - t0;
+  for (int s = 0; s < steps; s++) ASSERT_OK(fg_trainer_step(t, &st));
+  L->train_s = fg_mono_s() - t0;
   fg_trainer_free(t);
 
   fg_voxel_grid g;
   ASSERT_OK(fg_voxel_grid_init(&g, ws_min, ws_max, 0.01));
-  ASSERT_OK(fg_voxel_features_build(&L->vf, L->field, &g, 2));
+  ASSERT_OK(fg_voxel_features_build(&L->vf, L->field, &g, threads));
   printf("seed %s%s: %d steps in %.1f s, loss %.4f; voxel features: %zu of %zu voxels kept, "
-         "%.2f s, %.1f MB\n", spec->seed, spec->depth ? " (with depth)" : "", SG_LAYOUT_STEPS,
-         train_s, st.loss, fg_voxel_features_n_kept(L->vf), fg_voxel_grid_count(&g),
+         "%.2f s, %.1f MB\n", spec->seed, spec->depth ? " (with depth)" : "", steps,
+         L->train_s, st.loss, fg_voxel_features_n_kept(L->vf), fg_voxel_grid_count(&g),
          fg_voxel_features_build_seconds(L->vf), fg_voxel_features_bytes(L->vf) / 1e6);
   fflush(stdout);
   free(transforms);

@@ -5,9 +5,8 @@
  *
  * Every layout: 30 views of 160 x 120 with 32-d features in 4-pixel patches, 1500 steps of
  * 2^15 samples on 2 threads over the tabletop workspace of SPEC.md's example configuration,
- * voxel features at 1 cm. What differs
- * is in sg_layout_spec. Like the harness, every helper asserts instead of returning an
- * error. */
+ * voxel features at 1 cm. What differs is in sg_layout_spec (a benchmark may ask for other
+ * steps and threads). Like the harness, every helper asserts instead of returning an error. */
 #ifndef SG_LAYOUT_H
 #define SG_LAYOUT_H
 
@@ -21,6 +20,7 @@
 
 #define SG_LAYOUT_STEPS 1500
 #define SG_LAYOUT_VIEWS 30
+#define SG_LAYOUT_THREADS 2
 
 typedef struct sg_layout_spec {
   const char *seed;           /* scenegen's --seed */
@@ -29,6 +29,8 @@ typedef struct sg_layout_spec {
                                  extractor have) */
   int depth;                  /* 1: 16-bit depth maps (an RGB-D capture), trained with depth */
   int holdout_every;          /* the trainer's: 10 holds views 0, 10 and 20 out; 0 none */
+  int steps;                  /* training steps; 0: SG_LAYOUT_STEPS (a benchmark's budget) */
+  int threads;                /* training and voxel threads; 0: SG_LAYOUT_THREADS */
 } sg_layout_spec;
 
 typedef struct sg_layout {
@@ -40,10 +42,12 @@ typedef struct sg_layout {
   fg_field *field;
   float background[3];      /* the trainer's background colour */
   fg_voxel_features *vf;    /* 1 cm voxels over the workspace */
+  double train_s;           /* the training's wall time, seconds */
 } sg_layout;
 
 /* Generates the layout of spec with fieldgrip-scenegen (the program's path), trains it and
- * builds its voxel features; prints the training's time and loss. */
+ * builds its voxel features; prints the training's time and loss. The data set's folder
+ * (L->dir) holds scenegen's cell.xml too. */
 void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout *L);
 
 /* Releases everything and removes the data set's folder. */

@@ -53,37 +53,22 @@
 
 #include "core/pose.h"
 #include "grasp/grasp.h"
+#include "grasps.h"
 #include "heatmap_quality.h"
 #include "layout.h"
 
 #define N_QUERY 100
 #define POS_TOL_M 0.015
 #define ANGLE_TOL_DEG 20.0
-#define MASK_SCORE 0.5f
 
 enum { TASK_MUG, TASK_BOX, TASK_BALL, N_TASKS };
 static const char *const task_object[N_TASKS] = {"mug", "box", "ball"};
 static const double task_width_m[N_TASKS] = {0.05, 0.11, 0.12};
 #define GRIPPER FG_GRIPPER_ROBOTIQ_2F140
 
-/* T with its rotation post-multiplied by a turn of 180 degrees about its own axis a. */
-static void turn_half(const double T[16], int a, double out[16]) {
-  memcpy(out, T, 16 * sizeof *out);
-  for (int c = 0; c < 3; c++) {
-    if (c == a) continue;
-    for (int r = 0; r < 3; r++) out[4 * r + c] = -T[4 * r + c];
-  }
-}
-
-static int object_index(const sg_gt *gt, const char *name) {
-  for (int k = 0; k < gt->n_objects; k++)
-    if (strcmp(gt->objects[k].name, name) == 0) return k;
-  FG_TEST_FAIL("gt.json has no %s", name);
-}
-
 /* The task's gripper pose on its object in layout gt (world frame). */
 static void task_pose(const sg_gt *gt, int task, double T_world_gripper[16]) {
-  const sg_gt_object *ob = &gt->objects[object_index(gt, task_object[task])];
+  const sg_gt_object *ob = &gt->objects[sg_object_index(gt, task_object[task])];
   if (task != TASK_MUG) {
     memcpy(T_world_gripper, ob->T_world_grasp, 16 * sizeof(double));
     return;
@@ -104,41 +89,13 @@ static void task_errors(const sg_gt *gt, int task, const double T[16], double *d
                         double *angle_deg) {
   double truth[16];
   task_pose(gt, task, truth);
-  const double d[3] = {T[3] - truth[3], T[7] - truth[7], T[11] - truth[11]};
-  *dist_m = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-  if (task == TASK_BALL) { /* a ball looks the same from every side */
-    *angle_deg = 0.0;
-    return;
-  }
-  double best = INFINITY;
-  for (int obj_turn = 0; obj_turn < (task == TASK_BOX ? 2 : 1); obj_turn++) {
-    double t1[16];
-    if (obj_turn) { /* the box turned by 180 degrees about its vertical axis */
-      const sg_gt_object *ob = &gt->objects[object_index(gt, "box")];
-      double Tz[16], M[16];
-      turn_half(ob->shape.T_world_obj, 2, Tz);
-      fg_pose_compose(Tz, ob->shape.T_obj_world, M);
-      fg_pose_compose(M, truth, t1);
-    } else {
-      memcpy(t1, truth, sizeof t1);
-    }
-    for (int flip = 0; flip < 2; flip++) { /* the gripper turned about its approach axis */
-      double t2[16];
-      if (flip)
-        turn_half(t1, 2, t2);
-      else
-        memcpy(t2, t1, sizeof t2);
-      const double a = fg_pose_angle_rad(T, t2) * 180.0 / M_PI;
-      if (a < best) best = a;
-    }
-  }
-  *angle_deg = best;
+  sg_grasp_errors(gt, sg_object_index(gt, task_object[task]), truth, T, dist_m, angle_deg);
 }
 
 /* Every object of b moved >= 10 cm and turned >= 45 degrees about z from where it is in a. */
 static void assert_moved(const sg_gt *a, const sg_gt *b) {
   for (int k = 0; k < a->n_objects; k++) {
-    const sg_gt_object *oa = &a->objects[k], *ob = &b->objects[object_index(b, oa->name)];
+    const sg_gt_object *oa = &a->objects[k], *ob = &b->objects[sg_object_index(b, oa->name)];
     const double d = hypot(oa->position[0] - ob->position[0], oa->position[1] - ob->position[1]);
     const double ya = atan2(oa->shape.T_world_obj[4], oa->shape.T_world_obj[0]);
     const double yb = atan2(ob->shape.T_world_obj[4], ob->shape.T_world_obj[0]);
@@ -258,37 +215,25 @@ static void grasp_checks(const sg_layout *Q, const sg_gt demo_gt[2], const char 
     search_and_check(Q->dir, &Q->gt, gf, task, &t, NULL, "task");
   }
 
-  /* by language: retrieval, then the masked and weighted search */
+  /* by language: retrieval, then the masked search */
   const size_t N = fg_voxel_grid_count(fg_voxel_features_grid(Q->vf));
-  float *scores = malloc(N * sizeof *scores);
   uint8_t *mask = malloc(N);
-  float *neg = malloc((size_t)Q->gt.n_classes * D * sizeof *neg);
-  ASSERT(scores && mask && neg);
+  ASSERT(mask);
   for (int task = 0; task < N_TASKS; task++) {
-    const int cls = sg_gt_class(&Q->gt, task_object[task]);
-    ASSERT(cls >= 0);
-    int nn = 0;
-    for (int c = 0; c < Q->gt.n_classes; c++)
-      if (c != cls) memcpy(neg + (size_t)nn++ * D, Q->gt.embeddings + (size_t)c * D, D * 4);
     fg_query q;
-    ASSERT_OK(fg_query_init(&q, D, Q->gt.embeddings + (size_t)cls * D, 1, neg, nn, 0.1f));
-    int best = -1;
-    double best_sim = -INFINITY;
-    for (int k = 0; k < N_TASKS; k++) {
-      const double sim = fg_grasp_task_similarity(Z[k], N_QUERY, D, q.q);
-      printf("retrieval of '%s': task %s scores %.3f\n", task_object[task], task_object[k], sim);
-      if (sim > best_sim) best_sim = sim, best = k;
-    }
+    sg_class_query(&Q->gt, task_object[task], &q);
+    double sims[N_TASKS];
+    const int best = sg_task_retrieve(Z, N_TASKS, N_QUERY, D, q.q, sims);
+    for (int k = 0; k < N_TASKS; k++)
+      printf("retrieval of '%s': task %s scores %.3f\n", task_object[task], task_object[k],
+             sims[k]);
     ASSERT_EQ(best, task);
-    ASSERT_OK(fg_voxel_features_score(Q->vf, &q, 0.1f, scores, 2));
-    for (size_t i = 0; i < N; i++) mask[i] = scores[i] >= MASK_SCORE;
+    sg_language_mask(Q, &q, mask);
     const fg_grasp_target t = {N_QUERY, D, p[best], Z[best], NULL};
     search_and_check(Q->dir, &Q->gt, gf, task, &t, mask, "language");
     fg_query_release(&q);
   }
-  free(scores);
   free(mask);
-  free(neg);
   fg_grasp_field_free(gf);
 }
 
