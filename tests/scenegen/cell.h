@@ -17,8 +17,9 @@
  *   box:  solid (one box); ball: solid (one sphere).
  * The mug and the bowl also get a box inscribed in their bottom cylinder (bottom_box,
  * foot_box), invisible inside it: MuJoCo gives a box resting on the table several contacts
- * and a cylinder fewer, so the box is what makes them stand still. No other part reaches within SG_CELL_CLEARANCE_M of the table, which keeps a resting
- * cell to a handful of contacts (MuJoCo 2.2's default contact buffer holds 100).
+ * and a cylinder fewer, so the box is what makes them stand still. No other part reaches
+ * within SG_CELL_CLEARANCE_M of the table, which keeps a resting cell to a handful of
+ * contacts (MuJoCo 2.2's default contact buffer holds 100).
  *
  * Mass is spread uniformly over the analytic solid (its inertia integrated on a 1 mm grid),
  * with a fixed mass per object whatever its scale. */
@@ -51,9 +52,10 @@ typedef struct sg_cell_material {
 const sg_cell_material *sg_cell_material_of(sg_shape_type t);
 
 /* The cell as MJCF text: the model "fieldgrip-scenegen seed N", the table geom "table" on the
- * world body (a plane at the top of the scene's table slab, drawn over it), and a body per object named as the object, with a free
- * joint of the same name, at T_world_obj, holding its parts as geoms "<object>/<part>" in the
- * object frame. No <option>: the simulator sets its own. The same scene gives the same bytes.
+ * world body (a plane at the top of the scene's table slab, drawn over it), and a body per
+ * object named as the object, with a free joint of the same name, at T_world_obj, holding its
+ * parts as geoms "<object>/<part>" in the object frame. No <option>: the simulator sets its
+ * own. The same scene gives the same bytes.
  * 0 on success with *xml (NUL-terminated, *len bytes without the NUL) owned by the caller, who
  * frees it; otherwise *xml is NULL and the code FG_ENOMEM, or FG_ERANGE for shape parameters
  * that leave no room for the parts (none that sg_scene_build makes). */

@@ -1,7 +1,7 @@
 /* fieldgrip-scenegen's (argv[1]) cell.xml, checked with MuJoCo for three layouts:
  *   - it loads without a message; the table geom and the four object bodies are there by
- *     name, the table's plane at the top of the scene's slab, each body with a free joint at its gt pose, with
- *     its documented mass and friction, made of convex primitives only;
+ *     name, the table's plane at the top of the scene's slab, each body with a free joint
+ *     at its gt pose, with its documented mass and friction, made of convex primitives only;
  *   - its collision geometry is the rendered shapes: rays cast at an object's geoms from
  *     around and above it meet them where they meet the analytic solid (shapes.h) within
  *     3 mm, and both hit or both miss, except within 3 mm of where the analytic depth image
