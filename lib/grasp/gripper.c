@@ -23,7 +23,7 @@ static const fg_gripper_spec specs[FG_GRIPPER_N_MODELS] = {
     .name = "robotiq-2f85", .stroke_m = 0.085, .tip_beyond_tcp_m = 0.006,
     .pad_size_m = {0.022, 0.018, 0.025}, .holder_size_m = {0.026, 0.025, 0.015},
     .link_half_x_m = 0.0175, .link_z_lo_m = -0.099, .link_thick_m = 0.032,
-    .link_reach_m = 0.068, .link_inset = 0.19,
+    .link_reach_m = 0.068, .link_inset = 0.0, /* its lean-in lies in the palm box */
     .palm_size_m = {0.075, 0.085, 0.101}, .palm_top_m = -0.053,
     .arc_radius_m = 0.05712, .arc_angle_rad = 0.7185},
   /* Robotiq 2F-140 (ROS-Industrial's robotiq_2f_140_gripper_visualization and Menagerie's
