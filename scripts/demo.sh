@@ -11,7 +11,8 @@
 #      and the ball), uploads and trains the second scan, asks "where is the mug?" (heatmap
 #      PLY and PNG), asks for a grasp of the box by query, executes it in the simulator's
 #      physics cell of the second scan (MuJoCo) and prints the gripper's report and what
-#      physics says: the box lifted and by how much, or the miss;
+#      physics says: the box lifted and by how much, or the miss; puts the box back, and
+#      does the same for the ball, asked for by its task;
 #   4. keeps the daemon and the simulator running for you to explore; Ctrl-C stops both.
 #
 # With [clip] in the configuration the questions are texts ("a mug") and the daemon computes
@@ -373,31 +374,55 @@ off_mm=$(jq -n --argjson a "$(jq -c '.grasps[0].pose.position' <<<"$reply")" \
          '[range(3) as $i | ($a[$i] - $b[$i]) | . * .] | add | sqrt * 1000 | . * 10 | round / 10')
 echo "its TCP is $off_mm mm from the box's grasp in the scan's ground truth"
 
-say "Executing it: a pick through the robot controller and the gripper (the simulator)"
-api_curl POST "/v1/scenes/tabletop/grasps/$grasp/execute" -H 'Content-Type: application/json' \
-  -H "Idempotency-Key: demo-$grasp" -d '{"dry_run": false}'
-expect 200
-jq -c '{id, command, state, stage, seq, width, force}' <<<"$reply"
-[ "$(jq -r .state <<<"$reply")" = done ] || die "the pick ended $(jq -r .state <<<"$reply"): $reply"
+# What physics says of the simulator's last motion: the object OBJECT lifted, or the miss.
+physics_says() { # OBJECT
+  local last lifted
+  last=$(grep '"command"' "$out/physics.jsonl" | tail -n 1)
+  jq -c '{command, outcome, fingers, objects: [.objects[] | select(.touched or .moved or .lifted)
+          | {name, held, lifted, dz_m, moved, knocked_over}]}' <<<"$last"
+  lifted=$(jq -r '[.objects[] | select(.lifted) | .name] | join(",")' <<<"$last")
+  if [ "$lifted" = "$1" ]; then
+    echo "the $1 was lifted by $(jq -r --arg o "$1" '.objects[] | select(.name == $o) | .dz_m' <<<"$last") m, held between the fingers"
+  elif [ -n "$lifted" ]; then
+    miss "physics: the pick lifted the $lifted, not the $1"
+  else
+    miss "physics: the pick lifted nothing ($(jq -c '[.objects[] | select(.moved or .knocked_over) | .name]' <<<"$last") moved)"
+  fi
+}
 
-say "The gripper's report"
-api_curl GET /v1/gripper
-expect 200
-jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
-[ "$(jq -r .object_detected <<<"$reply")" = true ] || miss "the gripper holds nothing: $reply"
+execute() { # GRASP_ID OBJECT: the pick through fieldgripd, the gripper's report, physics's
+  say "Executing it: a pick through the robot controller and the gripper (the simulator)"
+  api_curl POST "/v1/scenes/tabletop/grasps/$1/execute" -H 'Content-Type: application/json' \
+    -H "Idempotency-Key: demo-$1" -d '{"dry_run": false}'
+  expect 200
+  jq -c '{id, command, state, stage, seq, width, force}' <<<"$reply"
+  [ "$(jq -r .state <<<"$reply")" = done ] || die "the pick ended $(jq -r .state <<<"$reply"): $reply"
+  say "The gripper's report"
+  api_curl GET /v1/gripper
+  expect 200
+  jq -c '{connected, activated, width, object_detected, fault}' <<<"$reply"
+  [ "$(jq -r .object_detected <<<"$reply")" = true ] || miss "the gripper holds nothing: $reply"
+  say "What physics says (the simulator's report of the last motion)"
+  physics_says "$2"
+}
 
-say "What physics says (the simulator's report of the last motion)"
-last=$(grep '"command"' "$out/physics.jsonl" | tail -n 1)
-jq -c '{command, outcome, fingers, objects: [.objects[] | select(.touched or .moved or .lifted)
-        | {name, held, lifted, dz_m, moved, knocked_over}]}' <<<"$last"
-lifted=$(jq -r '[.objects[] | select(.lifted) | .name] | join(",")' <<<"$last")
-if [ "$lifted" = box ]; then
-  echo "the box was lifted by $(jq -r '.objects[] | select(.name == "box") | .dz_m' <<<"$last") m, held between the fingers"
-elif [ -n "$lifted" ]; then
-  miss "physics: the pick lifted the $lifted, not the box"
-else
-  miss "physics: the pick lifted nothing ($(jq -c '[.objects[] | select(.moved or .knocked_over) | .name]' <<<"$last") moved)"
-fi
+box_pose=$(jq -c '.grasps[0].pose | {position, quaternion}' <<<"$reply")
+execute "$grasp" box
+
+say "Putting the box back: a place at the pose it was picked from"
+api_json POST /v1/robot/commands "{\"command\": \"place\", \"pose\": $box_pose, \"width\": 0.085}" \
+  -H "Idempotency-Key: demo-place-$grasp"
+expect 200
+jq -c '{id, command, state, stage, seq}' <<<"$reply"
+[ "$(jq -r .state <<<"$reply")" = done ] || die "the place ended $(jq -r .state <<<"$reply"): $reply"
+
+say "Pick up the ball: a grasp by the task's name"
+api_json POST /v1/scenes/tabletop/grasps '{"task": "ball", "top_k": 1, "seed": 0}'
+expect 200
+jq -c '{task, grasp: .grasps[0] | {id, score, width, position: .pose.position, quaternion: .pose.quaternion}}' <<<"$reply"
+grasp=$(jq -r '.grasps[0].id // empty' <<<"$reply")
+[ -n "$grasp" ] || die "no grasp of the ball found: $(jq -r '.reason // .' <<<"$reply")"
+execute "$grasp" ball
 
 say "Done: the loop ran through"
 echo "scans, heatmaps and logs: $out"

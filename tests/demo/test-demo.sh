@@ -3,7 +3,7 @@
 # and free loopback ports, with the programs of this build. The script itself stops at the
 # first step that goes wrong (a non-2xx answer, a best heatmap voxel off the mug, a query
 # that retrieves another task than the box's, no grasp, a pick that does not end done, a
-# gripper that holds nothing); here we check that it ran through, that it printed every
+# gripper that holds nothing, an object physics did not lift); here we check that it ran through, that it printed every
 # step's curl command and the files it names, and that it left no process behind. A second
 # run with [clip] (a tiny random model in CLIP's layout) checks that the questions are
 # then texts and the frames go up without features; in a sanitized build it is left out
@@ -66,8 +66,11 @@ run_demo "$tmp/demo.conf"
 grep -q '^== Done: the loop ran through' "$out_log" || fail "no final line"
 grep -q '"object_detected":true' "$out_log" || fail "no gripper report with an object"
 grep -q '"task":"box"' "$out_log" || fail "the grasp's task is not printed"
+grep -q '^the box was lifted by 0\.[0-9]* m' "$out_log" || fail "physics did not lift the box"
+grep -q '^the ball was lifted by 0\.[0-9]* m' "$out_log" || fail "physics did not lift the ball"
 # every request it made is shown as a command to copy, with the daemon's address
 for path in /v1/health /v1/scenes /v1/scenes/tabletop-demos/frames /v1/scenes/tabletop/train \
+            /v1/robot/commands \
             /v1/tasks/box/demos /v1/scenes/tabletop/heatmap /v1/scenes/tabletop/render \
             /v1/scenes/tabletop/grasps /v1/gripper; do
   grep -Eq "^\\\$ curl .*http://127.0.0.1:$http_port$path( |'|\$)" "$out_log" ||
