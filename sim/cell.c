@@ -1,5 +1,6 @@
 /* The physics cell (cell.h). */
 #include "cell.h"
+#include "hand.h"
 
 #include <math.h>
 #include <mujoco/mujoco.h>
@@ -35,11 +36,7 @@ static const hand_drive drives[FG_GRIPPER_N_MODELS] = {
   [FG_GRIPPER_ROBOTIQ_2F140] = {1.025, 10, 125, 0.03, 0.25},
 };
 
-#define FINGER_MASS_KG 0.08 /* a finger's pad and holder ... */
-#define LINK_MASS_KG 0.01   /* ... and its link: a contact's stiffness in newtons per metre
-                             * scales with the body's mass, so the pads' body is the heavy one */
-#define FINGER_KP 20000.0 /* N/m: the finger servo's stiffness ... */
-#define FINGER_KD 120.0   /* N s/m: ... and its damping (the joints', integrated implicitly) */
+#define FINGER_KP 20000.0 /* N/m: the finger servo's stiffness (its damping: SIM_FINGER_KD) */
 
 typedef enum { PH_GRIP, PH_PATH, PH_DWELL } phase_kind;
 
@@ -147,171 +144,6 @@ static double dist3(const double a[3], const double b[3]) {
 
 /* ---------------------------------------------------------------- the model */
 
-typedef struct {
-  char *s;
-  size_t n, cap;
-  int oom;
-} strbuf;
-
-static void sb_printf(strbuf *b, const char *fmt, ...) {
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(b->s ? b->s + b->n : NULL, b->s ? b->cap - b->n : 0, fmt, ap);
-    va_end(ap);
-    if (k < 0) {
-      b->oom = 1;
-      return;
-    }
-    if (b->s && b->n + (size_t)k < b->cap) {
-      b->n += (size_t)k;
-      return;
-    }
-    size_t cap = b->cap ? b->cap * 2 : 4096;
-    while (cap < b->n + (size_t)k + 1) cap *= 2;
-    char *s = realloc(b->s, cap);
-    if (!s) {
-      b->oom = 1;
-      return;
-    }
-    b->s = s;
-    b->cap = cap;
-  }
-}
-
-/* The finger bodies, by part: finger_l stands at -y and closes along +y. */
-static const char *const finger_body[2] = {"finger_l", "finger_r"};
-
-/* The pads' rise as a Robotiq finger closes (gripper.h), as the quartic a[1..4] in the
- * closing per finger q (a[0] = 0) that MuJoCo's joint coupling takes: a least-squares fit over
- * the stroke, within 0.02 mm of the arc for the models here. All zeros for fingers that slide. */
-static void rise_poly(fg_gripper_model model, double a[5]) {
-  const fg_gripper_spec *s = fg_gripper_spec_get(model);
-  double ata[4][5] = {{0}};
-  for (int k = 0; k < 5; k++) a[k] = 0;
-  if (s->arc_radius_m <= 0) return;
-  const int n = 64;
-  for (int i = 0; i <= n; i++) {
-    const double q = s->stroke_m / 2 * i / n, r = fg_gripper_tip_rise(model, s->stroke_m - 2 * q);
-    double x[4] = {q, q * q, q * q * q, q * q * q * q};
-    for (int u = 0; u < 4; u++) {
-      for (int v = 0; v < 4; v++) ata[u][v] += x[u] * x[v];
-      ata[u][4] += x[u] * r;
-    }
-  }
-  /* Gaussian elimination with partial pivoting on the 4x4 normal equations */
-  for (int c = 0; c < 4; c++) {
-    int piv = c;
-    for (int r = c + 1; r < 4; r++)
-      if (fabs(ata[r][c]) > fabs(ata[piv][c])) piv = r;
-    for (int k = 0; k < 5; k++) {
-      const double t = ata[c][k];
-      ata[c][k] = ata[piv][k];
-      ata[piv][k] = t;
-    }
-    for (int r = c + 1; r < 4; r++) {
-      const double f = ata[r][c] / ata[c][c];
-      for (int k = c; k < 5; k++) ata[r][k] -= f * ata[c][k];
-    }
-  }
-  for (int c = 3; c >= 0; c--) {
-    double t = ata[c][4];
-    for (int k = c + 1; k < 4; k++) t -= ata[c][k] * a[1 + k];
-    a[1 + c] = t / ata[c][c];
-  }
-}
-
-/* The wrapper model: the scene included, then the target, the hand and its drive. The hand is
- * the model's boxes (gripper.h), built open (at the stroke): the palm with a free joint welded
- * to the target; each finger on a slide joint along y, the two coupled to close symmetrically,
- * and for a Robotiq a second slide along +z coupled to the first, so the pads rise on the
- * linkage's arc as they close. A finger's link box hangs on a third slide along y, coupled so
- * that its inner face stays inset * width inside the pads' faces as gripper.h has it (its
- * outer face moves with the finger). The hand's geoms collide with the scene, never with each
- * other (contype 2, conaffinity 1). Pads grip (friction 1, torsional 0.01). */
-static char *wrapper_xml(const char *scene_file, fg_gripper_model model, const hand_drive *dr) {
-  const fg_gripper_spec *s = fg_gripper_spec_get(model);
-  fg_gripper_box box[FG_GRIPPER_N_BOXES];
-  if (fg_gripper_boxes(model, s->stroke_m, box) != 0) return NULL;
-  double rise[5];
-  rise_poly(model, rise);
-  const double rise_max = fg_gripper_tip_rise(model, 0), spread = 2 * s->link_inset;
-  double volume[FG_GRIPPER_N_PARTS] = {0}; /* of the boxes that are not links */
-  for (int i = 0; i < FG_GRIPPER_N_BOXES; i++)
-    if (i != FG_GRIPPER_BOX_LINK_MINUS_Y && i != FG_GRIPPER_BOX_LINK_PLUS_Y)
-      volume[box[i].part] += box[i].half_m[0] * box[i].half_m[1] * box[i].half_m[2];
-  strbuf b = {0};
-  sb_printf(&b, "<mujoco model=\"fieldgrip cell\">\n  <include file=\"%s\"/>\n", scene_file);
-  sb_printf(&b, "  <worldbody>\n    <body name=\"fg_target\" mocap=\"true\" pos=\"0.3 0 0.4\" "
-                "quat=\"0 1 0 0\"/>\n");
-  sb_printf(&b, "    <body name=\"fg_hand\" pos=\"0.3 0 0.4\" quat=\"0 1 0 0\">\n"
-                "      <freejoint name=\"fg_hand\"/>\n");
-  for (int part = FG_GRIPPER_PALM; part < FG_GRIPPER_N_PARTS; part++) {
-    const int finger = part != FG_GRIPPER_PALM;
-    const char *name = finger ? finger_body[part - 1] : "palm";
-    const double mass =
-        finger ? FINGER_MASS_KG : dr->mass_kg - 2 * (FINGER_MASS_KG + LINK_MASS_KG);
-    if (finger) {
-      sb_printf(&b, "      <body name=\"fg_%s\">\n        <joint name=\"fg_%s\" type=\"slide\" "
-                    "axis=\"0 %d 0\" limited=\"true\" range=\"0 %.6f\" damping=\"%.1f\"/>\n",
-                name, name, part == FG_GRIPPER_FINGER_MINUS_Y ? 1 : -1, s->stroke_m / 2,
-                FINGER_KD);
-      if (rise_max > 0)
-        sb_printf(&b, "        <joint name=\"fg_%s_rise\" type=\"slide\" axis=\"0 0 1\" "
-                      "limited=\"true\" range=\"-0.001 %.6f\" damping=\"%.1f\"/>\n",
-                  name, rise_max + 0.001, FINGER_KD);
-    }
-    for (int i = 0; i < FG_GRIPPER_N_BOXES; i++) {
-      const fg_gripper_box *x = &box[i];
-      if ((int)x->part != part) continue;
-      const int link = i == FG_GRIPPER_BOX_LINK_MINUS_Y || i == FG_GRIPPER_BOX_LINK_PLUS_Y;
-      if (link && spread > 0)
-        sb_printf(&b, "        <body name=\"fg_%s_link\">\n          <joint name=\"fg_%s_link\" "
-                      "type=\"slide\" axis=\"0 %d 0\" limited=\"true\" range=\"%.6f 0.001\" "
-                      "damping=\"%.1f\"/>\n",
-                  name, name, part == FG_GRIPPER_FINGER_MINUS_Y ? 1 : -1,
-                  -spread * s->stroke_m / 2 - 0.001, FINGER_KD);
-      sb_printf(&b, "%*s<geom name=\"fg_%s\" type=\"box\" pos=\"%.6f %.6f %.6f\" "
-                    "size=\"%.6f %.6f %.6f\" mass=\"%.4f\" contype=\"2\" conaffinity=\"1\"%s/>\n",
-                finger ? (link && spread > 0 ? 10 : 8) : 6, "", fg_gripper_box_name(i),
-                x->centre_m[0], x->centre_m[1], x->centre_m[2], x->half_m[0], x->half_m[1],
-                x->half_m[2],
-                link ? LINK_MASS_KG
-                     : mass * x->half_m[0] * x->half_m[1] * x->half_m[2] / volume[part],
-                x->pad ? " friction=\"1 0.01 0.0001\" condim=\"4\" solref=\"0.004 1\" "
-                         "solimp=\"0.95 0.99 0.001\""
-                : finger ? " solref=\"0.004 1\" solimp=\"0.95 0.99 0.001\"" : "");
-      if (link && spread > 0) sb_printf(&b, "        </body>\n");
-    }
-    if (finger) sb_printf(&b, "      </body>\n");
-  }
-  sb_printf(&b, "    </body>\n  </worldbody>\n");
-  sb_printf(&b, "  <equality>\n    <weld body1=\"fg_target\" body2=\"fg_hand\" "
-                "solref=\"0.005 1\"/>\n    <joint joint1=\"fg_finger_r\" joint2=\"fg_finger_l\" "
-                "polycoef=\"0 1 0 0 0\" solref=\"0.005 1\"/>\n");
-  for (int k = 0; k < 2; k++) {
-    if (rise_max > 0)
-      sb_printf(&b, "    <joint joint1=\"fg_%s_rise\" joint2=\"fg_%s\" polycoef=\"0 %.9g %.9g "
-                    "%.9g %.9g\" solref=\"0.005 1\"/>\n",
-                finger_body[k], finger_body[k], rise[1], rise[2], rise[3], rise[4]);
-    if (spread > 0)
-      sb_printf(&b, "    <joint joint1=\"fg_%s_link\" joint2=\"fg_%s\" polycoef=\"0 %.9g 0 0 0\" "
-                    "solref=\"0.005 1\"/>\n",
-                finger_body[k], finger_body[k], -spread);
-  }
-  sb_printf(&b, "  </equality>\n  <actuator>\n");
-  for (int k = 0; k < 2; k++)
-    sb_printf(&b, "    <motor name=\"fg_%s\" joint=\"fg_%s\" ctrllimited=\"true\" "
-                  "ctrlrange=\"-%.1f %.1f\"/>\n",
-              finger_body[k], finger_body[k], dr->force_max_n, dr->force_max_n);
-  sb_printf(&b, "  </actuator>\n</mujoco>\n");
-  if (b.oom) {
-    free(b.s);
-    return NULL;
-  }
-  return b.s;
-}
-
 static void errf(char *err, size_t errsz, const char *fmt, ...) {
   va_list ap;
   va_start(ap, fmt);
@@ -341,7 +173,7 @@ static mjModel *load(const char *scene_path, fg_gripper_model model, const hand_
     return NULL;
   }
   fclose(probe);
-  char *xml = wrapper_xml(base, model, dr);
+  char *xml = sim_hand_xml(base, model, dr->mass_kg, dr->force_max_n);
   mjVFS *vfs = xml ? malloc(sizeof *vfs) : NULL;
   if (!vfs) {
     free(xml);
@@ -453,7 +285,7 @@ static void fingers_control(sim_cell *c) {
     c->f_ramp += to > 0 ? step : -step;
     ramp_v = to > 0 ? c->f_speed : -c->f_speed;
   }
-  const double f = clampd(FINGER_KP * (c->f_ramp - q) + FINGER_KD * ramp_v, -c->f_force, c->f_force);
+  const double f = clampd(FINGER_KP * (c->f_ramp - q) + SIM_FINGER_KD * ramp_v, -c->f_force, c->f_force);
   c->d->ctrl[c->act[0]] = f;
   c->d->ctrl[c->act[1]] = f;
   if (!c->f_moving) return;
@@ -836,7 +668,7 @@ static int cell_index(sim_cell *c, char *err, size_t errsz) {
   c->hand_qadr = m->jnt_qposadr[mj_name2id(m, mjOBJ_JOINT, "fg_hand")];
   for (int k = 0; k < 2; k++) {
     char name[32];
-    snprintf(name, sizeof name, "fg_%s", finger_body[k]);
+    snprintf(name, sizeof name, "fg_%s", sim_hand_finger[k]);
     const int j = mj_name2id(m, mjOBJ_JOINT, name);
     c->finger[k] = mj_name2id(m, mjOBJ_BODY, name);
     c->qadr[k] = m->jnt_qposadr[j];
