@@ -85,8 +85,7 @@ static void rise_poly(fg_gripper_model model, double a[5]) {
 }
 
 /* The wrapper model (hand.h): the scene included, then the target, the hand and its drive.
- * The hand is
- * the model's boxes (gripper.h), built open (at the stroke): the palm with a free joint welded
+ * The hand is the model's boxes (gripper.h), built open (at the stroke): the palm with a free joint welded
  * to the target; each finger on a slide joint along y, the two coupled to close symmetrically,
  * and for a Robotiq a second slide along +z coupled to the first, so the pads rise on the
  * linkage's arc as they close. A finger's link box hangs on a third slide along y, coupled so
