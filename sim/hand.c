@@ -84,14 +84,14 @@ static void rise_poly(fg_gripper_model model, double a[5]) {
   }
 }
 
-/* The wrapper model (hand.h): the scene included, then the target, the hand and its drive.
- * The hand is the model's boxes (gripper.h), built open (at the stroke): the palm with a free joint welded
- * to the target; each finger on a slide joint along y, the two coupled to close symmetrically,
- * and for a Robotiq a second slide along +z coupled to the first, so the pads rise on the
- * linkage's arc as they close. A finger's link box hangs on a third slide along y, coupled so
- * that its inner face stays inset * width inside the pads' faces as gripper.h has it (its
- * outer face moves with the finger). The hand's geoms collide with the scene, never with each
- * other (contype 2, conaffinity 1). Pads grip (friction 1, torsional 0.01). */
+/* The wrapper model (hand.h): the scene included, then the target, the hand and its drive. The
+ * hand is the model's boxes (gripper.h), built open (at the stroke): the palm with a free joint
+ * welded to the target; each finger on a slide joint along y, the two coupled to close
+ * symmetrically, and for a Robotiq a second slide along +z coupled to the first, so the pads rise
+ * on the linkage's arc as they close. A finger's link box hangs on a third slide along y, coupled
+ * so that its inner face stays inset * width inside the pads' faces as gripper.h has it (its outer
+ * face moves with the finger). The hand's geoms collide with the scene, never with each other
+ * (contype 2, conaffinity 1). Pads grip (friction 1, torsional 0.01). */
 char *sim_hand_xml(const char *scene_file, fg_gripper_model model, double mass_kg,
                    double force_max_n) {
   const fg_gripper_spec *s = fg_gripper_spec_get(model);
