@@ -2,6 +2,7 @@
 #include "api.h"
 #include "api_decode.h"
 #include "decoder.h"
+#include "api_views.h"
 #include "json.h"
 #include "metrics.h"
 

@@ -1,4 +1,5 @@
-/* Request parsing and reply views: the translation between JSON and library structs.
+/* Request parsing and the JSON views of poses and vectors: the translation between JSON and
+ * library structs (the views of scenes and frames: api_views.h).
  * Parsers return 0 or FG_EINVAL with a detail naming the field, so a handler can pass the
  * sentence to the client unchanged. */
 #ifndef FG_DAEMON_JSON_H
@@ -12,7 +13,6 @@
 #include "io/camera.h"
 #include "io/frame.h"
 #include "io/transforms.h"
-#include "store.h"
 
 /* Parses a request body. On failure returns NULL and writes "line L, column C: what" into
  * err. An empty body is an error too. */
@@ -64,11 +64,5 @@ json_t *fg_json_from_vec(const double *v, size_t n);
 
 /* "2026-11-22T00:00:00.123Z" for a Unix time in milliseconds. */
 void fg_iso8601(int64_t ms, char out[32]);
-
-/* The scene object of the API. */
-json_t *fg_json_scene(const fg_scene_info *info);
-
-/* The frame object of the API. */
-json_t *fg_json_frame(const fg_frame *frame, int index);
 
 #endif
