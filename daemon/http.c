@@ -25,6 +25,15 @@
 
 /* How often the connection table is swept for connections past their deadlines. */
 #define SWEEP_MS 250
+
+/* The metrics count closed connections by fg_conn_reason under their own names. */
+_Static_assert((int)FG_METRICS_CLOSE_SHED == FG_CONN_SHED &&
+                   (int)FG_METRICS_CLOSE_HEADER_TIMEOUT == FG_CONN_HEADER_TIMEOUT &&
+                   (int)FG_METRICS_CLOSE_IDLE_TIMEOUT == FG_CONN_IDLE_TIMEOUT &&
+                   (int)FG_METRICS_CLOSE_BODY_TOO_SLOW == FG_CONN_BODY_TOO_SLOW &&
+                   (int)FG_METRICS_CLOSE_REASONS == FG_CONN_REASONS,
+               "metrics.h's close reasons follow http_conns.h's");
+
 /* File descriptors kept for everything but client connections: state files, the decoder
  * children's pipes, Modbus peers, the log. */
 #define FD_RESERVE 256
@@ -763,7 +772,7 @@ static void on_connection(void *cls, struct MHD_Connection *conn, void **socket_
   if (ci) {
     int shed = 0;
     *socket_context = fg_conns_open(h->conns, ci->connect_fd, mono_now(), &shed);
-    if (shed) fg_metrics_count_http_closed(FG_CONN_SHED, 1);
+    if (shed) fg_metrics_count_http_closed(FG_METRICS_CLOSE_SHED, 1);
   }
   /* Counted once it is in the table (and uncounted above once it has left), so a scrape
    * that sees a connection can rely on its place in the shedding order. */
@@ -786,7 +795,7 @@ static void *sweeper_main(void *arg) {
     size_t closed[FG_CONN_REASONS] = {0};
     if (fg_conns_sweep(h->conns, &lim, mono_now(), closed) > 0)
       for (int r = 0; r < FG_CONN_REASONS; r++)
-        if (closed[r]) fg_metrics_count_http_closed((fg_conn_reason)r, closed[r]);
+        if (closed[r]) fg_metrics_count_http_closed(r, closed[r]);
     struct timespec until;
     fg_deadline_after_ms(&until, CLOCK_MONOTONIC, SWEEP_MS);
     pthread_mutex_lock(&h->qlock);

@@ -1,7 +1,6 @@
 #include "metrics.h"
 
 #include "config.h"
-#include "http_conns.h"
 
 #include <dirent.h>
 #include <stdarg.h>
@@ -43,7 +42,7 @@ static atomic_ullong clip_loads_ok, clip_loads_failed;
 static atomic_ullong heatmaps[FG_METRICS_HEATMAP_KINDS];
 static atomic_ullong voxel_builds, voxel_build_us;
 static atomic_llong http_connections;
-static atomic_ullong http_closed[FG_CONN_REASONS];
+static atomic_ullong http_closed[FG_METRICS_CLOSE_REASONS];
 static atomic_int offload_threads, offload_running, offload_queued;
 static atomic_ullong offload_rejected;
 
@@ -52,7 +51,7 @@ void fg_metrics_add_http_connections(int delta) {
 }
 
 void fg_metrics_count_http_closed(int reason, size_t n) {
-  if (reason < 0 || reason >= FG_CONN_REASONS) return;
+  if (reason < 0 || reason >= FG_METRICS_CLOSE_REASONS) return;
   atomic_fetch_add_explicit(&http_closed[reason], n, memory_order_relaxed);
 }
 
@@ -319,9 +318,10 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
               route, method, count, route, method, (double)atomic_load(&slots[s].sum_us) / 1e6,
               route, method, count);
   }
-  static const char *const close_reasons[FG_CONN_REASONS] = {
-    [FG_CONN_SHED] = "shed", [FG_CONN_HEADER_TIMEOUT] = "header_timeout",
-    [FG_CONN_IDLE_TIMEOUT] = "idle_timeout", [FG_CONN_BODY_TOO_SLOW] = "body_too_slow"};
+  static const char *const close_reasons[FG_METRICS_CLOSE_REASONS] = {
+    [FG_METRICS_CLOSE_SHED] = "shed", [FG_METRICS_CLOSE_HEADER_TIMEOUT] = "header_timeout",
+    [FG_METRICS_CLOSE_IDLE_TIMEOUT] = "idle_timeout",
+    [FG_METRICS_CLOSE_BODY_TOO_SLOW] = "body_too_slow"};
   sb_printf(&sb, "# HELP fieldgrip_http_connections Client connections open, this one "
                  "included.\n# TYPE fieldgrip_http_connections gauge\n"
                  "fieldgrip_http_connections %lld\n"
@@ -329,7 +329,7 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "closed: shed at [http] max_connections, or too slow, by reason.\n"
                  "# TYPE fieldgrip_http_connections_closed_total counter\n",
             atomic_load(&http_connections));
-  for (int r = 0; r < FG_CONN_REASONS; r++)
+  for (int r = 0; r < FG_METRICS_CLOSE_REASONS; r++)
     sb_printf(&sb, "fieldgrip_http_connections_closed_total{reason=\"%s\"} %llu\n",
               close_reasons[r], atomic_load(&http_closed[r]));
   sb_printf(&sb, "# HELP fieldgrip_http_offload_threads Threads that run long requests.\n"

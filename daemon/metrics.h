@@ -51,9 +51,19 @@ typedef enum {
 void fg_metrics_count_heatmap(fg_metrics_heatmap_kind kind);
 void fg_metrics_add_voxel_build(double seconds);
 
-/* The HTTP layer: connections open now; connections it closed, by fg_conn_reason
- * (http_conns.h); offload threads, handlers running and requests queued; requests refused
- * 503 server_busy because the queue was full. */
+/* Why the HTTP layer closed a connection: http_conns.h's fg_conn_reason, value for value
+ * (http.c asserts it), as the labels of fieldgrip_http_connections_closed_total. */
+typedef enum {
+  FG_METRICS_CLOSE_SHED = 0,
+  FG_METRICS_CLOSE_HEADER_TIMEOUT,
+  FG_METRICS_CLOSE_IDLE_TIMEOUT,
+  FG_METRICS_CLOSE_BODY_TOO_SLOW,
+  FG_METRICS_CLOSE_REASONS
+} fg_metrics_close_reason;
+
+/* The HTTP layer: connections open now; connections it closed, by reason; offload threads,
+ * handlers running and requests queued; requests refused 503 server_busy because the queue
+ * was full. */
 void fg_metrics_add_http_connections(int delta);
 void fg_metrics_count_http_closed(int reason, size_t n);
 void fg_metrics_set_offload(int threads, int running, int queued);
