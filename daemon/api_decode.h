@@ -17,7 +17,7 @@
 #include <jansson.h>
 
 #include "clip_svc.h"
-#include "conf.h"
+#include "conf/conf.h"
 #include "grasp/grasp.h"
 #include "http.h"
 #include "io/transforms.h"

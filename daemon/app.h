@@ -11,7 +11,7 @@
 
 #include <pthread.h>
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "store.h"
 
 typedef struct fg_conf_ref fg_conf_ref;

@@ -15,7 +15,7 @@
 #ifndef FG_DAEMON_CLAIM_H
 #define FG_DAEMON_CLAIM_H
 
-#include "conf.h"
+#include "conf/conf.h"
 
 typedef struct fg_peer_claim fg_peer_claim;
 

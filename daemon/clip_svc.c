@@ -1,7 +1,7 @@
 /* The CLIP model the daemon serves: loading, reference counts, reloads; see clip_svc.h. */
 #include "clip_svc.h"
 
-#include "conf.h"
+#include "conf/conf.h"
 
 #include "core/error.h"
 #include "core/log.h"

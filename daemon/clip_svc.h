@@ -22,7 +22,7 @@
 
 #include "clip/clip.h"
 #include "clip/tokenizer.h"
-#include "conf.h"
+#include "conf/conf.h"
 
 typedef struct fg_clip_svc fg_clip_svc;
 typedef struct fg_clip_model fg_clip_model;

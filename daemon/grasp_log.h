@@ -11,7 +11,7 @@
 
 #include <stdint.h>
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "query/heatmap.h"
 
 #define FG_GRASP_LOG_PER_SCENE 1000 /* grasps execute can find, per scene (newest) */

@@ -1,6 +1,6 @@
 #include "http.h"
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "http_conns.h"
 #include "http_guard.h"
 #include "metrics.h"

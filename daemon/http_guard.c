@@ -1,7 +1,7 @@
 /* Cross-site guards: see http_guard.h. */
 #include "http_guard.h"
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "http.h"
 
 #include "core/error.h"

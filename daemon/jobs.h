@@ -28,7 +28,7 @@
 
 #include <jansson.h>
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "store.h"
 
 struct fg_app;

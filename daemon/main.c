@@ -4,7 +4,7 @@
 #include "audit.h"
 #include "claim.h"
 #include "clip_svc.h"
-#include "conf.h"
+#include "conf/conf.h"
 #include "decoder.h"
 #include "grasp_log.h"
 #include "http.h"

@@ -1,7 +1,7 @@
 #include "store.h"
 #include "store_priv.h"
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "voxcache.h"
 
 #include "core/error.h"

@@ -3,7 +3,7 @@
 #ifndef FG_DAEMON_STORE_PRIV_H
 #define FG_DAEMON_STORE_PRIV_H
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "store.h"
 
 #include <pthread.h>

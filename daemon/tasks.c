@@ -1,7 +1,7 @@
 /* The demonstration library; see tasks.h. */
 #include "tasks.h"
 
-#include "conf.h"
+#include "conf/conf.h"
 #include "json.h"
 
 #include "core/error.h"

@@ -26,7 +26,7 @@
 
 #include <jansson.h>
 
-#include "conf.h" /* FG_SCENE_NAME_MAX: task names follow the scene name rules */
+#include "conf/conf.h" /* FG_SCENE_NAME_MAX: task names follow the scene name rules */
 
 #define FG_TASK_MAX_DEMOS 256
 #define FG_TASK_DEFAULT_APPROACH_M 0.10

@@ -1,6 +1,6 @@
 /* Fuzz target for the daemon's INI configuration: the input is the configuration file; any
  * input either loads or fails with an error message, never crashes or leaks. */
-#include "conf.h"
+#include "conf/conf.h"
 
 #include "fuzz_file.h"
 

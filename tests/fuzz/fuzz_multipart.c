@@ -13,7 +13,7 @@
  * NUL-terminated at its length. A broken invariant aborts in the server's thread, which the
  * sanitizers and libFuzzer report as a crash of this input. */
 #include "api.h"
-#include "conf.h"
+#include "conf/conf.h"
 #include "http.h"
 
 #include <arpa/inet.h>

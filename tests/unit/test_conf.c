@@ -1,6 +1,6 @@
 /* Configuration file: defaults, the SPEC.md example verbatim, and every error class with the
  * line number it must name. */
-#include "conf.h"
+#include "conf/conf.h"
 
 #include "core/error.h"
 #include "test.h"
