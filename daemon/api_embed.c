@@ -3,7 +3,7 @@
 #include "api.h"
 #include "api_decode.h"
 #include "clip_svc.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 #include "json.h"
 #include "metrics.h"
 

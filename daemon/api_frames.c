@@ -1,7 +1,7 @@
 /* Frames: upload one (multipart), import a data set folder, list, and a frame's image. */
 #include "api.h"
 #include "api_decode.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 #include "api_views.h"
 #include "json.h"
 #include "metrics.h"

@@ -3,7 +3,7 @@
  * encoded by a fieldgrip-decode child (decoder.h). */
 #include "api.h"
 #include "api_decode.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 #include "json.h"
 #include "metrics.h"
 #include "query.h"

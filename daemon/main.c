@@ -5,7 +5,7 @@
 #include "claim.h"
 #include "clip_svc.h"
 #include "conf/conf.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 #include "grasp_log.h"
 #include "http.h"
 #include "idem.h"

@@ -9,7 +9,7 @@
 
 #include <stddef.h>
 
-#include "decoder.h"
+#include "decoder/decoder.h"
 
 #define FG_METRICS_MAX_ROUTES 64
 

@@ -10,7 +10,7 @@
  * the same bytes. */
 #include "core/error.h"
 #include "io/image.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 
 #include <stdint.h>
 #include <stdlib.h>

@@ -7,7 +7,7 @@
 #include "test.h"
 
 #include "core/error.h"
-#include "decode_seccomp.h"
+#include "decoder/decode_seccomp.h"
 
 #include <errno.h>
 #include <fcntl.h>

@@ -13,7 +13,7 @@
 #include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
-#include "decoder.h"
+#include "decoder/decoder.h"
 #include "io/depth.h"
 #include "io/image.h"
 
