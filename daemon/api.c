@@ -3,7 +3,7 @@
 #include "clip_svc.h"
 #include "jobs.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "query.h"
 #include "audit.h"
 #include "robot.h"

@@ -5,7 +5,7 @@
 #include "clip_svc.h"
 #include "decoder/decoder.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 
 #include "core/error.h"
 #include "io/image.h"

@@ -4,7 +4,7 @@
 #include "decoder/decoder.h"
 #include "api_views.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 
 #include "core/error.h"
 #include "core/fsutil.h"

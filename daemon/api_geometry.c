@@ -9,7 +9,7 @@
  * evict the cache the heatmaps use. Runs on the offload pool. */
 #include "api.h"
 #include "api_decode.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "voxcache.h"
 
 #include "core/clock.h"

@@ -15,7 +15,7 @@
 #include "api_decode.h"
 #include "grasp_log.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "query.h"
 #include "robot.h"
 #include "tasks.h"

@@ -5,7 +5,7 @@
 #include "api.h"
 #include "api_decode.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "query.h"
 #include "voxcache.h"
 

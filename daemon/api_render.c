@@ -5,7 +5,7 @@
 #include "api_decode.h"
 #include "decoder/decoder.h"
 #include "json.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "query.h"
 
 #include "core/error.h"

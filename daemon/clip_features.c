@@ -1,7 +1,7 @@
 /* CLIP features of a training's frames and their cache; see clip_features.h. */
 #include "clip_features.h"
 
-#include "metrics.h"
+#include "metrics/metrics.h"
 
 #include "core/error.h"
 #include "core/fsutil.h"

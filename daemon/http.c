@@ -3,7 +3,7 @@
 #include "conf/conf.h"
 #include "http_conns.h"
 #include "http_guard.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 
 #include "core/clock.h"
 #include "core/error.h"

@@ -9,7 +9,7 @@
 #include "app.h"
 #include "clip_features.h"
 #include "clip_svc.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 
 #include "core/clock.h"
 #include "core/error.h"

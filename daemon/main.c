@@ -12,7 +12,7 @@
 #include "cmd_ids.h"
 #include "job_train.h"
 #include "jobs.h"
-#include "metrics.h"
+#include "metrics/metrics.h"
 #include "notify.h"
 #include "robot.h"
 #include "store.h"
