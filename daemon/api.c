@@ -1,13 +1,13 @@
 #include "api.h"
 
-#include "clip_svc.h"
-#include "jobs.h"
-#include "json.h"
+#include "state/clip_svc.h"
+#include "state/jobs.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
 #include "audit.h"
 #include "robot.h"
-#include "voxcache.h"
+#include "state/voxcache.h"
 
 #include "config.h"
 #include "core/error.h"

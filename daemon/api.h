@@ -6,7 +6,7 @@
 
 #include <stddef.h>
 
-#include "app.h"
+#include "state/app.h"
 #include "http.h"
 #include "query/heatmap.h"
 

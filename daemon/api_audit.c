@@ -14,7 +14,7 @@
  * one (1 to 128 visible ASCII characters), else one made here; the same id is in the log. */
 #include "api.h"
 #include "audit.h"
-#include "json.h"
+#include "state/json.h"
 #include "robot.h"
 
 #include "core/clock.h"

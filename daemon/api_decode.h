@@ -16,15 +16,15 @@
 
 #include <jansson.h>
 
-#include "clip_svc.h"
+#include "state/clip_svc.h"
 #include "conf/conf.h"
 #include "grasp/grasp.h"
 #include "http.h"
 #include "io/transforms.h"
-#include "jobs.h"
+#include "state/jobs.h"
 #include "robot.h"
-#include "store.h"
-#include "tasks.h"
+#include "state/store.h"
+#include "state/tasks.h"
 
 /* The largest render: FG_API_RENDER_MAX_SIDE pixels on either side. */
 #define FG_API_RENDER_MAX_SIDE 4096

@@ -2,9 +2,9 @@
  * from the model of [clip] (clip_svc.h). Both run on the offload pool. */
 #include "api.h"
 #include "api_decode.h"
-#include "clip_svc.h"
+#include "state/clip_svc.h"
 #include "decoder/decoder.h"
-#include "json.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 
 #include "core/error.h"

@@ -3,7 +3,7 @@
 #include "api_decode.h"
 #include "decoder/decoder.h"
 #include "api_views.h"
-#include "json.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 
 #include "core/error.h"

@@ -10,7 +10,7 @@
 #include "api.h"
 #include "api_decode.h"
 #include "metrics/metrics.h"
-#include "voxcache.h"
+#include "state/voxcache.h"
 
 #include "core/clock.h"
 #include "core/error.h"

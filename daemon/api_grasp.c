@@ -13,13 +13,13 @@
  * by the first demo or search of a field and shared by every later one. */
 #include "api.h"
 #include "api_decode.h"
-#include "grasp_log.h"
-#include "json.h"
+#include "state/grasp_log.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
 #include "robot.h"
-#include "tasks.h"
-#include "voxcache.h"
+#include "state/tasks.h"
+#include "state/voxcache.h"
 
 #include "core/clock.h"
 #include "core/digest.h"

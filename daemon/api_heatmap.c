@@ -4,10 +4,10 @@
  * field builds its cache (seconds), later ones only score it. */
 #include "api.h"
 #include "api_decode.h"
-#include "json.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
-#include "voxcache.h"
+#include "state/voxcache.h"
 
 #include "core/error.h"
 #include "core/log.h"

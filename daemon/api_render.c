@@ -4,7 +4,7 @@
 #include "api.h"
 #include "api_decode.h"
 #include "decoder/decoder.h"
-#include "json.h"
+#include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
 

@@ -5,8 +5,8 @@
 #include "api.h"
 #include "api_decode.h"
 #include "cmd_ids.h"
-#include "idem.h"
-#include "json.h"
+#include "state/idem.h"
+#include "state/json.h"
 #include "robot.h"
 
 #include "core/error.h"

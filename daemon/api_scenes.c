@@ -1,9 +1,9 @@
 /* Scenes: create, list, describe, delete. */
 #include "api.h"
 #include "api_decode.h"
-#include "jobs.h"
+#include "state/jobs.h"
 #include "api_views.h"
-#include "json.h"
+#include "state/json.h"
 
 #include "core/error.h"
 

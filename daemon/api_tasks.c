@@ -4,9 +4,9 @@
  * points placed by the demo's gripper pose (F3RM's z) and keeps the sample, not the scene. */
 #include "api.h"
 #include "api_decode.h"
-#include "json.h"
-#include "tasks.h"
-#include "voxcache.h"
+#include "state/json.h"
+#include "state/tasks.h"
+#include "state/voxcache.h"
 
 #include "core/error.h"
 #include "core/log.h"

@@ -2,9 +2,9 @@
  * as Server-Sent Events. */
 #include "api.h"
 #include "api_decode.h"
-#include "job_train.h"
-#include "jobs.h"
-#include "json.h"
+#include "state/job_train.h"
+#include "state/jobs.h"
+#include "state/json.h"
 
 #include "core/error.h"
 

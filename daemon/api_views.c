@@ -1,7 +1,7 @@
 /* The API's views of scenes and frames (api_views.h). */
 #include "api_views.h"
 
-#include "json.h"
+#include "state/json.h"
 
 json_t *fg_json_scene(const fg_scene_info *info) {
   char created[32];

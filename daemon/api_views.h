@@ -5,7 +5,7 @@
 #include <jansson.h>
 
 #include "io/frame.h"
-#include "store.h"
+#include "state/store.h"
 
 /* The scene object of the API. */
 json_t *fg_json_scene(const fg_scene_info *info);

@@ -1,7 +1,7 @@
 /* The robot's audit log (audit.h): durable appends, rotation, the pairing of a command's
  * request and end, and reading back across the rotated files. */
 #include "audit.h"
-#include "json.h"
+#include "state/json.h"
 
 #include "core/error.h"
 #include "core/fsutil.h"

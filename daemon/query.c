@@ -1,9 +1,9 @@
 /* Queries: JSON to unit vectors; see query.h. */
 #include "query.h"
 
-#include "app.h"
-#include "clip_svc.h"
-#include "json.h"
+#include "state/app.h"
+#include "state/clip_svc.h"
+#include "state/json.h"
 
 #include "core/error.h"
 #include "io/frame.h"

@@ -7,7 +7,7 @@
  * succeeds, and then what it decoded is finite and within the ranges the handlers rely on,
  * or fails with FG_EINVAL or a 4xx answer with a message. */
 #include "api_decode.h"
-#include "json.h"
+#include "state/json.h"
 
 #include "core/error.h"
 #include "grasp/gripper.h"

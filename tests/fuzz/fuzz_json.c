@@ -5,7 +5,7 @@
  * fails with an error code; decoded poses are finite. */
 #include "core/error.h"
 #include "core/pose.h"
-#include "json.h"
+#include "state/json.h"
 
 #include <jansson.h>
 #include <math.h>

@@ -7,7 +7,7 @@
 
 #include "core/error.h"
 #include "core/fsutil.h"
-#include "idem.h"
+#include "state/idem.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>

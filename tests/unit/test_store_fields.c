@@ -3,7 +3,7 @@
  * evicts one in use and says so (FG_EBUSY) when it cannot load. The integration test
  * (tests/integration/test_caps.c) checks the same over HTTP with trained scenes; this one
  * reaches the states a black-box test cannot hold still: a field pinned by a request. */
-#include "store.h"
+#include "state/store.h"
 
 #include "test.h"
 
