@@ -5,8 +5,8 @@
 #include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
-#include "audit.h"
-#include "robot.h"
+#include "robot/audit.h"
+#include "robot/robot.h"
 #include "state/voxcache.h"
 
 #include "config.h"

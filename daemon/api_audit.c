@@ -13,9 +13,9 @@
  * Each answer of these routes carries X-Request-Id: the client's own when it sent a usable
  * one (1 to 128 visible ASCII characters), else one made here; the same id is in the log. */
 #include "api.h"
-#include "audit.h"
+#include "robot/audit.h"
 #include "state/json.h"
-#include "robot.h"
+#include "robot/robot.h"
 
 #include "core/clock.h"
 #include "core/error.h"

@@ -22,7 +22,7 @@
 #include "http.h"
 #include "io/transforms.h"
 #include "state/jobs.h"
-#include "robot.h"
+#include "robot/robot.h"
 #include "state/store.h"
 #include "state/tasks.h"
 

@@ -17,7 +17,7 @@
 #include "state/json.h"
 #include "metrics/metrics.h"
 #include "query.h"
-#include "robot.h"
+#include "robot/robot.h"
 #include "state/tasks.h"
 #include "state/voxcache.h"
 

@@ -4,10 +4,10 @@
  * Idempotency-Key (idem.h). */
 #include "api.h"
 #include "api_decode.h"
-#include "cmd_ids.h"
+#include "robot/cmd_ids.h"
 #include "state/idem.h"
 #include "state/json.h"
-#include "robot.h"
+#include "robot/robot.h"
 
 #include "core/error.h"
 #include "core/log.h"

@@ -4,7 +4,7 @@
  * and a command's end reported before its request's line still lands after it. */
 #include "test.h"
 
-#include "audit.h"
+#include "robot/audit.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 

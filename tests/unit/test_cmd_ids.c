@@ -3,7 +3,7 @@
  * block is reserved on disk before its first id is used. */
 #include "test.h"
 
-#include "cmd_ids.h"
+#include "robot/cmd_ids.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 
