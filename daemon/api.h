@@ -7,7 +7,7 @@
 #include <stddef.h>
 
 #include "state/app.h"
-#include "http.h"
+#include "http/http.h"
 #include "query/heatmap.h"
 
 /* The route table. */

@@ -19,7 +19,7 @@
 #include "state/clip_svc.h"
 #include "conf/conf.h"
 #include "grasp/grasp.h"
-#include "http.h"
+#include "http/http.h"
 #include "io/transforms.h"
 #include "state/jobs.h"
 #include "robot/robot.h"

@@ -7,7 +7,7 @@
 #include "conf/conf.h"
 #include "decoder/decoder.h"
 #include "state/grasp_log.h"
-#include "http.h"
+#include "http/http.h"
 #include "state/idem.h"
 #include "robot/cmd_ids.h"
 #include "state/job_train.h"

@@ -21,7 +21,7 @@
 
 #include <jansson.h>
 
-#include "http.h"
+#include "http/http.h"
 #include "query/heatmap.h"
 
 #define FG_QUERY_MAX_TEXTS 16 /* positive texts of one query */

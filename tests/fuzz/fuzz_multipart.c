@@ -14,7 +14,7 @@
  * sanitizers and libFuzzer report as a crash of this input. */
 #include "api.h"
 #include "conf/conf.h"
-#include "http.h"
+#include "http/http.h"
 
 #include <arpa/inet.h>
 #include <errno.h>

@@ -2,7 +2,7 @@
  * oldest idle connection at the cap (never a busy one, never the newcomer), the header and
  * keep-alive deadlines, and the body-rate floor, each seen as the peer's end of the socket
  * reading end-of-file. Times are given, not waited for. */
-#include "http_conns.h"
+#include "http/http_conns.h"
 
 #include "core/error.h"
 #include "test.h"

@@ -2,8 +2,8 @@
  * against Host and [http] allowed_origins, and each route kind's Content-Type. The daemon's
  * use of them is tests/integration/test_xsite.c. */
 #include "conf/conf.h"
-#include "http.h"
-#include "http_guard.h"
+#include "http/http.h"
+#include "http/http_guard.h"
 
 #include "core/error.h"
 #include "test.h"
