@@ -1,5 +1,5 @@
 /* fieldgripd: flags, configuration, start-up, the signal loop and shutdown. */
-#include "api.h"
+#include "api/api.h"
 #include "state/app.h"
 #include "robot/audit.h"
 #include "robot/claim.h"

@@ -6,7 +6,7 @@
  * and for one with demos), upload meta and text embedding body. Each decoder either
  * succeeds, and then what it decoded is finite and within the ranges the handlers rely on,
  * or fails with FG_EINVAL or a 4xx answer with a message. */
-#include "api_decode.h"
+#include "api/api_decode.h"
 #include "state/json.h"
 
 #include "core/error.h"

@@ -12,7 +12,7 @@
  * check what the layer hands them: at most FG_HTTP_MAX_PARTS parts, each named, distinct,
  * NUL-terminated at its length. A broken invariant aborts in the server's thread, which the
  * sanitizers and libFuzzer report as a crash of this input. */
-#include "api.h"
+#include "api/api.h"
 #include "conf/conf.h"
 #include "http/http.h"
 
