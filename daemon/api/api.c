@@ -4,7 +4,7 @@
 #include "state/jobs.h"
 #include "state/json.h"
 #include "metrics/metrics.h"
-#include "query.h"
+#include "api_query.h"
 #include "robot/audit.h"
 #include "robot/robot.h"
 #include "state/voxcache.h"

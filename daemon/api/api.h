@@ -144,7 +144,7 @@ int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, 
 /* Releases what *sv holds (each part may be NULL already). */
 void fg_api_solid_release(fg_api_solid *sv);
 
-/* 0 when query q (query.h) can score field f of scene `name`; else answers 409 no_features (a
+/* 0 when query q (api_query.h) can score field f of scene `name`; else answers 409 no_features (a
  * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was
  * committed since q was checked) and returns -1. */
 struct fg_query;

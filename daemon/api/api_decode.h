@@ -51,7 +51,7 @@ typedef struct fg_api_heatmap_req {
   size_t max_points; /* 0: none */
 } fg_api_heatmap_req;
 
-/* POST /v1/scenes/{s}/heatmap: the keys of body but its query (query.h resolves that with
+/* POST /v1/scenes/{s}/heatmap: the keys of body but its query (api_query.h resolves that with
  * the CLIP model) into *r, against the scene's params. 0, or -1 after answering 400. */
 int fg_api_parse_heatmap(json_t *body, const fg_scene_params *params, fg_api_heatmap_req *r,
                          fg_resp *resp);
@@ -98,7 +98,7 @@ typedef struct fg_api_render_req {
   fg_camera cam;          /* PINHOLE, w and h set, at most FG_API_RENDER_MAX_SIDE */
   int depth;              /* output depth, else rgb */
   int normal;             /* output normal, else rgb */
-  int heatmap;            /* output heatmap: the body also holds a query (query.h) */
+  int heatmap;            /* output heatmap: the body also holds a query (api_query.h) */
 } fg_api_render_req;
 
 /* POST /v1/scenes/{s}/render: the camera, pose and output of body but its query into *r.

@@ -16,7 +16,7 @@
 #include "state/grasp_log.h"
 #include "state/json.h"
 #include "metrics/metrics.h"
-#include "query.h"
+#include "api_query.h"
 #include "robot/robot.h"
 #include "state/tasks.h"
 #include "state/voxcache.h"

@@ -1,4 +1,4 @@
-/* POST /v1/scenes/{s}/heatmap: a query (query.h) scored over the scene's workspace grid, from
+/* POST /v1/scenes/{s}/heatmap: a query (api_query.h) scored over the scene's workspace grid, from
  * the voxel feature cache of its trained field (voxcache.h), as a JSON point list, a dense
  * .npy grid or a coloured PLY point cloud. Runs on the offload pool: the first heatmap of a
  * field builds its cache (seconds), later ones only score it. */
@@ -6,7 +6,7 @@
 #include "api_decode.h"
 #include "state/json.h"
 #include "metrics/metrics.h"
-#include "query.h"
+#include "api_query.h"
 #include "state/voxcache.h"
 
 #include "core/error.h"

@@ -6,7 +6,7 @@
 #include "decoder/decoder.h"
 #include "state/json.h"
 #include "metrics/metrics.h"
-#include "query.h"
+#include "api_query.h"
 
 #include "core/error.h"
 #include "core/pose.h"
@@ -39,7 +39,7 @@ static int is_camera_key(const char *k) {
 
 /* Takes the pose keys (transform_matrix, pose, convention) of src into *matrix, *pose and
  * *convention (borrowed) and its intrinsics into merged, refusing any other key and any key
- * given twice. top_level skips "camera", "output" and the query keys (query.h); where names
+ * given twice. top_level skips "camera", "output" and the query keys (api_query.h); where names
  * src in messages. */
 static int collect(json_t *src, const char *where, int top_level, json_t *merged,
                    json_t **matrix, json_t **pose, json_t **convention) {

@@ -1,5 +1,5 @@
 /* Queries: JSON to unit vectors; see query.h. */
-#include "query.h"
+#include "api_query.h"
 
 #include "state/app.h"
 #include "state/clip_svc.h"

@@ -14,8 +14,8 @@
  * (query/heatmap.h): each vector scaled to unit L2 norm, the positives averaged and the mean
  * scaled again; a zero or non-finite vector, or positives that cancel out, are refused. An
  * "embedding" query has no negatives unless the request names some. */
-#ifndef FG_DAEMON_QUERY_H
-#define FG_DAEMON_QUERY_H
+#ifndef FG_DAEMON_API_QUERY_H
+#define FG_DAEMON_API_QUERY_H
 
 #include <stddef.h>
 
