@@ -1,4 +1,4 @@
-/* Queries: JSON to unit vectors; see query.h. */
+/* Queries: JSON to unit vectors; see api_query.h. */
 #include "api_query.h"
 
 #include "state/app.h"
