@@ -80,7 +80,7 @@ typedef struct fg_conf {
   size_t min_body_bytes_per_s; /* from min_body_kb_per_s (0..1048576, default 8); 0: none */
   int max_queued_requests; /* 1..100000, default 64: long work waiting for a thread */
   char *viewer_dir;      /* the web viewer's files (absolute); NULL: the built-in place
-                          * (daemon/api_viewer.c) */
+                          * (daemon/api/api_viewer.c) */
   char *three_js;        /* three.min.js for the viewer (absolute); default
                           * FG_CONF_DEFAULT_THREE_JS */
   char **allowed_hosts;  /* Host names served besides IP addresses and localhost

@@ -1,6 +1,6 @@
 /* Loading an instant-ngp / nerfstudio data set from disk straight into frames, in-process:
  * for benchmarks, tests and tools that train without the daemon. (The daemon imports through
- * its decoder processes instead; see daemon/api_frames.c.) */
+ * its decoder processes instead; see daemon/api/api_frames.c.) */
 #ifndef FG_IO_DATASET_H
 #define FG_IO_DATASET_H
 

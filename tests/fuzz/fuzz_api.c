@@ -1,4 +1,4 @@
-/* Fuzz target for the request decoders of every endpoint (daemon/api_decode.h). The input is
+/* Fuzz target for the request decoders of every endpoint (daemon/api/api_decode.h). The input is
  * a request body: it goes through the body parser with its limits (fg_json_parse), and when
  * that yields an object (what the handlers pass on, via fg_api_body_object) it is fed to
  * every decoder in turn, as scene creation, training, heatmap, geometry and points (its

@@ -1,4 +1,4 @@
-/* Unit tests of the robot's audit log (daemon/audit.c): rotation keeps audit_keep files and
+/* Unit tests of the robot's audit log (daemon/robot/audit.c): rotation keeps audit_keep files and
  * drops the oldest, reading back pages newest first across the files, entry numbers carry
  * on after a reopen (also past a torn last line), files beyond a smaller keep are removed,
  * and a command's end reported before its request's line still lands after it. */

@@ -1,4 +1,4 @@
-/* Unit tests of the robot's command ids (daemon/cmd_ids.c): a store opened again, as after a
+/* Unit tests of the robot's command ids (daemon/robot/cmd_ids.c): a store opened again, as after a
  * restart or kill -9, starts above every id the previous one could have handed out, and a
  * block is reserved on disk before its first id is used. */
 #include "test.h"

@@ -1,4 +1,4 @@
-/* The HTTP layer's connection table (daemon/http_conns.h) on socket pairs: shedding the
+/* The HTTP layer's connection table (daemon/http/http_conns.h) on socket pairs: shedding the
  * oldest idle connection at the cap (never a busy one, never the newcomer), the header and
  * keep-alive deadlines, and the body-rate floor, each seen as the peer's end of the socket
  * reading end-of-file. Times are given, not waited for. */

@@ -1,4 +1,4 @@
-/* The cross-site guards (daemon/http_guard.h) case by case: Host names and literals, Origin
+/* The cross-site guards (daemon/http/http_guard.h) case by case: Host names and literals, Origin
  * against Host and [http] allowed_origins, and each route kind's Content-Type. The daemon's
  * use of them is tests/integration/test_xsite.c. */
 #include "conf/conf.h"

@@ -1,4 +1,4 @@
-/* Unit tests of the Idempotency-Key store (daemon/idem.c): a key knows its request by the
+/* Unit tests of the Idempotency-Key store (daemon/state/idem.c): a key knows its request by the
  * canonical JSON of its body, lives 24 hours whatever the number of keys, is kept in a
  * journal that replays after a restart (a torn last line dropped), is compacted, and is
  * refused at the store's cap rather than forgetting a younger key; the whole-file stores of
