@@ -17,7 +17,7 @@
  *
  * Parsing stops at the first error: the reader returns end-of-file to inih once one has been
  * recorded, so the message is always about the earliest bad line. */
-#include "conf.h"
+#include "conf_parse.h"
 #include "secret.h"
 
 #include "core/error.h"
@@ -34,19 +34,6 @@
 #include <sys/types.h>
 
 /* ---------------------------------------------------------------- sections and keys */
-
-typedef enum {
-  SEC_NONE = 0, /* before the first header */
-  SEC_HTTP,
-  SEC_STATE,
-  SEC_CLIP,
-  SEC_TRAIN,
-  SEC_GRIPPER,
-  SEC_ROBOT,
-  SEC_GRIPPER_MODBUS,
-  SEC_SCENE,
-  SEC_COUNT
-} conf_section;
 
 static const char *const section_names[SEC_COUNT] = {
     [SEC_HTTP] = "http",       [SEC_STATE] = "state",  [SEC_CLIP] = "clip",
@@ -79,7 +66,6 @@ enum {
 };
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
-#define MAX_KEYS 32
 
 static const char *const http_keys[] = {"listen",           "token",
                                         "max_upload_mb",    "token_file",
@@ -120,288 +106,7 @@ static const char *const gripper_model_names[] = {"panda", "robotiq-2f85", "robo
                                                   NULL};
 static const char *const bool_names[] = {"false", "true", NULL};
 
-/* Per-scene parse bookkeeping, parallel to fg_conf.scenes. */
-typedef struct scene_meta {
-  int header_line;
-  int key_line[4]; /* line of each scene key, 0 when not set */
-} scene_meta;
 
-typedef enum { LINE_BLANK, LINE_COMMENT, LINE_HEADER, LINE_KEY, LINE_CONTINUATION } line_kind;
-
-typedef struct conf_parse {
-  fg_conf *conf;
-  const char *path; /* as the caller gave it: messages name the file the user named */
-  char *base_dir;   /* the file's folder, absolute: relative paths are taken from here */
-  FILE *fp;
-
-  char *raw; /* the current physical line, without its newline */
-  size_t raw_cap;
-  int line;
-  line_kind kind;
-  int key_active;    /* mirrors inih's prev_name: an indented line now continues a value */
-  char last_key[64]; /* for the continuation message */
-
-  conf_section sec;
-  char sec_text[96]; /* the current header's text, e.g. "scene tabletop" */
-  size_t scene;      /* index into conf->scenes when sec == SEC_SCENE */
-  int sec_line[SEC_COUNT];
-  int key_line[SEC_COUNT][MAX_KEYS];
-  scene_meta *scene_meta;
-
-  int failed;    /* an error has been recorded */
-  int err_line;  /* its line, to keep the earliest of the end-of-file checks */
-  int err_code;
-  char err[768];
-} conf_parse;
-
-/* ---------------------------------------------------------------- errors */
-
-/* Records "FILE:LINE: [section] key: message" unless an error on an earlier line is already
- * recorded, and returns 0 so that handler paths stay one line (inih's "failed" value). */
-__attribute__((format(printf, 5, 6))) static int fail_at(conf_parse *st, int line,
-                                                          const char *section, const char *key,
-                                                          const char *fmt, ...) {
-  if (st->failed && st->err_line <= line) return 0;
-  char msg[512];
-  va_list ap;
-  va_start(ap, fmt);
-  vsnprintf(msg, sizeof msg, fmt, ap);
-  va_end(ap);
-  if (section && key)
-    snprintf(st->err, sizeof st->err, "%s:%d: [%s] %s: %s", st->path, line, section, key, msg);
-  else if (section)
-    snprintf(st->err, sizeof st->err, "%s:%d: [%s]: %s", st->path, line, section, msg);
-  else if (key)
-    snprintf(st->err, sizeof st->err, "%s:%d: %s: %s", st->path, line, key, msg);
-  else
-    snprintf(st->err, sizeof st->err, "%s:%d: %s", st->path, line, msg);
-  st->failed = 1;
-  st->err_line = line;
-  st->err_code = FG_EINVAL;
-  return 0;
-}
-
-/* An allocation failure while parsing: not the file's fault, but reported the same way. */
-static int fail_nomem(conf_parse *st) {
-  int earlier = st->failed && st->err_line <= st->line;
-  fail_at(st, st->line, NULL, NULL, "out of memory");
-  if (!earlier) st->err_code = FG_ENOMEM;
-  return 0;
-}
-
-/* ---------------------------------------------------------------- paths */
-
-/* Joins base and p (unless p is absolute) and removes ".", ".." and repeated slashes
- * lexically, so that the daemon logs and compares clean absolute paths. ".." is applied to
- * the text, not through symlinks; the base itself comes from realpath(), so this only differs
- * from the kernel's view when the value itself walks back out of a symlink. NULL on
- * allocation failure. */
-static char *path_absolute(const char *base, const char *p) {
-  size_t blen = p[0] == '/' ? 0 : strlen(base);
-  size_t plen = strlen(p);
-  char *joined = malloc(blen + plen + 2);
-  char *out = malloc(blen + plen + 2);
-  if (!joined || !out) {
-    free(joined);
-    free(out);
-    return NULL;
-  }
-  memcpy(joined, base, blen);
-  joined[blen] = '/';
-  memcpy(joined + blen + 1, p, plen + 1);
-
-  size_t n = 0; /* out holds "/a/b" without a trailing slash ("" means "/") */
-  char *save = NULL;
-  for (char *c = strtok_r(joined, "/", &save); c; c = strtok_r(NULL, "/", &save)) {
-    if (strcmp(c, ".") == 0) continue;
-    if (strcmp(c, "..") == 0) {
-      while (n > 0 && out[n - 1] != '/') n--;
-      if (n > 0) n--; /* drop the slash too; ".." at the root stays at the root */
-      continue;
-    }
-    out[n++] = '/';
-    size_t clen = strlen(c);
-    memcpy(out + n, c, clen);
-    n += clen;
-  }
-  if (n == 0) out[n++] = '/';
-  out[n] = '\0';
-  free(joined);
-  return out;
-}
-
-/* The folder holding the file at path, made absolute through realpath() so that relative
- * values do not depend on the daemon's working directory at reload time. The folder of a
- * symlinked file is the link's folder, which is where the user looks. */
-static char *folder_of(const char *path) {
-  const char *slash = strrchr(path, '/');
-  char *dir;
-  if (!slash)
-    dir = strdup(".");
-  else if (slash == path)
-    dir = strdup("/");
-  else
-    dir = strndup(path, (size_t)(slash - path));
-  if (!dir) return NULL;
-  char *real = realpath(dir, NULL);
-  free(dir);
-  return real;
-}
-
-/* ---------------------------------------------------------------- value parsers */
-
-/* Each returns 1 and stores the value, or records an error naming the current line and key
- * and returns 0. */
-
-static int parse_int(conf_parse *st, const char *key, const char *v, long lo, long hi, int *out) {
-  char *end;
-  errno = 0;
-  long x = strtol(v, &end, 10);
-  if (end == v || *end != '\0' || errno == ERANGE || x < lo || x > hi)
-    return fail_at(st, st->line, st->sec_text, key, "expected an integer from %ld to %ld, got '%s'",
-                   lo, hi, v);
-  *out = (int)x;
-  return 1;
-}
-
-/* Reads one finite number from *s, advancing it; 0 when there is none. */
-static int scan_double(const char **s, double *out) {
-  char *end;
-  errno = 0;
-  double x = strtod(*s, &end);
-  if (end == *s || errno == ERANGE || !isfinite(x)) return 0;
-  *s = end;
-  *out = x;
-  return 1;
-}
-
-static int parse_double(conf_parse *st, const char *key, const char *v, double *out) {
-  const char *s = v;
-  double x;
-  if (!scan_double(&s, &x) || *s != '\0')
-    return fail_at(st, st->line, st->sec_text, key, "expected a finite number, got '%s'", v);
-  *out = x;
-  return 1;
-}
-
-/* Three numbers separated by whitespace; what they mean ("x y z", "R G B") goes into the
- * message. */
-static int parse_vec3(conf_parse *st, const char *key, const char *v, const char *what,
-                      double out[3]) {
-  const char *s = v;
-  double x[3];
-  for (int i = 0; i < 3; i++) {
-    if (!scan_double(&s, &x[i]) || (i < 2 && !isspace((unsigned char)*s)))
-      return fail_at(st, st->line, st->sec_text, key,
-                     "expected 3 finite numbers separated by spaces (%s), got '%s'", what, v);
-  }
-  if (*s != '\0')
-    return fail_at(st, st->line, st->sec_text, key,
-                   "expected exactly 3 numbers separated by spaces (%s), got '%s'", what, v);
-  memcpy(out, x, sizeof x);
-  return 1;
-}
-
-/* Matches v against a NULL-terminated list of names. */
-static int parse_enum(conf_parse *st, const char *key, const char *v, const char *const *names,
-                      int *out) {
-  char expected[160] = "";
-  for (int i = 0; names[i]; i++) {
-    if (strcmp(v, names[i]) == 0) {
-      *out = i;
-      return 1;
-    }
-    size_t n = strlen(expected);
-    snprintf(expected + n, sizeof expected - n, "%s%s", i == 0 ? "" : (names[i + 1] ? ", " : " or "),
-             names[i]);
-  }
-  return fail_at(st, st->line, st->sec_text, key, "expected %s, got '%s'", expected, v);
-}
-
-static int set_string(conf_parse *st, char **dst, const char *v) {
-  char *copy = strdup(v);
-  if (!copy) return fail_nomem(st);
-  free(*dst);
-  *dst = copy;
-  return 1;
-}
-
-/* A file or folder value, taken relative to the configuration file's folder. */
-static int set_path(conf_parse *st, const char *key, char **dst, const char *v) {
-  if (v[0] == '\0')
-    return fail_at(st, st->line, st->sec_text, key, "expected a path, got nothing");
-  char *p = path_absolute(st->base_dir, v);
-  if (!p) return fail_nomem(st);
-  free(*dst);
-  *dst = p;
-  return 1;
-}
-
-static void free_dirs(char **dirs, size_t n) {
-  for (size_t i = 0; i < n; i++) free(dirs[i]);
-  free(dirs);
-}
-
-/* token_file: a path, relative to the file's folder like the others, or one that starts with
- * ${CREDENTIALS_DIRECTORY}, the folder where systemd puts what LoadCredential= gives the
- * service (systemd/fieldgripd.service). Empty: none, as for token. The file itself is read
- * in check_final, once it is known whether token is set as well. */
-#define CREDENTIALS_VAR "${CREDENTIALS_DIRECTORY}"
-static int set_token_file(conf_parse *st, const char *key, const char *v) {
-  const size_t nv = strlen(CREDENTIALS_VAR);
-  if (!v[0]) {
-    free(st->conf->token_file);
-    st->conf->token_file = NULL;
-    return 1;
-  }
-  if (strncmp(v, CREDENTIALS_VAR, nv) != 0) return set_path(st, key, &st->conf->token_file, v);
-  const char *dir = getenv("CREDENTIALS_DIRECTORY");
-  if (!dir || dir[0] != '/')
-    return fail_at(st, st->line, st->sec_text, key, "%s is not set: systemd sets it for a "
-                   "service with LoadCredential= (see systemd/fieldgripd.service); started "
-                   "otherwise, name the token file itself", CREDENTIALS_VAR);
-  if (v[nv] != '/' || !v[nv + 1])
-    return fail_at(st, st->line, st->sec_text, key, "expected %s/NAME, got '%s'",
-                   CREDENTIALS_VAR, v);
-  char *p = malloc(strlen(dir) + strlen(v + nv) + 1);
-  if (!p) return fail_nomem(st);
-  sprintf(p, "%s%s", dir, v + nv);
-  free(st->conf->token_file);
-  st->conf->token_file = p;
-  return 1;
-}
-
-/* import_dirs: colon-separated folders. Empty entries ("a::b", a trailing colon) are skipped
- * rather than read as "the current folder", which would be a surprising thing to export.
- * The folders need not exist yet (a share may be mounted after start-up). */
-static int set_import_dirs(conf_parse *st, const char *key, const char *v) {
-  char **dirs = NULL;
-  size_t n = 0;
-  const char *s = v;
-  while (*s) {
-    const char *colon = strchr(s, ':');
-    size_t len = colon ? (size_t)(colon - s) : strlen(s);
-    if (len > 0) {
-      char *part = strndup(s, len);
-      char *abs = part ? path_absolute(st->base_dir, part) : NULL;
-      free(part);
-      char **grown = abs ? realloc(dirs, (n + 1) * sizeof *dirs) : NULL;
-      if (!grown) {
-        free(abs);
-        free_dirs(dirs, n);
-        return fail_nomem(st);
-      }
-      dirs = grown;
-      dirs[n++] = abs;
-    }
-    s += len;
-    if (*s == ':') s++;
-  }
-  free_dirs(st->conf->import_dirs, st->conf->n_import_dirs);
-  st->conf->import_dirs = dirs;
-  st->conf->n_import_dirs = n;
-  return 1;
-}
 
 /* ---------------------------------------------------------------- sections */
 
@@ -416,13 +121,14 @@ static int enter_section(conf_parse *st, const char *text, size_t len) {
   while (len > 0 && isspace((unsigned char)text[len - 1])) len--;
   snprintf(st->sec_text, sizeof st->sec_text, "%.*s", (int)len, text);
   if (len >= sizeof st->sec_text)
-    return fail_at(st, st->line, NULL, NULL, "section name '%.40s...' is too long", st->sec_text);
+    return conf_fail_at(st, st->line, NULL, NULL, "section name '%.40s...' is too long",
+                        st->sec_text);
 
   for (int s = SEC_HTTP; s < SEC_SCENE; s++) {
     if (strcmp(st->sec_text, section_names[s]) != 0) continue;
     if (st->sec_line[s])
-      return fail_at(st, st->line, st->sec_text, NULL,
-                     "duplicate section (first on line %d); merge the two", st->sec_line[s]);
+      return conf_fail_at(st, st->line, st->sec_text, NULL,
+                          "duplicate section (first on line %d); merge the two", st->sec_line[s]);
     st->sec = (conf_section)s;
     st->sec_line[s] = st->line;
     return 1;
@@ -432,22 +138,22 @@ static int enter_section(conf_parse *st, const char *text, size_t len) {
       (st->sec_text[5] == '\0' || isspace((unsigned char)st->sec_text[5]))) {
     const char *name = skip_space(st->sec_text + 5);
     if (*name == '\0')
-      return fail_at(st, st->line, st->sec_text, NULL,
-                     "a scene section needs a name, e.g. [scene tabletop]");
+      return conf_fail_at(st, st->line, st->sec_text, NULL,
+                          "a scene section needs a name, e.g. [scene tabletop]");
     if (fg_scene_name_validate(name) < 0)
-      return fail_at(st, st->line, st->sec_text, NULL, "%s", fg_error_detail());
+      return conf_fail_at(st, st->line, st->sec_text, NULL, "%s", fg_error_detail());
     fg_conf *c = st->conf;
     for (size_t i = 0; i < c->n_scenes; i++) {
       if (strcmp(c->scenes[i].name, name) == 0)
-        return fail_at(st, st->line, st->sec_text, NULL,
-                       "duplicate scene section (first on line %d); merge the two",
-                       st->scene_meta[i].header_line);
+        return conf_fail_at(st, st->line, st->sec_text, NULL,
+                            "duplicate scene section (first on line %d); merge the two",
+                            st->scene_meta[i].header_line);
     }
     fg_conf_scene *scenes = realloc(c->scenes, (c->n_scenes + 1) * sizeof *scenes);
-    if (!scenes) return fail_nomem(st);
+    if (!scenes) return conf_fail_nomem(st);
     c->scenes = scenes;
     scene_meta *meta = realloc(st->scene_meta, (c->n_scenes + 1) * sizeof *meta);
-    if (!meta) return fail_nomem(st);
+    if (!meta) return conf_fail_nomem(st);
     st->scene_meta = meta;
     fg_conf_scene_defaults(&scenes[c->n_scenes]);
     snprintf(scenes[c->n_scenes].name, sizeof scenes[c->n_scenes].name, "%s", name);
@@ -458,9 +164,9 @@ static int enter_section(conf_parse *st, const char *text, size_t len) {
     return 1;
   }
 
-  return fail_at(st, st->line, st->sec_text, NULL,
-                 "unknown section; expected http, state, clip, train, gripper, robot, "
-                 "gripper.modbus or scene NAME");
+  return conf_fail_at(st, st->line, st->sec_text, NULL,
+                      "unknown section; expected http, state, clip, train, gripper, robot, "
+                      "gripper.modbus or scene NAME");
 }
 
 /* ---------------------------------------------------------------- the line reader */
@@ -496,23 +202,24 @@ static int classify_line(conf_parse *st) {
   }
   if (INI_ALLOW_MULTILINE && st->key_active && start > st->raw) {
     st->kind = LINE_CONTINUATION;
-    return fail_at(st, st->line, st->sec_text, st->last_key,
-                   "this indented line would continue the value of '%s', and values cannot span "
-                   "lines; remove the leading whitespace", st->last_key);
+    return conf_fail_at(st, st->line, st->sec_text, st->last_key,
+                        "this indented line would continue the value of '%s', and values "
+                        "cannot span lines; remove the leading whitespace",
+                        st->last_key);
   }
   if (*start == '[') {
     const char *end = find_chars_or_comment(start + 1, "]");
     if (*end != ']')
-      return fail_at(st, st->line, NULL, NULL,
-                     "section header lacks its closing ']'; expected [NAME]");
+      return conf_fail_at(st, st->line, NULL, NULL,
+                          "section header lacks its closing ']'; expected [NAME]");
     st->kind = LINE_HEADER;
     st->key_active = 0;
     return enter_section(st, start + 1, (size_t)(end - start - 1));
   }
   const char *end = find_chars_or_comment(start, "=:");
   if (*end != '=' && *end != ':')
-    return fail_at(st, st->line, st->sec == SEC_NONE ? NULL : st->sec_text, NULL,
-                   "expected 'key = value', '[section]' or a comment, got '%.60s'", start);
+    return conf_fail_at(st, st->line, st->sec == SEC_NONE ? NULL : st->sec_text, NULL,
+                        "expected 'key = value', '[section]' or a comment, got '%.60s'", start);
   size_t klen = (size_t)(end - start);
   while (klen > 0 && isspace((unsigned char)start[klen - 1])) klen--;
   snprintf(st->last_key, sizeof st->last_key, "%.*s", (int)klen, start);
@@ -534,13 +241,14 @@ static char *conf_reader(char *buf, int num, void *stream) {
   size_t len = (size_t)n;
   if (len > 0 && st->raw[len - 1] == '\n') st->raw[--len] = '\0';
   if (memchr(st->raw, '\0', len)) {
-    fail_at(st, st->line, NULL, NULL, "line holds a NUL byte; is this a text file?");
+    conf_fail_at(st, st->line, NULL, NULL, "line holds a NUL byte; is this a text file?");
     return NULL;
   }
   /* inih wants room for the text, a newline and the terminator */
   if (num < 2 || len > (size_t)num - 2) {
-    fail_at(st, st->line, NULL, NULL, "line is %zu characters long; the parser takes at most %d",
-            len, num > 2 ? num - 2 : 0);
+    conf_fail_at(st, st->line, NULL, NULL,
+                 "line is %zu characters long; the parser takes at most %d", 
+                 len, num > 2 ? num - 2 : 0);
     return NULL;
   }
   if (!classify_line(st)) return NULL;
@@ -562,30 +270,30 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
   int x = 0;
   switch (k) {
   case K_TRANSPORT:
-    if (!parse_enum(st, name, v, transport_names, &x)) return 0;
+    if (!conf_parse_enum(st, name, v, transport_names, &x)) return 0;
     m->transport = (fg_transport)x;
     return 1;
-  case K_HOST: return set_string(st, &m->host, v);
-  case K_PORT: return parse_int(st, name, v, 1, 65535, &m->port);
-  case K_DEVICE: return set_string(st, &m->device, v);
-  case K_BAUD: return parse_int(st, name, v, 1, 4000000, &m->baud);
+  case K_HOST: return conf_set_string(st, &m->host, v);
+  case K_PORT: return conf_parse_int(st, name, v, 1, 65535, &m->port);
+  case K_DEVICE: return conf_set_string(st, &m->device, v);
+  case K_BAUD: return conf_parse_int(st, name, v, 1, 4000000, &m->baud);
   case K_PARITY: {
     char c = (char)toupper((unsigned char)v[0]);
     if (v[0] == '\0' || v[1] != '\0' || (c != 'N' && c != 'E' && c != 'O'))
-      return fail_at(st, st->line, st->sec_text, name, "expected N, E or O, got '%s'", v);
+      return conf_fail_at(st, st->line, st->sec_text, name, "expected N, E or O, got '%s'", v);
     m->parity = c;
     return 1;
   }
-  case K_UNIT_ID: return parse_int(st, name, v, 0, 247, &m->unit_id);
-  case K_TIMEOUT_MS: return parse_int(st, name, v, 1, 60000, &m->timeout_ms);
-  case K_BASE: return parse_int(st, name, v, 0, 65535 - 26, &m->base); /* the float32 span */
+  case K_UNIT_ID: return conf_parse_int(st, name, v, 0, 247, &m->unit_id);
+  case K_TIMEOUT_MS: return conf_parse_int(st, name, v, 1, 60000, &m->timeout_ms);
+  case K_BASE: return conf_parse_int(st, name, v, 0, 65535 - 26, &m->base); /* the float32 span */
   case K_ENCODING:
-    if (!parse_enum(st, name, v, encoding_names, &x)) return 0;
+    if (!conf_parse_enum(st, name, v, encoding_names, &x)) return 0;
     m->encoding = (fg_encoding)x;
     return 1;
-  case K_ACK_TIMEOUT_MS: return parse_int(st, name, v, 1, 600000, &m->ack_timeout_ms);
-  case K_DONE_TIMEOUT_MS: return parse_int(st, name, v, 1, 3600000, &m->done_timeout_ms);
-  case K_MOTION_TIMEOUT_MS: return parse_int(st, name, v, 1, 600000, &m->motion_timeout_ms);
+  case K_ACK_TIMEOUT_MS: return conf_parse_int(st, name, v, 1, 600000, &m->ack_timeout_ms);
+  case K_DONE_TIMEOUT_MS: return conf_parse_int(st, name, v, 1, 3600000, &m->done_timeout_ms);
+  case K_MOTION_TIMEOUT_MS: return conf_parse_int(st, name, v, 1, 600000, &m->motion_timeout_ms);
   }
   return 1;
 }
@@ -593,18 +301,18 @@ static int set_modbus(conf_parse *st, fg_conf_modbus *m, int k, const char *name
 /* A number from lo to hi (inclusive; lo_open excludes lo itself). */
 static int parse_bounded(conf_parse *st, const char *key, const char *v, double lo, int lo_open,
                          double hi, double *out) {
-  if (!parse_double(st, key, v, out)) return 0;
+  if (!conf_parse_double(st, key, v, out)) return 0;
   if (*out < lo || (lo_open && *out == lo) || *out > hi)
-    return fail_at(st, st->line, st->sec_text, key, "expected a number %s %g and at most %g, "
-                   "got '%s'", lo_open ? "above" : "from", lo, hi, v);
+    return conf_fail_at(st, st->line, st->sec_text, key, "expected a number %s %g and at most %g, "
+                        "got '%s'", lo_open ? "above" : "from", lo, hi, v);
   return 1;
 }
 
 static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name,
                       const char *v) {
   switch (k) {
-  case K_LIMIT_MIN: return parse_vec3(st, name, v, "x y z in metres", m->limit_min);
-  case K_LIMIT_MAX: return parse_vec3(st, name, v, "x y z in metres", m->limit_max);
+  case K_LIMIT_MIN: return conf_parse_vec3(st, name, v, "x y z in metres", m->limit_min);
+  case K_LIMIT_MAX: return conf_parse_vec3(st, name, v, "x y z in metres", m->limit_max);
   case K_LIMIT_MARGIN: return parse_bounded(st, name, v, 0, 0, 10, &m->limit_margin_m);
   case K_APPROACH_CONE_DEG: return parse_bounded(st, name, v, 0, 0, 180, &m->approach_cone_deg);
   case K_MAX_FORCE_N: return parse_bounded(st, name, v, 0, 0, 65535, &m->max_force_n);
@@ -619,18 +327,19 @@ static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name
 /* [robot]'s audit_max_mb, audit_keep and lock_dir. A fraction of a MiB is allowed so that a
  * test can rotate after a few lines. */
 static int set_robot_audit(conf_parse *st, fg_conf *c, int k, const char *name, const char *v) {
-  if (k == K_AUDIT_KEEP) return parse_int(st, name, v, 1, 1000, &c->audit_keep);
+  if (k == K_AUDIT_KEEP) return conf_parse_int(st, name, v, 1, 1000, &c->audit_keep);
   if (k == K_LOCK_DIR) {
-    if (v[0]) return set_path(st, name, &c->lock_dir, v);
+    if (v[0]) return conf_set_path(st, name, &c->lock_dir, v);
     free(c->lock_dir); /* empty: the default, so the example file can list the key */
     c->lock_dir = NULL;
     return 1;
   }
   double mb = 0;
-  if (!parse_double(st, name, v, &mb)) return 0;
+  if (!conf_parse_double(st, name, v, &mb)) return 0;
   if (!(mb > 0) || mb > 1048576)
-    return fail_at(st, st->line, st->sec_text, name,
-                   "expected a size in MiB above 0 and at most 1048576 (e.g. 16), got '%s'", v);
+    return conf_fail_at(st, st->line, st->sec_text, name,
+                        "expected a size in MiB above 0 and at most 1048576 (e.g. 16), "
+                        "got '%s'", v);
   c->audit_max_bytes = (size_t)(mb * 1048576.0);
   if (c->audit_max_bytes == 0) c->audit_max_bytes = 1;
   return 1;
@@ -638,20 +347,20 @@ static int set_robot_audit(conf_parse *st, fg_conf *c, int k, const char *name, 
 
 static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, const char *v) {
   switch (k) {
-  case K_WORKSPACE_MIN: return parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
-  case K_WORKSPACE_MAX: return parse_vec3(st, name, v, "x y z in metres", s->workspace_max);
+  case K_WORKSPACE_MIN: return conf_parse_vec3(st, name, v, "x y z in metres", s->workspace_min);
+  case K_WORKSPACE_MAX: return conf_parse_vec3(st, name, v, "x y z in metres", s->workspace_max);
   case K_VOXEL_SIZE:
-    if (!parse_double(st, name, v, &s->voxel_size)) return 0;
+    if (!conf_parse_double(st, name, v, &s->voxel_size)) return 0;
     if (s->voxel_size <= 0)
-      return fail_at(st, st->line, st->sec_text, name,
-                     "expected a positive size in metres (e.g. 0.01), got '%s'", v);
+      return conf_fail_at(st, st->line, st->sec_text, name,
+                          "expected a positive size in metres (e.g. 0.01), got '%s'", v);
     return 1;
   case K_BACKGROUND:
-    if (!parse_vec3(st, name, v, "R G B from 0 to 1", s->background)) return 0;
+    if (!conf_parse_vec3(st, name, v, "R G B from 0 to 1", s->background)) return 0;
     for (int i = 0; i < 3; i++) {
       if (s->background[i] < 0 || s->background[i] > 1)
-        return fail_at(st, st->line, st->sec_text, name,
-                       "expected 3 numbers from 0 to 1 (R G B), got '%s'", v);
+        return conf_fail_at(st, st->line, st->sec_text, name,
+                            "expected 3 numbers from 0 to 1 (R G B), got '%s'", v);
     }
     return 1;
   }
@@ -674,11 +383,11 @@ static int conf_handler(void *user, const char *section, const char *name, const
   fg_conf *c = st->conf;
   (void)section; /* inih truncates long section names; ours comes from the reader */
   if (st->kind != LINE_KEY)
-    return fail_at(st, st->line, NULL, name, "the parser saw a value on a line that is not "
-                   "'key = value'; check the indentation");
+    return conf_fail_at(st, st->line, NULL, name, "the parser saw a value on a line that is not "
+                        "'key = value'; check the indentation");
   if (st->sec == SEC_NONE)
-    return fail_at(st, st->line, NULL, name, "key outside any section; put it under its "
-                   "[section] header");
+    return conf_fail_at(st, st->line, NULL, name, "key outside any section; put it under its "
+                        "[section] header");
 
   const char *const *keys = section_keys[st->sec];
   int k = find_key(keys, name);
@@ -686,16 +395,17 @@ static int conf_handler(void *user, const char *section, const char *name, const
     char list[256];
     list_keys(keys, list, sizeof list);
     if (st->sec == SEC_GRIPPER_MODBUS && find_key(robot_keys, name) >= 0)
-      return fail_at(st, st->line, st->sec_text, name,
-                     "unknown key: this one belongs to [robot] only; [gripper.modbus] takes %s",
-                     list);
-    return fail_at(st, st->line, st->sec_text, name, "unknown key; [%s] takes %s",
-                   st->sec == SEC_SCENE ? "scene NAME" : st->sec_text, list);
+      return conf_fail_at(st, st->line, st->sec_text, name,
+                          "unknown key: this one belongs to [robot] only; [gripper.modbus] "
+                          "takes %s", list);
+    return conf_fail_at(st, st->line, st->sec_text, name, "unknown key; [%s] takes %s",
+                        st->sec == SEC_SCENE ? "scene NAME" : st->sec_text, list);
   }
   int *seen = st->sec == SEC_SCENE ? &st->scene_meta[st->scene].key_line[k] : &st->key_line[st->sec][k];
   if (*seen)
-    return fail_at(st, st->line, st->sec_text, name, "duplicate key (first set on line %d); keep "
-                   "one", *seen);
+    return conf_fail_at(st, st->line, st->sec_text, name,
+                        "duplicate key (first set on line %d); keep "
+                        "one", *seen);
   *seen = st->line;
 
   int x = 0;
@@ -705,75 +415,75 @@ static int conf_handler(void *user, const char *section, const char *name, const
       char *host;
       int port;
       if (fg_conf_parse_listen(v, &host, &port) < 0)
-        return fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
+        return conf_fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
       free(host);
-      return set_string(st, &c->listen, v);
+      return conf_set_string(st, &c->listen, v);
     }
     if (k == K_TOKEN) {
       fg_secret_free(c->token);
       c->token = NULL;
-      return v[0] ? set_string(st, &c->token, v) : 1;
+      return v[0] ? conf_set_string(st, &c->token, v) : 1;
     }
     switch (k) {
-    case K_TOKEN_FILE: return set_token_file(st, name, v);
+    case K_TOKEN_FILE: return conf_set_token_file(st, name, v);
     /* Empty: the built-in place, so the example file can list the keys without values. */
     case K_VIEWER_DIR:
-      if (v[0]) return set_path(st, name, &c->viewer_dir, v);
+      if (v[0]) return conf_set_path(st, name, &c->viewer_dir, v);
       free(c->viewer_dir);
       c->viewer_dir = NULL;
       return 1;
     case K_THREE_JS:
-      return set_path(st, name, &c->three_js, v[0] ? v : FG_CONF_DEFAULT_THREE_JS);
+      return conf_set_path(st, name, &c->three_js, v[0] ? v : FG_CONF_DEFAULT_THREE_JS);
     case K_ALLOWED_HOSTS:
     case K_ALLOWED_ORIGINS: {
       const int hosts = k == K_ALLOWED_HOSTS;
       int rc = fg_conf_split_list(v, hosts ? fg_conf_check_host_name : fg_conf_check_origin,
                                   hosts ? &c->allowed_hosts : &c->allowed_origins,
                                   hosts ? &c->n_allowed_hosts : &c->n_allowed_origins);
-      if (rc == FG_ENOMEM) return fail_nomem(st);
-      return rc == 0 ? 1 : fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
+      if (rc == FG_ENOMEM) return conf_fail_nomem(st);
+      return rc == 0 ? 1 : conf_fail_at(st, st->line, st->sec_text, name, "%s", fg_error_detail());
     }
     case K_MAX_UPLOAD_MB:
-      if (!parse_int(st, name, v, 1, 4096, &x)) return 0;
+      if (!conf_parse_int(st, name, v, 1, 4096, &x)) return 0;
       c->max_upload_bytes = (size_t)x << 20;
       return 1;
     case K_MAX_JSON_KB:
-      if (!parse_int(st, name, v, 1, 1048576, &x)) return 0;
+      if (!conf_parse_int(st, name, v, 1, 1048576, &x)) return 0;
       c->max_json_bytes = (size_t)x << 10;
       return 1;
-    case K_MAX_CONNECTIONS: return parse_int(st, name, v, 16, 1000000, &c->max_connections);
-    case K_HEADER_TIMEOUT_S: return parse_int(st, name, v, 1, 3600, &c->header_timeout_s);
-    case K_IDLE_TIMEOUT_S: return parse_int(st, name, v, 1, 86400, &c->idle_timeout_s);
+    case K_MAX_CONNECTIONS: return conf_parse_int(st, name, v, 16, 1000000, &c->max_connections);
+    case K_HEADER_TIMEOUT_S: return conf_parse_int(st, name, v, 1, 3600, &c->header_timeout_s);
+    case K_IDLE_TIMEOUT_S: return conf_parse_int(st, name, v, 1, 86400, &c->idle_timeout_s);
     case K_MIN_BODY_KB_PER_S:
-      if (!parse_int(st, name, v, 0, 1048576, &x)) return 0;
+      if (!conf_parse_int(st, name, v, 0, 1048576, &x)) return 0;
       c->min_body_bytes_per_s = (size_t)x << 10;
       return 1;
-    default: return parse_int(st, name, v, 1, 100000, &c->max_queued_requests);
+    default: return conf_parse_int(st, name, v, 1, 100000, &c->max_queued_requests);
     }
   case SEC_STATE:
-    if (k == K_DIR) return set_path(st, name, &c->state_dir, v);
-    if (k == K_MAX_SCENES) return parse_int(st, name, v, 0, 1000000, &c->max_scenes);
+    if (k == K_DIR) return conf_set_path(st, name, &c->state_dir, v);
+    if (k == K_MAX_SCENES) return conf_parse_int(st, name, v, 0, 1000000, &c->max_scenes);
     if (k == K_MAX_LOADED_FIELDS)
-      return parse_int(st, name, v, 0, 100000, &c->max_loaded_fields);
-    return set_import_dirs(st, name, v);
+      return conf_parse_int(st, name, v, 0, 100000, &c->max_loaded_fields);
+    return conf_set_import_dirs(st, name, v);
   case SEC_CLIP:
-    if (k == K_CLIP_THREADS) return parse_int(st, name, v, 0, 1024, &c->clip_threads);
-    return set_path(st, name, k == K_WEIGHTS ? &c->clip_weights : &c->clip_vocab, v);
+    if (k == K_CLIP_THREADS) return conf_parse_int(st, name, v, 0, 1024, &c->clip_threads);
+    return conf_set_path(st, name, k == K_WEIGHTS ? &c->clip_weights : &c->clip_vocab, v);
   case SEC_TRAIN:
-    if (k == K_STEPS) return parse_int(st, name, v, 1, 10000000, &c->train_steps);
-    if (k == K_THREADS) return parse_int(st, name, v, 0, 1024, &c->train_threads);
-    if (k == K_HALF_PRECISION) return parse_enum(st, name, v, bool_names, &c->half_precision);
+    if (k == K_STEPS) return conf_parse_int(st, name, v, 1, 10000000, &c->train_steps);
+    if (k == K_THREADS) return conf_parse_int(st, name, v, 0, 1024, &c->train_threads);
+    if (k == K_HALF_PRECISION) return conf_parse_enum(st, name, v, bool_names, &c->half_precision);
     if (k == K_DEPTH_WEIGHT || k == K_DISTORTION_WEIGHT) {
       double *w = k == K_DEPTH_WEIGHT ? &c->depth_weight : &c->distortion_weight;
-      if (!parse_double(st, name, v, w)) return 0;
+      if (!conf_parse_double(st, name, v, w)) return 0;
       if (*w < 0.0 || *w > FG_TRAIN_MAX_LOSS_WEIGHT)
-        return fail_at(st, st->line, st->sec_text, name, "must be from 0 to %g, got '%s'",
-                       (double)FG_TRAIN_MAX_LOSS_WEIGHT, v);
+        return conf_fail_at(st, st->line, st->sec_text, name, "must be from 0 to %g, got '%s'",
+                            (double)FG_TRAIN_MAX_LOSS_WEIGHT, v);
       return 1;
     }
-    return parse_int(st, name, v, 16, 16384, &c->max_image_side);
+    return conf_parse_int(st, name, v, 16, 16384, &c->max_image_side);
   case SEC_GRIPPER:
-    if (!parse_enum(st, name, v, gripper_model_names, &x)) return 0;
+    if (!conf_parse_enum(st, name, v, gripper_model_names, &x)) return 0;
     c->gripper_model = (fg_gripper_model)x;
     return 1;
   case SEC_ROBOT:
@@ -798,11 +508,11 @@ static void check_modbus(conf_parse *st, conf_section sec, const fg_conf_modbus 
   const char *name = section_names[sec];
   int where = lines[K_TRANSPORT];
   if (m->transport == FG_TRANSPORT_TCP && (!m->host || !m->host[0]))
-    fail_at(st, lines[K_HOST] ? lines[K_HOST] : where, name, "host",
-            "transport tcp needs a host; set host = ADDRESS (name or IP address)");
+    conf_fail_at(st, lines[K_HOST] ? lines[K_HOST] : where, name, "host",
+                 "transport tcp needs a host; set host = ADDRESS (name or IP address)");
   if (m->transport == FG_TRANSPORT_RTU && (!m->device || !m->device[0]))
-    fail_at(st, lines[K_DEVICE] ? lines[K_DEVICE] : where, name, "device",
-            "transport rtu needs a serial device; set device = /dev/ttyUSB0 or similar");
+    conf_fail_at(st, lines[K_DEVICE] ? lines[K_DEVICE] : where, name, "device",
+                 "transport rtu needs a serial device; set device = /dev/ttyUSB0 or similar");
 }
 
 /* limit_min and limit_max come together and make a box; the default speed is one the limit
@@ -812,24 +522,25 @@ static void check_motion(conf_parse *st, fg_conf_motion *m) {
   const int lmin = lines[K_LIMIT_MIN], lmax = lines[K_LIMIT_MAX];
   if (lmin || lmax) {
     if (!lmin || !lmax) {
-      fail_at(st, lmin ? lmin : lmax, "robot", lmin ? "limit_max" : "limit_min",
-              "missing; the position box needs both limit_min and limit_max (or neither: then "
-              "it is the scenes' workspaces grown by limit_margin)");
+      conf_fail_at(st, lmin ? lmin : lmax, "robot", lmin ? "limit_max" : "limit_min",
+                   "missing; the position box needs both limit_min and limit_max (or neither: then "
+                   "it is the scenes' workspaces grown by limit_margin)");
       return;
     }
     static const char axis[3] = {'x', 'y', 'z'};
     for (int i = 0; i < 3; i++)
       if (!(m->limit_min[i] < m->limit_max[i])) {
-        fail_at(st, lmin, "robot", "limit_min", "must be below limit_max on every axis, but on "
-                "%c it is %g and limit_max is %g", axis[i], m->limit_min[i], m->limit_max[i]);
+        conf_fail_at(st, lmin, "robot", "limit_min",
+                     "must be below limit_max on every axis, but on "
+                     "%c it is %g and limit_max is %g", axis[i], m->limit_min[i], m->limit_max[i]);
         return;
       }
     m->has_box = 1;
   }
   if (m->speed_mps > m->max_speed_mps)
-    fail_at(st, lines[K_SPEED_MPS] ? lines[K_SPEED_MPS] : lines[K_MAX_SPEED_MPS], "robot",
-            "speed_mps", "the default speed %g m/s is above max_speed_mps = %g m/s",
-            m->speed_mps, m->max_speed_mps);
+    conf_fail_at(st, lines[K_SPEED_MPS] ? lines[K_SPEED_MPS] : lines[K_MAX_SPEED_MPS], "robot",
+                 "speed_mps", "the default speed %g m/s is above max_speed_mps = %g m/s",
+                 m->speed_mps, m->max_speed_mps);
 }
 
 /* A scene's workspace must be a box, and a voxel must fit into it. Reported at the scene's
@@ -842,18 +553,19 @@ static void check_scene(conf_parse *st, const fg_conf_scene *s, const scene_meta
   for (int i = 0; i < 3; i++) {
     double extent = s->workspace_max[i] - s->workspace_min[i];
     if (!(extent > 0)) {
-      fail_at(st, meta->header_line, sec, "workspace_min",
-              "must be below workspace_max on every axis, but on %c it is %g and workspace_max "
-              "is %g", axis[i], s->workspace_min[i], s->workspace_max[i]);
+      conf_fail_at(st, meta->header_line, sec, "workspace_min",
+                   "must be below workspace_max on every axis, but on %c it is %g and "
+                   "workspace_max is %g", axis[i], s->workspace_min[i], s->workspace_max[i]);
       return;
     }
     if (extent < smallest) smallest = extent;
   }
   if (s->voxel_size > smallest)
-    fail_at(st, meta->key_line[K_VOXEL_SIZE] ? meta->key_line[K_VOXEL_SIZE] : meta->header_line,
-            sec, "voxel_size",
-            "%g m is larger than the smallest workspace extent (%g m); expected at most that",
-            s->voxel_size, smallest);
+    conf_fail_at(st,
+                 meta->key_line[K_VOXEL_SIZE] ? meta->key_line[K_VOXEL_SIZE] : meta->header_line, 
+                 sec, "voxel_size",
+                 "%g m is larger than the smallest workspace extent (%g m); expected at most that",
+                 s->voxel_size, smallest);
 }
 
 /* The token from token_file; both keys at once would leave one of them ignored. */
@@ -862,13 +574,14 @@ static void check_token_file(conf_parse *st) {
   const int line = st->key_line[SEC_HTTP][K_TOKEN_FILE];
   if (!c->token_file) return;
   if (c->token && c->token[0]) {
-    fail_at(st, line, "http", "token_file", "token is set too (line %d); keep one of them, "
-            "token_file for a token that others may not read", st->key_line[SEC_HTTP][K_TOKEN]);
+    conf_fail_at(st, line, "http", "token_file",
+                 "token is set too (line %d); keep one of them, token_file for a token that "
+                 "others may not read", st->key_line[SEC_HTTP][K_TOKEN]);
     return;
   }
   char *secret;
   if (fg_secret_read(c->token_file, &secret) != 0) {
-    fail_at(st, line, "http", "token_file", "%s", fg_error_detail());
+    conf_fail_at(st, line, "http", "token_file", "%s", fg_error_detail());
     return;
   }
   fg_secret_free(c->token);
@@ -882,11 +595,11 @@ static void check_final(conf_parse *st) {
     c->clip_weights_line = st->key_line[SEC_CLIP][K_WEIGHTS];
     c->clip_vocab_line = st->key_line[SEC_CLIP][K_VOCAB];
     if (!c->clip_weights)
-      fail_at(st, st->sec_line[SEC_CLIP], "clip", "weights",
-              "missing; [clip] needs both weights and vocab (or remove the section)");
+      conf_fail_at(st, st->sec_line[SEC_CLIP], "clip", "weights",
+                   "missing; [clip] needs both weights and vocab (or remove the section)");
     else if (!c->clip_vocab)
-      fail_at(st, st->sec_line[SEC_CLIP], "clip", "vocab",
-              "missing; [clip] needs both weights and vocab (or remove the section)");
+      conf_fail_at(st, st->sec_line[SEC_CLIP], "clip", "vocab",
+                   "missing; [clip] needs both weights and vocab (or remove the section)");
   }
   check_modbus(st, SEC_ROBOT, &c->robot);
   check_motion(st, &c->motion);
@@ -894,12 +607,12 @@ static void check_final(conf_parse *st) {
   for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);
   /* The declared scenes alone would not fit: the file contradicts itself. */
   if (c->max_scenes > 0 && c->n_scenes > (size_t)c->max_scenes)
-    fail_at(st, st->key_line[SEC_STATE][K_MAX_SCENES]
-                    ? st->key_line[SEC_STATE][K_MAX_SCENES]
-                    : st->scene_meta[c->max_scenes].header_line,
-            "state", "max_scenes", "the file declares %zu [scene NAME] sections, more than "
-            "max_scenes (%d); raise max_scenes or declare fewer scenes", c->n_scenes,
-            c->max_scenes);
+    conf_fail_at(st, st->key_line[SEC_STATE][K_MAX_SCENES]
+                         ? st->key_line[SEC_STATE][K_MAX_SCENES]
+                         : st->scene_meta[c->max_scenes].header_line,
+                 "state", "max_scenes", "the file declares %zu [scene NAME] sections, more than "
+                 "max_scenes (%d); raise max_scenes or declare fewer scenes", c->n_scenes,
+                 c->max_scenes);
 }
 
 /* ---------------------------------------------------------------- load and free */
@@ -926,7 +639,7 @@ int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen) {
     copy_err(err, errlen, fg_error_detail());
     return rc;
   }
-  st.base_dir = folder_of(path);
+  st.base_dir = conf_folder_of(path);
   if (!st.base_dir) {
     st.failed = 1;
     st.err_code = errno == ENOMEM ? FG_ENOMEM : FG_EIO;
@@ -934,7 +647,7 @@ int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen) {
   } else {
     const char *slash = strrchr(path, '/');
     st.conf = fg_conf_defaults();
-    if (st.conf) st.conf->path = path_absolute(st.base_dir, slash ? slash + 1 : path);
+    if (st.conf) st.conf->path = conf_path_absolute(st.base_dir, slash ? slash + 1 : path);
     if (!st.conf || !st.conf->path) {
       st.failed = 1;
       st.err_code = FG_ENOMEM;
@@ -953,8 +666,8 @@ int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen) {
       snprintf(st.err, sizeof st.err, "%s: out of memory while parsing", path);
     } else if (rc > 0 && !st.failed) {
       /* inih saw something our classification let through; should not happen */
-      fail_at(&st, rc, NULL, NULL, "malformed line; expected 'key = value', '[section]' or a "
-              "comment");
+      conf_fail_at(&st, rc, NULL, NULL, "malformed line; expected 'key = value', '[section]' or a "
+                   "comment");
     }
     if (!st.failed) check_final(&st);
   }
