@@ -6,6 +6,7 @@
 #include "state/jobs.h"
 #include "state/json.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 
 #include <errno.h>
@@ -206,11 +207,6 @@ typedef struct sse_stream {
   size_t pending_len, pending_off;
 } sse_stream;
 
-static double sse_now(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 /* One event: "event: NAME\ndata: JSON\n\n" (compact JSON has no newline). */
 static void sse_event(sse_stream *st, const char *name, const fg_job_info *info) {
@@ -233,7 +229,7 @@ static long sse_read(void *ctx, char *buf, size_t max, int closing) {
     if (st->final_sent || closing) return -1;
     fg_job_info info;
     fg_job_get_info(st->job, &info);
-    double now = sse_now();
+    double now = fg_mono_s();
     if (fg_job_state_finished(info.state)) {
       sse_event(st, fg_job_state_name(info.state), &info);
       st->final_sent = 1;

@@ -174,11 +174,6 @@ static int authorized(const conn_ctx *c, int public_route) {
  * resumes every parked stream and lets the readers end their bodies, so no connection is
  * suspended when MHD_stop_daemon runs (an API violation in libmicrohttpd). */
 
-static double mono_now(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 static ssize_t stream_reader(void *cls, uint64_t pos, char *buf, size_t max) {
   (void)pos;
@@ -222,7 +217,7 @@ static void *ticker_main(void *arg) {
   pthread_mutex_lock(&h->slock);
   while (!h->streams_closing) {
     int any_parked = 0;
-    double now = mono_now();
+    double now = fg_mono_s();
     for (http_stream *hs = h->streams; hs; hs = hs->next) {
       if (!hs->parked) continue;
       if (hs->ops->ready(hs->ctx, now)) {
@@ -654,7 +649,7 @@ static void on_connection(void *cls, struct MHD_Connection *conn, void **socket_
     MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
   if (ci) {
     int shed = 0;
-    *socket_context = fg_conns_open(h->conns, ci->connect_fd, mono_now(), &shed);
+    *socket_context = fg_conns_open(h->conns, ci->connect_fd, fg_mono_s(), &shed);
     if (shed) fg_metrics_count_http_closed(FG_METRICS_CLOSE_SHED, 1);
   }
   /* Counted once it is in the table (and uncounted above once it has left), so a scrape
@@ -676,7 +671,7 @@ static void *sweeper_main(void *arg) {
                            .min_body_bytes_per_s = (double)conf->min_body_bytes_per_s};
     h->cfg.conf_release(h->cfg.app, conf);
     size_t closed[FG_CONN_REASONS] = {0};
-    if (fg_conns_sweep(h->conns, &lim, mono_now(), closed) > 0)
+    if (fg_conns_sweep(h->conns, &lim, fg_mono_s(), closed) > 0)
       for (int r = 0; r < FG_CONN_REASONS; r++)
         if (closed[r]) fg_metrics_count_http_closed(r, closed[r]);
     struct timespec until;

@@ -3,6 +3,7 @@
 #include "audit.h"
 #include "state/json.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
@@ -212,9 +213,7 @@ int fg_audit_open(fg_audit **out, const fg_audit_config *cfg) {
 /* Writes entry as the next line. Called with the lock held. */
 static int append_locked(fg_audit *a, json_t *entry) {
   char when[32];
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  fg_iso8601((int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000, when);
+  fg_iso8601(fg_real_ms(), when);
   json_t *o = json_pack("{s:I, s:s}", "seq", (json_int_t)a->next_seq, "time", when);
   if (o && json_object_update_missing(o, entry) != 0) {
     json_decref(o);

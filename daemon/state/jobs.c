@@ -71,7 +71,6 @@ int fg_job_state_finished(fg_job_state s) {
 }
 
 /* Unix milliseconds, for the job's timestamps. */
-static int64_t now_ms(void) { return (int64_t)(fg_real_s() * 1000.0); }
 
 /* ---------------------------------------------------------------- job objects */
 
@@ -119,7 +118,7 @@ static void make_id(char out[FG_JOB_ID_MAX]) {
   uint32_t rnd = 0;
   if (getrandom(&rnd, sizeof rnd, GRND_NONBLOCK) != (ssize_t)sizeof rnd)
     rnd = (uint32_t)getpid() * 2654435761u ^ atomic_fetch_add(&counter, 1) * 40503u;
-  snprintf(out, FG_JOB_ID_MAX, "j%012llx-%06x", (unsigned long long)now_ms(),
+  snprintf(out, FG_JOB_ID_MAX, "j%012llx-%06x", (unsigned long long)fg_real_ms(),
            (unsigned)(rnd & 0xffffffu));
 }
 
@@ -404,7 +403,7 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
   snprintf(j->info.kind, sizeof j->info.kind, "%s", kind->name);
   j->info.state = FG_JOB_QUEUED;
   j->info.params = *params;
-  j->info.created_ms = now_ms();
+  j->info.created_ms = fg_real_ms();
   j->info.version = 1;
   fg_scene_info si;
   fg_scene_get_info(scene, &si);
@@ -470,7 +469,7 @@ static int cancel_locked(fg_jobs *jobs, fg_job *j) {
     }
     j->info.state = FG_JOB_CANCELLED;
     j->info.eta_s = NAN;
-    j->info.finished_ms = now_ms();
+    j->info.finished_ms = fg_real_ms();
     j->info.version++;
   }
   pthread_mutex_unlock(&j->lock);
@@ -567,7 +566,7 @@ void fg_job_fail(fg_job *j, const char *fmt, ...) {
     snprintf(j->info.error, sizeof j->info.error, "%s", msg);
     j->info.eta_s = NAN;
     j->info.elapsed_s = fg_mono_s() - j->started_mono;
-    j->info.finished_ms = now_ms();
+    j->info.finished_ms = fg_real_ms();
     j->info.version++;
   }
   pthread_mutex_unlock(&j->lock);
@@ -597,7 +596,7 @@ void fg_job_finish(fg_job *j, fg_job_state state) {
   info.state = state;
   info.eta_s = state == FG_JOB_DONE ? 0 : NAN;
   info.elapsed_s = fg_mono_s() - j->started_mono;
-  info.finished_ms = now_ms();
+  info.finished_ms = fg_real_ms();
   if (j->jobs) persist_info(j->jobs, scene, &info, 0);
   pthread_mutex_lock(&j->lock);
   j->info.state = state;
@@ -645,7 +644,7 @@ static void *worker_main(void *arg) {
     int go = j->info.state == FG_JOB_QUEUED;
     if (go) {
       j->info.state = FG_JOB_RUNNING;
-      j->info.started_ms = now_ms();
+      j->info.started_ms = fg_real_ms();
       j->started_mono = fg_mono_s();
       j->info.version++;
     }
@@ -705,7 +704,7 @@ static void load_last_job(fg_jobs *jobs, fg_scene *scene) {
             "reported done", info.id, info.scene);
     info.state = FG_JOB_DONE;
     info.eta_s = 0;
-    if (!info.finished_ms) info.finished_ms = now_ms();
+    if (!info.finished_ms) info.finished_ms = fg_real_ms();
     interrupted = 0;
     persist_info(jobs, scene, &info, 0);
   }
@@ -715,7 +714,7 @@ static void load_last_job(fg_jobs *jobs, fg_scene *scene) {
     info.state = FG_JOB_FAILED;
     snprintf(info.error, sizeof info.error, "interrupted by a daemon restart");
     info.eta_s = NAN;
-    if (!info.finished_ms) info.finished_ms = now_ms();
+    if (!info.finished_ms) info.finished_ms = fg_real_ms();
   }
   info.version = 1;
   j->info = info;

@@ -4,6 +4,7 @@
 #include "conf/conf.h"
 #include "voxcache.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
@@ -30,12 +31,6 @@ struct fg_field_ref {
 };
 
 static atomic_uint name_counter;
-
-static int64_t now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
 
 /* ---------------------------------------------------------------- parameters */
 
@@ -672,7 +667,7 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   }
   s->params = *params;
   s->declared = declared;
-  s->created_ms = now_ms();
+  s->created_ms = fg_real_ms();
   rc = fg_mkdir_p(s->frames_dir);
   if (rc == 0) rc = write_scene_json(s);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);

@@ -4,6 +4,7 @@
 #include "conf/conf.h"
 #include "json.h"
 
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
@@ -48,12 +49,6 @@ struct fg_tasks {
 static atomic_uint trash_counter;
 
 const char *fg_task_kind_name(fg_task_kind k) { return k == FG_TASK_PLACE ? "place" : "grasp"; }
-
-static int64_t now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
 
 /* ---------------------------------------------------------------- snapshots */
 
@@ -619,7 +614,7 @@ int fg_tasks_add_demo(fg_tasks *ts, const char *name, const fg_task_demo_new *d,
     n_old = cur->n_demos;
   } else {
     snprintf(base.name, sizeof base.name, "%s", name);
-    base.created_ms = now_ms();
+    base.created_ms = fg_real_ms();
     base.next_id = 1;
   }
   if (n_old == 0) { /* the first demo fixes the query points, the kind and D */
@@ -645,7 +640,7 @@ int fg_tasks_add_demo(fg_tasks *ts, const char *name, const fg_task_demo_new *d,
   x->kind = d->kind;
   x->width_m = d->width_m;
   x->approach_m = d->approach_m;
-  x->created_ms = now_ms();
+  x->created_ms = fg_real_ms();
   x->z = d->z;
   if ((rc = obj_build(&base, demos, n_old + 1, &o)) != 0) goto out;
   char *dir = task_path(ts, name, NULL);

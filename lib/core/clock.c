@@ -14,6 +14,12 @@ double fg_real_s(void) {
   return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+int64_t fg_real_ms(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
 void fg_deadline_after_ms(struct timespec *ts, clockid_t clock, long ms) {
   clock_gettime(clock, ts);
   ts->tv_sec += ms / 1000;

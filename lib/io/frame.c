@@ -4,6 +4,7 @@
  * on the compiler's struct packing or the host's byte order; the struct below only documents
  * the layout and gives every field its offset. */
 #include "io/frame.h"
+#include "core/clock.h"
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/half.h"
@@ -286,12 +287,6 @@ static int features_undistort(fg_frame *f, const fg_camera *dist, const fg_camer
   return 0;
 }
 
-static int64_t now_ms(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 /* From decoded pixels to the stored frame: undistort (pixels and features), downscale,
  * quantise. rgb is float [h][w][3] and only read; every step writes a new buffer, so the
  * caller's image needs no copy. cam (sized w x h) becomes the stored pinhole camera. */
@@ -442,7 +437,7 @@ static int prepare_pixels(fg_frame *out, const fg_image *img, const fg_camera *c
   if (depth) FG_TRY(depth_resample(out, depth, &received, &c));
   memcpy(out->T_world_cam, T_world_cam, 16 * sizeof(double));
   out->cam = c;
-  out->created_ms = now_ms();
+  out->created_ms = fg_real_ms();
   return 0;
 }
 

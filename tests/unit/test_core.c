@@ -1,6 +1,7 @@
 /* Unit tests of lib/core: error detail, half floats, poses, atomic files, SHA-256. */
 #include "test.h"
 
+#include "core/clock.h"
 #include "core/digest.h"
 #include "core/error.h"
 #include "core/fsutil.h"
@@ -262,8 +263,19 @@ static void test_sha256(void) {
   ASSERT_EQ(raw[31], 0xad);
 }
 
+/* The real-time clock in milliseconds is the one in seconds, truncated. */
+static void test_clock(void) {
+  const double before = fg_real_s();
+  const int64_t ms = fg_real_ms();
+  const double after = fg_real_s();
+  ASSERT(ms >= (int64_t)(before * 1000.0) - 1);
+  ASSERT(ms <= (int64_t)(after * 1000.0) + 1);
+  ASSERT(ms > INT64_C(1700000000000)); /* after November 2023: milliseconds, not seconds */
+}
+
 int main(void) {
   test_error();
+  test_clock();
   test_sha256();
   test_half();
   test_pose();
