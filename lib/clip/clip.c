@@ -21,6 +21,7 @@
 
 #include "core/blas.h"
 #include "core/error.h"
+#include "core/threads.h"
 #include "io/safetensors.h"
 
 #define LN_EPS 1e-5f
@@ -642,7 +643,7 @@ static void interp_pos(const float *pos, int g, int w, int hp, int wp, float *ou
   }
 }
 
-static int threads_of(const fg_clip *c) { return c->threads > 0 ? c->threads : omp_get_max_threads(); }
+static int threads_of(const fg_clip *c) { return fg_threads(c->threads); }
 
 int fg_clip_dense_grid(const fg_clip *c, int H, int W, int *hp, int *wp) {
   const int p = c->info.patch_size;

@@ -9,6 +9,7 @@
 #include "field/adam.h"
 
 #include "core/error.h"
+#include "core/threads.h"
 
 #include <math.h>
 #include <omp.h>
@@ -168,7 +169,7 @@ void fg_adam_step_kernel(fg_adam_kernel k, const fg_adam_config *cfg, float *par
                          const float *grads, float *m, float *v, size_t n, int step,
                          int n_threads) {
   const float lr_t = corrected_lr(cfg, step);
-  int nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+  int nt = fg_threads(n_threads);
   if (n < 65536) nt = 1;
   /* Fixed ranges per thread, cut at multiples of 16 elements. */
 #pragma omp parallel num_threads(nt) if (nt > 1)

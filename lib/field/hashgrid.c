@@ -34,6 +34,7 @@
 #include "field/hashgrid.h"
 
 #include "core/error.h"
+#include "core/threads.h"
 
 #include <assert.h>
 #include <math.h>
@@ -149,10 +150,6 @@ int fg_hashgrid_init(const fg_hashgrid_config *cfg, float *params, uint64_t seed
 
 /* Clamps to [0, 1] and maps NaN to 0 (comparisons: fminf/fmaxf are libm calls here). */
 static inline float clamp01(float v) { return v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; }
-
-static inline int resolve_threads(int n_threads) {
-  return n_threads > 0 ? n_threads : omp_get_max_threads();
-}
 
 /* ---- references ----------------------------------------------------------------------- */
 
@@ -407,7 +404,7 @@ void fg_hashgrid_forward(const fg_hashgrid_config *cfg, const float *params, con
   fg_hashgrid_level lv[FG_HASHGRID_MAX_LEVELS];
   level_geometry(cfg, lv);
   const long n_blocks = ((long)B + BLK - 1) / BLK;
-  int nt = resolve_threads(n_threads);
+  int nt = fg_threads(n_threads);
   if (nt > n_blocks) nt = (int)n_blocks;
 #pragma omp parallel for schedule(static) num_threads(nt)
   for (long b = 0; b < n_blocks; b++) {
@@ -454,7 +451,7 @@ void fg_hashgrid_backward(const fg_hashgrid_config *cfg, const float *x, int B,
   const size_t stride = (size_t)L * F;
   fg_hashgrid_level lv[FG_HASHGRID_MAX_LEVELS];
   level_geometry(cfg, lv);
-  int nt = resolve_threads(n_threads);
+  int nt = fg_threads(n_threads);
   if (nt > L) nt = L;
   int owner[FG_HASHGRID_MAX_LEVELS];
   assign_levels(lv, L, F, nt, owner);

@@ -30,6 +30,7 @@
 
 #include "core/blas.h"
 #include "core/error.h"
+#include "core/threads.h"
 
 #include <cblas.h>
 #include <math.h>
@@ -136,10 +137,6 @@ size_t fg_mlp_scratch_floats(const fg_mlp_config *cfg, int B) {
   const plan p = make_plan(B);
   const size_t deltas = cfg->n_hidden_layers > 0 ? 2 * (size_t)p.chunk * cfg->n_hidden : 0;
   return (size_t)p.n_groups * (fg_mlp_n_params(cfg) + deltas);
-}
-
-static inline int resolve_threads(int n_threads) {
-  return n_threads > 0 ? n_threads : omp_get_max_threads();
 }
 
 /* ---- references ----------------------------------------------------------------------- */
@@ -553,7 +550,7 @@ void fg_mlp_forward(const fg_mlp_config *cfg, const float *W, const float *in, i
   if (B <= 0) return;
   const plan p = make_plan(B);
   const int L = cfg->n_hidden_layers, H = cfg->n_hidden, avx = use_avx512();
-  const int nt = resolve_threads(n_threads);
+  const int nt = fg_threads(n_threads);
   const int blas = needs_blas(cfg, avx, 1) ? fg_blas_single_begin() : 1;
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && p.n_chunks > 1)
   for (int c = 0; c < p.n_chunks; c++) {
@@ -575,7 +572,7 @@ void fg_mlp_backward(const fg_mlp_config *cfg, const float *W, const float *in,
   if (B <= 0) return;
   const plan p = make_plan(B);
   const int L = cfg->n_hidden_layers, H = cfg->n_hidden, avx = use_avx512();
-  const int nt = resolve_threads(n_threads);
+  const int nt = fg_threads(n_threads);
   const size_t n_params = fg_mlp_n_params(cfg);
   const size_t delta_floats = L > 0 ? (size_t)p.chunk * H : 0;
   float *parts = scratch, *deltas = scratch + (size_t)p.n_groups * n_params;

@@ -9,6 +9,7 @@
 
 #include "core/arena.h"
 #include "core/error.h"
+#include "core/threads.h"
 #include "field/render.h"
 #include "io/camera.h"
 #include "field/sh.h"
@@ -398,7 +399,7 @@ int fg_field_render_rays(const fg_field *f, const float *rays_o, const float *ra
       eval_density(f, &b, S, n_threads);
       if (rgb) eval_colour(f, &b, n_wave, S, n_threads); /* depth, opacity, normals: no colour */
       if (feat) eval_hidden(f, &b, S, n_threads);
-#pragma omp parallel for schedule(static) num_threads(n_threads > 0 ? n_threads : omp_get_max_threads())
+#pragma omp parallel for schedule(static) num_threads(fg_threads(n_threads))
       for (int i = 0; i < n_wave; i++) {
         ray_state *s = &st[live[i]];
         float *ha = feat ? hacc + (size_t)live[i] * H : NULL;

@@ -26,6 +26,7 @@
 #include <string.h>
 
 #include "core/error.h"
+#include "core/threads.h"
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -50,15 +51,6 @@ struct fg_occgrid {
 };
 
 /* ---- helpers -------------------------------------------------------------------------- */
-
-static int threads_for(int n_threads) {
-#ifdef _OPENMP
-  return n_threads > 0 ? n_threads : omp_get_max_threads();
-#else
-  (void)n_threads;
-  return 1;
-#endif
-}
 
 enum { RAYS_PER_CHUNK = 64, MEAN_BLOCKS = 64 };
 
@@ -216,7 +208,7 @@ static void rebuild_from_bits(fg_occgrid *g) {
 }
 
 void fg_occgrid_update_bits(fg_occgrid *g, float density_threshold, int n_threads) {
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
   const float *restrict dens = g->density;
   /* mean: MEAN_BLOCKS fixed blocks summed in double, combined in block order */
   double part[MEAN_BLOCKS];
@@ -299,7 +291,7 @@ int fg_occgrid_update_points(const fg_occgrid *g, int32_t step, uint64_t seed,
   const int32_t half = M / 2, N = g->N;
   const uint32_t n_occ = (uint32_t)g->n_occupied, n_cells = (uint32_t)g->n_cells;
   const float inv_n = 1.0f / (float)N;
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
   /* interleaved chunks: the occupied half costs more (select) than the uniform half */
 #pragma omp parallel for schedule(static, 1024) num_threads(nt) if (nt > 1 && M > 4096)
   for (int32_t i = 0; i < M; i++) {
@@ -331,7 +323,7 @@ int fg_occgrid_update_density(fg_occgrid *g, const int32_t *cells, const float *
     if (cells[i] < 0 || cells[i] >= g->n_cells)
       return fg_fail(FG_EINVAL, "occgrid update: cell %d of point %d outside [0, %d)",
                      (int)cells[i], (int)i, (int)g->n_cells);
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
   float *restrict dens = g->density;
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1)
   for (int32_t c = 0; c < g->n_cells; c++) dens[c] *= decay;
@@ -538,7 +530,7 @@ int fg_occgrid_march(const fg_occgrid *g, int32_t n_rays, const float *rays_o,
                      float *x, float *dt_out, float *t_out, int32_t *n_samples, int n_threads) {
   FG_TRY(check_march_args(g, n_rays, rays_o, rays_d, dt, max_samples_per_ray, capacity,
                           ray_offset, ray_count, x, dt_out, t_out, n_samples));
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
 #pragma omp parallel for schedule(dynamic, RAYS_PER_CHUNK) num_threads(nt) \
     if (nt > 1 && n_rays > RAYS_PER_CHUNK)
   for (int32_t r = 0; r < n_rays; r++)

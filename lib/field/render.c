@@ -44,6 +44,8 @@
  * bit and the early-termination cut is the same everywhere. */
 #include "field/render.h"
 
+#include "core/threads.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -62,15 +64,6 @@ static inline float alpha_of(float x, float e) {
 
 static inline const float *bg_of(const float *bg_rgb, int bg_per_ray, int32_t r) {
   return bg_per_ray ? bg_rgb + (size_t)3 * (size_t)r : bg_rgb;
-}
-
-static int threads_for(int n_threads) {
-#ifdef _OPENMP
-  return n_threads > 0 ? n_threads : omp_get_max_threads();
-#else
-  (void)n_threads;
-  return 1;
-#endif
 }
 
 /* Rays per scheduling chunk. Each ray is computed start to finish by one thread, so the
@@ -152,7 +145,7 @@ void fg_render_forward(int32_t n_rays, const int32_t *ray_offset, const int32_t 
                        float t_min_transmittance, float *out_rgb, float *out_depth,
                        float *out_opacity, float *out_feat, int32_t *n_used, int n_threads) {
   if (!feat || !out_feat || D <= 0) feat = NULL, out_feat = NULL, D = 0;
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
 #pragma omp parallel for schedule(dynamic, RAYS_PER_CHUNK) num_threads(nt) \
     if (nt > 1 && n_rays > RAYS_PER_CHUNK)
   for (int32_t r = 0; r < n_rays; r++)
@@ -233,7 +226,7 @@ void fg_render_backward(int32_t n_rays, const int32_t *ray_offset, const int32_t
                         const float *d_out_feat, float *d_sigma, float *d_rgb, float *d_feat,
                         int n_threads) {
   if (!feat || D <= 0) feat = NULL, d_out_feat = NULL, d_feat = NULL, D = 0;
-  const int nt = threads_for(n_threads);
+  const int nt = fg_threads(n_threads);
 #pragma omp parallel for schedule(dynamic, RAYS_PER_CHUNK) num_threads(nt) \
     if (nt > 1 && n_rays > RAYS_PER_CHUNK)
   for (int32_t r = 0; r < n_rays; r++)
@@ -409,7 +402,7 @@ void fg_loss_ray_weights(int32_t n_rays, const int32_t *ray_offset, const int32_
                          double *loss_dist, int n_threads) {
   double ld = 0.0, lw = 0.0;
   int32_t nd = 0;
-#pragma omp parallel for schedule(static) num_threads(threads_for(n_threads)) reduction(+ : ld, lw, nd)
+#pragma omp parallel for schedule(static) num_threads(fg_threads(n_threads)) reduction(+ : ld, lw, nd)
   for (int32_t r = 0; r < n_rays; r++) {
     const float z = depth_z && depth_z[r] > 0.0f ? depth_z[r] : 0.0f;
     double a, b;

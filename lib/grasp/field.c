@@ -12,6 +12,7 @@
 #include "core/half.h"
 #include "core/pose.h"
 #include "core/rng.h"
+#include "core/threads.h"
 #include "grasp/grasp.h"
 #include "grasp/internal.h"
 
@@ -163,7 +164,7 @@ int fg_grasp_field_new(fg_grasp_field **out, const fg_voxel_features *vf, int n_
   for (size_t i = 0; i < N; i++) gf->slot[i] = -1;
   for (size_t k = 0; k < n_kept; k++) gf->slot[kept[k]] = (int32_t)k;
   /* y (m, 64) = alpha * (h (m, 64) R^T), one SGEMM per chunk of kept voxels */
-  const int nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+  const int nt = fg_threads(n_threads);
   const int64_t n_chunks = (int64_t)((n_kept + BUILD_CHUNK - 1) / BUILD_CHUNK);
   const int blas = fg_blas_single_begin();
   int nomem = 0;

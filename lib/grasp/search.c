@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/pose.h"
 #include "core/rng.h"
+#include "core/threads.h"
 #include "grasp/grasp.h"
 #include "grasp/internal.h"
 
@@ -365,7 +366,7 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
   const int n_rot = o.n_rotations;
   st->rotations = n_rot;
   st->iterations = o.iterations;
-  b.nt = o.n_threads > 0 ? o.n_threads : omp_get_max_threads();
+  b.nt = fg_threads(o.n_threads);
   fg_gripper_box boxes[FG_GRIPPER_N_BOXES];
   fg_gripper_boxes(o.gripper, o.width_m, boxes);
 

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "core/fsutil.h"
+#include "core/threads.h"
 #include "io/depth.h"
 #include "io/image.h"
 #include "io/npy.h"
@@ -63,7 +64,7 @@ int fg_dataset_load(const char *transforms_path, const fg_ingest_opts *opts, int
     if (tr.frames[i].image_path) which[m++] = i;
   int failed = 0, first_rc = 0;
   char detail[512] = "";
-#pragma omp parallel for schedule(dynamic, 1) num_threads(n_threads > 0 ? n_threads : omp_get_max_threads())
+#pragma omp parallel for schedule(dynamic, 1) num_threads(fg_threads(n_threads))
   for (size_t k = 0; k < m; k++) {
     fg_transforms_frame *tf = &tr.frames[which[k]];
     const int rc = load_one(tf, opts, &out[k]);

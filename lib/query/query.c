@@ -7,6 +7,7 @@
 #include <omp.h>
 
 #include "core/error.h"
+#include "core/threads.h"
 #include "field/model.h"
 #include "query/heatmap.h"
 #include "query/internal.h"
@@ -232,7 +233,7 @@ int fg_query_score_features(const fg_query *q, const float *feat, int64_t n, int
     return fg_fail(FG_EINVAL, "query has %d dimensions but the features have %d", q->dim, dim);
   if (n < 0 || (n > 0 && (!feat || !scores)))
     return fg_fail(FG_EINVAL, "score features: NULL arrays or negative count");
-  const int nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+  const int nt = fg_threads(n_threads);
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int64_t i = 0; i < n; i++) {
     const float *f = feat + (size_t)i * dim;

@@ -13,6 +13,7 @@
 #include "core/clock.h"
 #include "core/fsutil.h"
 #include "core/half.h"
+#include "core/threads.h"
 #include "field/model.h"
 #include "query/heatmap.h"
 #include "query/internal.h"
@@ -320,7 +321,7 @@ int fg_voxel_features_score(const fg_voxel_features *vf, const fg_query *q,
     }
   }
   for (size_t i = 0; i < vf->n_vox; i++) scores[i] = NAN;
-  const int nt = n_threads > 0 ? n_threads : omp_get_max_threads();
+  const int nt = fg_threads(n_threads);
   const int64_t n_blocks = (int64_t)((vf->n_kept + SCORE_BLOCK - 1) / SCORE_BLOCK);
 #pragma omp parallel num_threads(nt)
   {

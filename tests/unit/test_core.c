@@ -7,6 +7,7 @@
 #include "core/fsutil.h"
 #include "core/half.h"
 #include "core/pose.h"
+#include "core/threads.h"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -273,9 +274,18 @@ static void test_clock(void) {
   ASSERT(ms > INT64_C(1700000000000)); /* after November 2023: milliseconds, not seconds */
 }
 
+/* A positive count is kept; anything else is OpenMP's default, at least one thread. */
+static void test_threads(void) {
+  ASSERT_EQ(fg_threads(3), 3);
+  ASSERT_EQ(fg_threads(1), 1);
+  ASSERT(fg_threads(0) >= 1);
+  ASSERT_EQ(fg_threads(-2), fg_threads(0));
+}
+
 int main(void) {
   test_error();
   test_clock();
+  test_threads();
   test_sha256();
   test_half();
   test_pose();
