@@ -8,7 +8,8 @@
 
 #include "state/app.h"
 #include "http/http.h"
-#include "query/heatmap.h"
+#include "query/grid.h"
+#include "query/query.h"
 
 /* The route table. */
 extern const fg_route fg_api_routes[];

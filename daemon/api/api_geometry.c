@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "query/geometry.h"
+#include "query/heatmap.h"
 
 #include <math.h>
 #include <stdio.h>

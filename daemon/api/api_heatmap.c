@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "query/heatmap.h"
 
 #include <float.h>
 #include <inttypes.h>

@@ -11,7 +11,7 @@
  *   "negative_embeddings": [[D]]  or vectors given directly (not both);
  *   "temperature": 0.1            > 0, of the softmax between query and negatives.
  * Every query, from texts or vectors, is resolved by the library's one rule, fg_query_init
- * (query/heatmap.h): each vector scaled to unit L2 norm, the positives averaged and the mean
+ * (query/query.h): each vector scaled to unit L2 norm, the positives averaged and the mean
  * scaled again; a zero or non-finite vector, or positives that cancel out, are refused. An
  * "embedding" query has no negatives unless the request names some. */
 #ifndef FG_DAEMON_API_QUERY_H
@@ -22,11 +22,11 @@
 #include <jansson.h>
 
 #include "http/http.h"
-#include "query/heatmap.h"
+#include "query/query.h"
 
 #define FG_QUERY_MAX_TEXTS 16 /* positive texts of one query */
 
-/* The resolved query is the library's (query/heatmap.h): unit q (D), n_neg unit negatives,
+/* The resolved query is the library's (query/query.h): unit q (D), n_neg unit negatives,
  * temperature; FG_QUERY_MAX_NEGATIVES and FG_QUERY_DEFAULT_TEMPERATURE come from there. */
 
 /* 1 when key is one of the query keys above (for handlers that refuse unknown keys). */

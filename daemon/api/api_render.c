@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/pose.h"
 #include "field/model.h"
+#include "query/colormap.h"
 
 #include <math.h>
 #include <stdint.h>

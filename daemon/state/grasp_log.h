@@ -12,7 +12,7 @@
 #include <stdint.h>
 
 #include "conf/conf.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 #define FG_GRASP_LOG_PER_SCENE 1000 /* grasps execute can find, per scene (newest) */
 #define FG_GRASP_LOG_SCENES 64      /* scenes whose grasps are kept (most recently used) */

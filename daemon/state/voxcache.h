@@ -1,4 +1,4 @@
-/* The voxel feature cache of a trained field (query/heatmap.h): the field sampled once on the
+/* The voxel feature cache of a trained field (query/voxfeat.h): the field sampled once on the
  * scene's workspace grid, shared by every heatmap, demo and grasp search of that field.
  *
  * One fg_voxcache belongs to each trained field the store holds (store.h, fg_field_ref) and
@@ -21,7 +21,7 @@
 
 #include "field/model.h"
 #include "grasp/grasp.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 typedef struct fg_voxcache fg_voxcache;
 typedef struct fg_voxels fg_voxels;

@@ -59,7 +59,7 @@ typedef struct fg_train_opts {
  * surface lies more than a window in front of the measurement, the front term then empties
  * the blob and nothing is left to pull (object depth p90 45 mm, PSNR 29.2 dB, the ball's
  * voxels all free); 5 cm kept it too. Depth surfaces are shells thinner than a voxel; voxel
- * opacities average each voxel's density (query/heatmap.h), so they still count. */
+ * opacities average each voxel's density (query/voxfeat.h), so they still count. */
 #define FG_TRAIN_DEPTH_WEIGHT 0.3
 #define FG_TRAIN_DEPTH_MARGIN 0.03 /* metres */
 /* The distortion loss is opt-in: at 0.01 it measured better on a small tabletop without depth

@@ -1,5 +1,5 @@
 /* 6-DOF grasps (and placements) from demonstrations, F3RM's method on the voxel features of a
- * trained field (query/heatmap.h).
+ * trained field (query/voxfeat.h).
  *
  * Query points. A task samples the field at N_q points p_i in the gripper frame (gripper.h),
  * in one of two layouts, each a fixed sequence so that the same parameters give the same
@@ -62,7 +62,7 @@
 
 #include "grasp/gripper.h"
 #include "motion/limits.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 #define FG_GRASP_MAX_QUERY_POINTS 1000
 #define FG_GRASP_DEFAULT_QUERY_POINTS 100

@@ -4,7 +4,7 @@
  * the daemon can colour heatmaps without loading OpenCV. */
 #include <math.h>
 
-#include "query/heatmap.h"
+#include "query/colormap.h"
 
 /* clang-format off */
 const uint8_t fg_turbo_rgb[256][3] = {
@@ -76,7 +76,7 @@ static uint8_t to_u8(float v) {
   return (uint8_t)lrintf(255.0f * v);
 }
 
-/* Blends scores (n) over rgb (n,3) into out (n,3) uint8; see heatmap.h for the rule. */
+/* Blends scores (n) over rgb (n,3) into out (n,3) uint8; see colormap.h for the rule. */
 void fg_heatmap_blend(const float *rgb, const float *scores, int64_t n, float lo, float hi,
                       uint8_t *out) {
   if (!(lo < hi)) { /* auto range: the image's finite scores */

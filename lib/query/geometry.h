@@ -1,9 +1,9 @@
 /* The geometry a gripper would collide with: the solid part of a trained field on a voxel
- * grid (heatmap.h's fg_voxel_grid), as a closed triangle mesh or as the centres of the solid
+ * grid (grid.h's fg_voxel_grid), as a closed triangle mesh or as the centres of the solid
  * voxels, ready for a PLY file (io/ply.h).
  *
  * Solid voxels. Both read the voxels' opacities alpha = 1 - exp(-mean sigma * voxel_size)
- * (heatmap.h), (nz, ny, nx) in the grid's flat order: the voxel feature cache holds them
+ * (voxfeat.h), (nz, ny, nx) in the grid's flat order: the voxel feature cache holds them
  * (fg_voxel_features_alpha), fg_voxel_alpha() samples a field for any grid. A voxel is solid
  * when alpha >= threshold, the heatmap's rule for occupied voxels; a NaN alpha is empty.
  *
@@ -40,7 +40,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "query/heatmap.h"
+#include "query/grid.h"
 
 struct fg_field;
 
@@ -57,7 +57,7 @@ typedef struct fg_mesh {
 void fg_mesh_release(fg_mesh *m);
 
 /* Opacities of every voxel of grid g from field f into alpha (nz, ny, nx), the caller's
- * buffer, as the voxel feature cache computes them (heatmap.h). For fields without a
+ * buffer, as the voxel feature cache computes them (voxfeat.h). For fields without a
  * feature branch or grids the cache does not hold. FG_EINVAL (NULL, a grid whose sizes do not match its workspace),
  * FG_ENOMEM. */
 int fg_voxel_alpha(const struct fg_field *f, const fg_voxel_grid *g, float *alpha,

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "io/npy.h"
+#include "query/colormap.h"
 #include "query/heatmap.h"
 
 void fg_heatmap_options_default(fg_heatmap_options *o) {

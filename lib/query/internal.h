@@ -4,7 +4,7 @@
 
 #include <stddef.h>
 
-#include "query/heatmap.h"
+#include "query/grid.h"
 
 /* Centres of flat voxel indices [i0, i0 + n) of g as float into p_world (n, 3). */
 void fg_query_grid_centres_range(const fg_voxel_grid *g, size_t i0, size_t n, float *p_world);

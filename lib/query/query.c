@@ -1,5 +1,5 @@
 /* Voxel grids over the workspace and resolved queries: the score rule of SPEC.md "A query"
- * (see heatmap.h). */
+ * (grid.h, query.h). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -9,7 +9,8 @@
 #include "core/error.h"
 #include "core/threads.h"
 #include "field/model.h"
-#include "query/heatmap.h"
+#include "query/grid.h"
+#include "query/query.h"
 #include "query/internal.h"
 
 const char *const fg_query_default_negatives[FG_QUERY_N_DEFAULT_NEGATIVES] = {

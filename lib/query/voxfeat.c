@@ -1,4 +1,4 @@
-/* The voxel feature cache (heatmap.h): the trained field sampled once on the workspace grid,
+/* The voxel feature cache (voxfeat.h): the trained field sampled once on the workspace grid,
  * kept as float16 hidden vectors so that every heatmap is a 64-d dot per voxel. */
 #include <math.h>
 #include <stdlib.h>
@@ -15,7 +15,7 @@
 #include "core/half.h"
 #include "core/threads.h"
 #include "field/model.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 #include "query/internal.h"
 
 #define H FG_FIELD_FEATURE_HIDDEN

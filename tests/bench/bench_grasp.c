@@ -65,7 +65,7 @@
 #include "gt.h"
 #include "io/dataset.h"
 #include "io/npy.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 #define N_QUERY FG_GRASP_DEFAULT_QUERY_POINTS
 #define WIDTH_M 0.11

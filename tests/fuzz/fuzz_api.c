@@ -11,7 +11,7 @@
 
 #include "core/error.h"
 #include "grasp/gripper.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 #include <jansson.h>
 #include <math.h>

@@ -12,7 +12,7 @@
 #include "core/pose.h"
 #include "field/model.h"
 #include "grasp/grasp.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 #include "test.h"
 
 #define HID FG_FIELD_FEATURE_HIDDEN

@@ -25,7 +25,7 @@
 #include "io/image.h"
 #include "io/npy.h"
 #include "geometry_checks.h"
-#include "query/heatmap.h"
+#include "query/colormap.h"
 #include "training.h"
 #include "views.h"
 

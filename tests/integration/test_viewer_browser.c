@@ -27,7 +27,7 @@
 #include "grasp/gripper.h"
 #include "grasp_util.h"
 #include "io/image.h"
-#include "query/heatmap.h"
+#include "query/colormap.h"
 
 #define TOKEN "browser-test-token"
 #define STR_(x) #x

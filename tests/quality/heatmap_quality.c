@@ -53,6 +53,8 @@
 #include "geomeval.h"
 #include "gtvox.h"
 #include "io/image.h"
+#include "query/heatmap.h"
+#include "query/colormap.h"
 
 #define IOU_FLOOR 0.5
 #define DEPTH_MEDIAN_MM 2.0 /* issue 13, with depth maps */

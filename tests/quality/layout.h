@@ -16,7 +16,7 @@
 #include "field/train.h"
 #include "gt.h"
 #include "io/dataset.h"
-#include "query/heatmap.h"
+#include "query/voxfeat.h"
 
 #define SG_LAYOUT_STEPS 1500
 #define SG_LAYOUT_VIEWS 30

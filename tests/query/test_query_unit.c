@@ -12,6 +12,7 @@
 #include "field/model.h"
 #include "io/npy.h"
 #include "query/colormap_cv.h"
+#include "query/colormap.h"
 #include "query/heatmap.h"
 #include "test.h"
 

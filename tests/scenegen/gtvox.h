@@ -14,7 +14,7 @@
 #include <stddef.h>
 
 #include "gt.h"
-#include "query/heatmap.h"
+#include "query/grid.h"
 
 #define SG_GT_LATTICE_PER_VOXEL 8
 
