@@ -46,9 +46,9 @@ static void time_heatmaps(const fg_voxel_features *vf, const fg_query *q, float 
     n_points = hm.n_points;
     fg_heatmap_release(&hm);
   }
-  qsort(ms, (size_t)runs, sizeof *ms, bench_cmp_double);
-  printf("%s_p50_ms=%.3f\n%s_p90_ms=%.3f\n%s_points=%zu\n", key, ms[runs / 2], key,
-         ms[(runs * 9) / 10], key, n_points);
+  const double p50 = bench_percentile(ms, runs, 0.5), p90 = bench_percentile(ms, runs, 0.9);
+  printf("%s_p50_ms=%.3f\n%s_p90_ms=%.3f\n%s_points=%zu\n", key, p50, key, p90, key,
+         n_points);
   free(ms);
 }
 

@@ -98,13 +98,6 @@ static void *client_main(void *arg) {
   return NULL;
 }
 
-/* The q-quantile of sorted v[n] (nearest rank). */
-static double quantile(const double *v, size_t n, double q) {
-  if (n == 0) return NAN;
-  size_t i = (size_t)ceil(q * (double)n);
-  return v[i ? i - 1 : 0];
-}
-
 static int arg_int(int argc, char **argv, const char *name, int dflt) {
   for (int i = 3; i + 1 < argc; i++)
     if (strcmp(argv[i], name) == 0) return atoi(argv[i + 1]);
@@ -220,12 +213,12 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bench_load: %s: %ld errors, the first %s\n", ep_name[e], cl[k].errors,
                 cl[k].first_error);
     }
-    qsort(v, n, sizeof *v, bench_cmp_double);
-    const double p99 = quantile(v, n, 0.99) * 1e3;
+    const double p50 = bench_percentile(v, (int)n, 0.5) * 1e3; /* sorts v */
+    const double p99 = bench_percentile(v, (int)n, 0.99) * 1e3;
     printf("bench=load endpoint=%s clients=%d requests=%zu requests_per_s=%.1f p50_ms=%.2f "
            "p99_ms=%.2f max_ms=%.2f errors=%ld\n",
-           ep_name[e], n_clients[e], n, (double)n / elapsed, quantile(v, n, 0.5) * 1e3, p99,
-           n ? v[n - 1] * 1e3 : NAN, errors);
+           ep_name[e], n_clients[e], n, (double)n / elapsed, p50, p99, n ? v[n - 1] * 1e3 : NAN,
+           errors);
     if (e == EP_HEALTH) health_p99_ms = p99;
     errors_all += errors;
     free(v);

@@ -87,16 +87,6 @@ static double now_ms(void) {
   return (double)ts.tv_sec * 1e3 + 1e-6 * (double)ts.tv_nsec;
 }
 
-/* The nearest-rank percentile q (0..1] of v[0..n-1], sorting v in place; NAN when n is 0. */
-static double percentile(double *v, int n, double q) {
-  if (n <= 0) return NAN;
-  qsort(v, (size_t)n, sizeof *v, bench_cmp_double);
-  int k = (int)ceil(q * n) - 1;
-  if (k < 0) k = 0;
-  if (k >= n) k = n - 1;
-  return v[k];
-}
-
 static uint16_t seq_next(uint16_t s) { return s == 65535 ? 1 : (uint16_t)(s + 1); }
 
 /* ---------------------------------------------------------------- HTTP */
@@ -536,9 +526,9 @@ int main(int argc, char **argv) {
       if (cmds[i].ack_ms >= 0) ack[na++] = cmds[i].ack_ms;
     }
     if (phase && n_nowait == 0) break;
-    const double p50 = percentile(ms, n, 0.50), p90 = percentile(ms, n, 0.90);
-    const double p99 = percentile(ms, n, 0.99), mx = percentile(ms, n, 1.0);
-    const double a50 = percentile(ack, na, 0.50), a99 = percentile(ack, na, 0.99);
+    const double p50 = bench_percentile(ms, n, 0.50), p90 = bench_percentile(ms, n, 0.90);
+    const double p99 = bench_percentile(ms, n, 0.99), mx = bench_percentile(ms, n, 1.0);
+    const double a50 = bench_percentile(ack, na, 0.50), a99 = bench_percentile(ack, na, 0.99);
     if (phase == 0) {
       printf("bench=robot_execute n=%d p50_ms=%.3f p90_ms=%.3f p99_ms=%.3f max_ms=%.3f "
              "mean_ms=%.3f ack_p50_ms=%.3f ack_p99_ms=%.3f errors=%d connects=%ld "
@@ -557,8 +547,8 @@ int main(int argc, char **argv) {
   }
   printf("bench=robot_execute_baseline n=%d get_robot_p50_ms=%.3f get_robot_p99_ms=%.3f "
          "dry_run_p50_ms=%.3f dry_run_p99_ms=%.3f errors=%d\n", BASELINE_N,
-         percentile(get_ms, BASELINE_N, 0.5), percentile(get_ms, BASELINE_N, 0.99),
-         percentile(dry_ms, BASELINE_N, 0.5), percentile(dry_ms, BASELINE_N, 0.99), base_errors);
+         bench_percentile(get_ms, BASELINE_N, 0.5), bench_percentile(get_ms, BASELINE_N, 0.99),
+         bench_percentile(dry_ms, BASELINE_N, 0.5), bench_percentile(dry_ms, BASELINE_N, 0.99), base_errors);
   free(get_ms);
   free(dry_ms);
   free(cmds);
