@@ -34,6 +34,7 @@
 #include "field/hashgrid.h"
 
 #include "core/error.h"
+#include "core/rng.h"
 #include "core/threads.h"
 
 #include <assert.h>
@@ -127,19 +128,13 @@ int fg_hashgrid_level_info(const fg_hashgrid_config *cfg, int level, fg_hashgrid
   return 0;
 }
 
-/* splitmix64's output function; splitmix64 seeded with s yields mix(s + k * GAMMA), k >= 1. */
-static inline uint64_t splitmix64_mix(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-
 int fg_hashgrid_init(const fg_hashgrid_config *cfg, float *params, uint64_t seed) {
   size_t n = 0;
   FG_TRY(fg_hashgrid_layout(cfg, NULL, &n));
   if (!params) return fg_fail(FG_EINVAL, "fg_hashgrid_init: params is NULL");
   for (size_t i = 0; i < n; i++) {
-    const uint64_t r = splitmix64_mix(seed + (uint64_t)(i + 1) * 0x9e3779b97f4a7c15ull);
+    /* the (i + 1)-th output of splitmix64 seeded with seed */
+    const uint64_t r = fg_mix64(seed + (uint64_t)(i + 1) * 0x9e3779b97f4a7c15ull);
     const float u = (float)(r >> 40) * 0x1p-24f; /* [0, 1), 24 exact bits */
     params[i] = (2.0f * u - 1.0f) * 1e-4f;
   }

@@ -30,6 +30,7 @@
 
 #include "core/blas.h"
 #include "core/error.h"
+#include "core/rng.h"
 #include "core/threads.h"
 
 #include <cblas.h>
@@ -88,20 +89,14 @@ size_t fg_mlp_n_params(const fg_mlp_config *cfg) {
   return fg_mlp_layer_offset(cfg, cfg->n_hidden_layers + 1);
 }
 
-/* splitmix64's output function; splitmix64 seeded with s yields mix(s + k * GAMMA), k >= 1. */
-static inline uint64_t splitmix64_mix(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-
 void fg_mlp_init(const fg_mlp_config *cfg, float *W, uint64_t seed) {
   size_t i = 0;
   for (int l = 0; l <= cfg->n_hidden_layers; l++) {
     const int fan_in = fg_mlp_layer_fan_in(cfg, l), fan_out = fg_mlp_layer_fan_out(cfg, l);
     const float scale = sqrtf(6.0f / (float)(fan_in + fan_out));
     for (size_t e = i + (size_t)fan_in * (size_t)fan_out; i < e; i++) {
-      const uint64_t r = splitmix64_mix(seed + (uint64_t)(i + 1) * 0x9e3779b97f4a7c15ull);
+      /* the (i + 1)-th output of splitmix64 seeded with seed */
+      const uint64_t r = fg_mix64(seed + (uint64_t)(i + 1) * 0x9e3779b97f4a7c15ull);
       const float u = (float)(r >> 40) * 0x1p-24f; /* [0, 1), 24 exact bits */
       W[i] = (2.0f * u - 1.0f) * scale;
     }

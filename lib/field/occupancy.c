@@ -26,6 +26,7 @@
 #include <string.h>
 
 #include "core/error.h"
+#include "core/rng.h"
 #include "core/threads.h"
 
 #ifdef _OPENMP
@@ -57,17 +58,12 @@ enum { RAYS_PER_CHUNK = 64, MEAN_BLOCKS = 64 };
 /* Random streams, so that update points and ray jitter never share numbers. */
 enum { STREAM_UPDATE = 1, STREAM_MARCH = 2 };
 
-static inline uint64_t mix64(uint64_t z) { /* splitmix64's finaliser */
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
 
 /* Counter-based: a pure function of its arguments. */
 static inline uint64_t hash4(uint64_t seed, int32_t step, uint64_t index, uint64_t stream) {
-  uint64_t h = mix64(seed + 0x9e3779b97f4a7c15ull);
-  h = mix64(h ^ ((uint64_t)(uint32_t)step * 0xd1b54a32d192ed03ull + stream));
-  return mix64(h ^ (index * 0xaef17502108ef2d9ull));
+  uint64_t h = fg_mix64(seed + 0x9e3779b97f4a7c15ull);
+  h = fg_mix64(h ^ ((uint64_t)(uint32_t)step * 0xd1b54a32d192ed03ull + stream));
+  return fg_mix64(h ^ (index * 0xaef17502108ef2d9ull));
 }
 
 /* 24 bits of h starting at bit `shift`, as a float in [0,1). */
@@ -296,7 +292,7 @@ int fg_occgrid_update_points(const fg_occgrid *g, int32_t step, uint64_t seed,
 #pragma omp parallel for schedule(static, 1024) num_threads(nt) if (nt > 1 && M > 4096)
   for (int32_t i = 0; i < M; i++) {
     const uint64_t h1 = hash4(seed, step, (uint64_t)i, STREAM_UPDATE);
-    const uint64_t h2 = mix64(h1 ^ 0x632be59bd9b4e019ull);
+    const uint64_t h2 = fg_mix64(h1 ^ 0x632be59bd9b4e019ull);
     int32_t cell;
     if (warm)
       cell = i;

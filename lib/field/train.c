@@ -9,6 +9,7 @@
 #include "core/blas.h"
 #include "core/error.h"
 #include "core/half.h"
+#include "core/rng.h"
 #include "field/adam.h"
 #include "field/render.h"
 #include "field/sh.h"
@@ -23,16 +24,11 @@
 
 enum { STREAM_FRAME = 1, STREAM_PIXEL, STREAM_JITTER, STREAM_EVAL };
 
-static inline uint64_t mix64(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
 
 static inline uint64_t hash4(uint64_t seed, int64_t step, uint64_t index, uint64_t stream) {
-  uint64_t h = mix64(seed + 0x9e3779b97f4a7c15ull);
-  h = mix64(h ^ ((uint64_t)step + 0x632be59bd9b4e019ull));
-  h = mix64(h ^ (index * 4 + stream));
+  uint64_t h = fg_mix64(seed + 0x9e3779b97f4a7c15ull);
+  h = fg_mix64(h ^ ((uint64_t)step + 0x632be59bd9b4e019ull));
+  h = fg_mix64(h ^ (index * 4 + stream));
   return h;
 }
 
@@ -666,7 +662,7 @@ static int eval_pixels(const fg_trainer *t, int full, eval_px **out, size_t *n_o
       const uint64_t h = hash4(t->opts.seed, -1, i, STREAM_EVAL);
       const size_t k = below(h, (uint32_t)t->n_held);
       const fg_frame *fr = &t->frames[t->held_idx[k]];
-      const uint64_t hp = mix64(h);
+      const uint64_t hp = fg_mix64(h);
       px[i] = (eval_px){t->held_idx[k], (int)below(hp, (uint32_t)fr->cam.w),
                         (int)below(hp << 32, (uint32_t)fr->cam.h)};
     }
