@@ -105,12 +105,8 @@ static json_t *words_json(const uint16_t *w, int n) {
   return a;
 }
 
-static json_t *time_json(double s) {
-  if (s <= 0) return json_null();
-  char buf[32];
-  fg_iso8601((int64_t)(s * 1000), buf);
-  return json_string(buf);
-}
+/* A time in seconds since the epoch as JSON (null when not set). */
+static json_t *time_json(double s) { return fg_json_time_ms(s > 0 ? (int64_t)(s * 1000) : 0); }
 
 static json_t *command_json(const fg_robot_cmd_view *v) {
   json_t *o = json_object();

@@ -19,17 +19,11 @@
 
 /* ---------------------------------------------------------------- views */
 
-static json_t *time_json(int64_t ms) {
-  char buf[32];
-  fg_iso8601(ms, buf);
-  return json_string(buf);
-}
-
 static json_t *demo_json(const fg_task_demo *d) {
   return json_pack("{s:i, s:s, s:o, s:s, s:f, s:f, s:o}", "id", d->id, "scene", d->scene,
                    "pose", fg_json_pose(d->T_world_gripper), "kind",
                    fg_task_kind_name(d->kind), "width", d->width_m, "approach", d->approach_m,
-                   "created", time_json(d->created_ms));
+                   "created", fg_json_time_ms(d->created_ms));
 }
 
 /* The task object of the API; with_demos adds the demos. */
@@ -41,7 +35,7 @@ static json_t *task_json(const fg_task *t, int with_demos) {
       has ? json_integer(t->dim) : json_null(), "query_points", fg_task_query_points_json(t),
       "width", has ? json_real(t->width_m) : json_null(), "approach",
       has ? json_real(t->approach_m) : json_null(), "n_demos", t->n_demos, "created",
-      time_json(t->created_ms));
+      fg_json_time_ms(t->created_ms));
   if (o && with_demos) {
     json_t *a = json_array();
     for (int i = 0; a && i < t->n_demos; i++) json_array_append_new(a, demo_json(&t->demos[i]));

@@ -126,13 +126,6 @@ static void make_id(char out[FG_JOB_ID_MAX]) {
 
 static json_t *num_or_null(double v) { return isfinite(v) ? json_real(v) : json_null(); }
 
-static json_t *time_or_null(int64_t ms) {
-  if (ms <= 0) return json_null();
-  char t[32];
-  fg_iso8601(ms, t);
-  return json_string(t);
-}
-
 json_t *fg_job_info_json(const fg_job_info *j) {
   json_t *o = json_object();
   if (!o) return NULL;
@@ -173,9 +166,9 @@ json_t *fg_job_info_json(const fg_job_info *j) {
                         ? json_pack("{s:i,s:i,s:i}", "total", j->features_total, "done",
                                     j->features_done, "cached", j->features_cached)
                         : json_null());
-  json_object_set_new(o, "created", time_or_null(j->created_ms));
-  json_object_set_new(o, "started", time_or_null(j->started_ms));
-  json_object_set_new(o, "finished", time_or_null(j->finished_ms));
+  json_object_set_new(o, "created", fg_json_time_ms(j->created_ms));
+  json_object_set_new(o, "started", fg_json_time_ms(j->started_ms));
+  json_object_set_new(o, "finished", fg_json_time_ms(j->finished_ms));
   return o;
 }
 

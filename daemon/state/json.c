@@ -203,3 +203,10 @@ void fg_iso8601(int64_t ms, char out[32]) {
   strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%S", &tm);
   snprintf(out, 32, "%.19s.%03dZ", date, (int)(ms % 1000));
 }
+
+json_t *fg_json_time_ms(int64_t ms) {
+  if (ms <= 0) return json_null();
+  char out[32];
+  fg_iso8601(ms, out);
+  return json_string(out);
+}

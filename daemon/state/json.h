@@ -65,4 +65,8 @@ json_t *fg_json_from_vec(const double *v, size_t n);
 /* "2026-11-22T00:00:00.123Z" for a Unix time in milliseconds. */
 void fg_iso8601(int64_t ms, char out[32]);
 
+/* The JSON view of a time: fg_iso8601's string, or null when ms <= 0 (not set). New
+ * reference. */
+json_t *fg_json_time_ms(int64_t ms);
+
 #endif
