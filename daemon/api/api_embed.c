@@ -79,14 +79,12 @@ static int collect_texts(json_t *body, const char **texts, int *n, fg_resp *resp
 }
 
 int fg_api_parse_embed_text(json_t *body, fg_api_embed_text_req *r, fg_resp *resp) {
-  const char *key;
-  json_t *val;
-  json_object_foreach(body, key, val) {
-    if (strcmp(key, "text") && strcmp(key, "truncate") && strcmp(key, "normalize"))
-      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; the body takes "
-                           "\"text\" and, optionally, \"truncate\" and \"normalize\" (true "
-                           "or false)", key), -1;
-  }
+  static const char *const keys[] = {"text", "truncate", "normalize", NULL};
+  const char *key = fg_json_unknown_key(body, keys);
+  if (key)
+    return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; the body takes "
+                         "\"text\" and, optionally, \"truncate\" and \"normalize\" (true "
+                         "or false)", key), -1;
   r->truncate = r->normalize = 0;
   r->n = 0;
   if (json_flag(body, "truncate", &r->truncate) < 0 ||

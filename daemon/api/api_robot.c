@@ -28,20 +28,15 @@ int fg_api_parse_robot_request(json_t *body, const char *const *allowed, fg_robo
                                fg_resp *resp) {
   memset(r, 0, sizeof *r);
   r->wait = 1;
-  const char *key;
-  json_t *v;
-  json_object_foreach(body, key, v) {
-    int ok = 0;
-    for (int i = 0; allowed[i]; i++) ok |= strcmp(allowed[i], key) == 0;
-    if (!ok) {
-      char list[160] = "";
-      for (int i = 0; allowed[i]; i++) {
-        size_t n = strlen(list);
-        snprintf(list + n, sizeof list - n, "%s%s", i ? ", " : "", allowed[i]);
-      }
-      fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; expected %s", key, list);
-      return -1;
+  const char *key = fg_json_unknown_key(body, allowed);
+  if (key) {
+    char list[160] = "";
+    for (int i = 0; allowed[i]; i++) {
+      size_t n = strlen(list);
+      snprintf(list + n, sizeof list - n, "%s%s", i ? ", " : "", allowed[i]);
     }
+    fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; expected %s", key, list);
+    return -1;
   }
   const char *cmd = NULL;
   if (fg_json_string(body, "command", &cmd) < 0 ||

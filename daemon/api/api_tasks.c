@@ -202,16 +202,11 @@ bad:
  * points). Answers 400 itself and returns -1 on a bad request. */
 int fg_api_parse_demo(json_t *body, const fg_conf *conf, const fg_task *t,
                       fg_task_demo_new *d, fg_resp *resp) {
-  const char *key;
-  json_t *v;
-  json_object_foreach(body, key, v) {
-    int known = 0;
-    for (int i = 0; demo_keys[i]; i++) known |= strcmp(key, demo_keys[i]) == 0;
-    if (!known)
-      return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a demo takes "
-                           "\"scene\", \"pose\", \"kind\", \"width\", \"approach\" and "
-                           "\"query_points\"", key), -1;
-  }
+  const char *key = fg_json_unknown_key(body, demo_keys);
+  if (key)
+    return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a demo takes "
+                         "\"scene\", \"pose\", \"kind\", \"width\", \"approach\" and "
+                         "\"query_points\"", key), -1;
   if (fg_json_string(body, "scene", &d->scene) != 1)
     return fg_resp_error(resp, 400, "invalid_request", "\"scene\" is required: the name of a "
                          "trained scene the demo's pose is shown on"), -1;

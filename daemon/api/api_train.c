@@ -66,17 +66,13 @@ static int json_loss_weight(json_t *obj, const char *key, double *out) {
 
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
 int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
-  static const char *const keys[] = {"steps",         "seed",         "max_seconds",
-                                     "holdout_every", "depth_weight", "distortion_weight"};
-  const char *key;
-  json_t *val;
-  json_object_foreach(body, key, val) {
-    int known = 0;
-    for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++) known |= strcmp(key, keys[i]) == 0;
-    if (!known)
-      return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds, "
-                     "holdout_every, depth_weight and distortion_weight", key);
-  }
+  static const char *const keys[] = {"steps",        "seed",
+                                     "max_seconds",  "holdout_every",
+                                     "depth_weight", "distortion_weight", NULL};
+  const char *key = fg_json_unknown_key(body, keys);
+  if (key)
+    return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds, "
+                   "holdout_every, depth_weight and distortion_weight", key);
   memset(p, 0, sizeof *p);
   p->steps = conf->train_steps;
   long long x = 0;

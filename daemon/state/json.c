@@ -195,6 +195,17 @@ json_t *fg_json_from_matrix4(const double T[16]) {
   return m;
 }
 
+const char *fg_json_unknown_key(json_t *obj, const char *const *keys) {
+  const char *key;
+  json_t *v;
+  json_object_foreach(obj, key, v) {
+    int known = 0;
+    for (size_t i = 0; !known && keys[i]; i++) known = strcmp(key, keys[i]) == 0;
+    if (!known) return key;
+  }
+  return NULL;
+}
+
 void fg_iso8601(int64_t ms, char out[32]) {
   time_t t = (time_t)(ms / 1000);
   struct tm tm;

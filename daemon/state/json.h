@@ -62,6 +62,10 @@ int fg_json_camera(json_t *obj, int strict, fg_transforms_frame *f);
 json_t *fg_json_from_matrix4(const double T[16]);
 json_t *fg_json_from_vec(const double *v, size_t n);
 
+/* The first key of obj (in its order) that is not among keys (NULL-terminated), or NULL:
+ * what a request's "unknown key" refusal names. */
+const char *fg_json_unknown_key(json_t *obj, const char *const *keys);
+
 /* "2026-11-22T00:00:00.123Z" for a Unix time in milliseconds. */
 void fg_iso8601(int64_t ms, char out[32]);
 
