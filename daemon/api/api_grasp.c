@@ -47,13 +47,13 @@ static const char *const grasp_keys[] = {"task", "top_k", "seed", "rotations",
  * and returns -1 otherwise. */
 static int int_key(json_t *body, const char *key, json_int_t lo, json_int_t hi, json_int_t *out,
                    const char *meaning, fg_resp *resp) {
-  json_t *v = json_object_get(body, key);
-  if (!v || json_is_null(v)) return 0;
-  if (!json_is_integer(v) || json_integer_value(v) < lo || json_integer_value(v) > hi)
+  long long x;
+  const int rc = fg_json_int_range(body, key, lo, hi, &x);
+  if (rc < 0)
     return fg_resp_error(resp, 400, "invalid_request", "\"%s\" must be an integer from %"
                          JSON_INTEGER_FORMAT " to %" JSON_INTEGER_FORMAT ": %s", key, lo, hi,
                          meaning), -1;
-  *out = json_integer_value(v);
+  if (rc == 1) *out = x;
   return 0;
 }
 

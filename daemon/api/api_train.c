@@ -21,12 +21,10 @@
 
 /* Reads key as a whole number in [lo, hi]: 1 present, 0 absent (or null), FG_EINVAL. */
 static int json_whole(json_t *obj, const char *key, long long lo, long long hi, long long *out) {
-  json_t *v = json_object_get(obj, key);
-  if (!v || json_is_null(v)) return 0;
-  if (!json_is_integer(v) || json_integer_value(v) < lo || json_integer_value(v) > hi)
+  const int rc = fg_json_int_range(obj, key, lo, hi, out);
+  if (rc < 0)
     return fg_fail(FG_EINVAL, "\"%s\" must be a whole number from %lld to %lld", key, lo, hi);
-  *out = json_integer_value(v);
-  return 1;
+  return rc;
 }
 
 /* The seed: a JSON integer 0..2^63-1, or a decimal string 0..2^64-1 (JSON parsers, this

@@ -195,6 +195,14 @@ json_t *fg_json_from_matrix4(const double T[16]) {
   return m;
 }
 
+int fg_json_int_range(json_t *obj, const char *key, long long lo, long long hi, long long *out) {
+  json_t *v = json_object_get(obj, key);
+  if (!v || json_is_null(v)) return 0;
+  if (!json_is_integer(v) || json_integer_value(v) < lo || json_integer_value(v) > hi) return -1;
+  *out = json_integer_value(v);
+  return 1;
+}
+
 const char *fg_json_unknown_key(json_t *obj, const char *const *keys) {
   const char *key;
   json_t *v;

@@ -28,6 +28,10 @@ int fg_json_string(json_t *obj, const char *key, const char **out);
 /* Reads an array of exactly n finite numbers; what names it in the error. */
 int fg_json_vec(json_t *v, double *out, size_t n, const char *what);
 
+/* Reads key of obj as an integer in [lo, hi]: 1 present, 0 absent (or null), -1 present but
+ * not an integer in range. No error detail: the caller says what the number means. */
+int fg_json_int_range(json_t *obj, const char *key, long long lo, long long hi, long long *out);
+
 /* A 4x4 row-major nested array of numbers (not validated as rigid). */
 int fg_json_matrix4(json_t *v, double T[16], const char *what);
 

@@ -224,10 +224,10 @@ static int write_demo_npy(const fg_tasks *ts, const char *name, int id, const fl
 }
 
 static int json_int_in(json_t *o, const char *key, long lo, long hi, int *out) {
-  json_t *v = json_object_get(o, key);
-  if (!json_is_integer(v) || json_integer_value(v) < lo || json_integer_value(v) > hi)
+  long long x;
+  if (fg_json_int_range(o, key, lo, hi, &x) != 1)
     return fg_fail(FG_EFORMAT, "\"%s\" must be an integer from %ld to %ld", key, lo, hi);
-  *out = (int)json_integer_value(v);
+  *out = (int)x;
   return 0;
 }
 
