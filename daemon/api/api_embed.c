@@ -111,7 +111,8 @@ int fg_api_embed_text(fg_req *req, fg_resp *resp) {
     goto out;
   }
   int bad = -1;
-  int rc = fg_clip_model_embed_texts(m, r.texts, n, r.truncate, normalize, emb, &bad);
+  int rc = fg_clip_embed_texts(fg_clip_model_clip(m), fg_clip_model_tokenizer(m), r.texts, n,
+                               r.truncate, normalize, emb, &bad);
   if (rc == FG_ERANGE) {
     fg_resp_error(resp, 400, "text_too_long", "text[%d]: %s; shorten it, or send \"truncate\": "
                   "true to embed its first %d tokens", bad, fg_error_detail(),
@@ -195,7 +196,7 @@ int fg_api_embed_image(fg_req *req, fg_resp *resp) {
   const int E = info->embed_dim;
   if (pooled) {
     float *v = malloc((size_t)E * sizeof *v);
-    rc = v ? fg_clip_model_pooled(m, img.rgb, img.w, img.h, v)
+    rc = v ? fg_clip_pooled_embedding(fg_clip_model_clip(m), img.rgb, img.w, img.h, v)
            : fg_fail(FG_ENOMEM, "out of memory");
     json_t *arr = rc == 0 ? float_array(v, E) : NULL;
     free(v);
@@ -216,7 +217,7 @@ int fg_api_embed_image(fg_req *req, fg_resp *resp) {
     goto out;
   }
   int hp, wp;
-  rc = fg_clip_model_dense(m, img.rgb, img.w, img.h, &dense, &hp, &wp);
+  rc = fg_clip_dense_features(fg_clip_model_clip(m), img.rgb, img.w, img.h, &dense, &hp, &wp);
   if (rc == FG_EINVAL || rc == FG_ERANGE) {
     fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
     goto out;

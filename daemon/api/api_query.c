@@ -91,7 +91,8 @@ static int embed_texts(fg_resp *resp, fg_clip_model *m, const char *const *pos, 
   float *emb = malloc((size_t)n * (size_t)E * sizeof *emb); /* [n][E] */
   if (!emb) return fg_resp_error(resp, 500, "internal_error", "out of memory"), -1;
   int bad = -1;
-  int rc = fg_clip_model_embed_texts(m, texts, n, 0, 0, emb, &bad);
+  int rc = fg_clip_embed_texts(fg_clip_model_clip(m), fg_clip_model_tokenizer(m), texts, n, 0, 0,
+                               emb, &bad);
   if (rc != 0) {
     char name[32];
     if (bad >= 0 && bad < n_pos && n_pos == 1) snprintf(name, sizeof name, "\"text\"");

@@ -127,7 +127,7 @@ static int compute(fg_clip_model *m, fg_frame *f, const char *path) {
   for (size_t i = 0; i < np; i++) rgb[i] = (float)f->rgb[i] / 65535.0f;
   float *dense = NULL;
   int hp = 0, wp = 0;
-  int rc = fg_clip_model_dense(m, rgb, w, h, &dense, &hp, &wp);
+  int rc = fg_clip_dense_features(fg_clip_model_clip(m), rgb, w, h, &dense, &hp, &wp);
   free(rgb);
   if (rc != 0) return rc;
   size_t count = (size_t)hp * (size_t)wp * (size_t)E;
@@ -208,7 +208,7 @@ int fg_clip_features_attach(fg_clip_model *m, const char *scene_dir, fg_frame *f
       break;
     }
     int hp, wp;
-    rc = fg_clip_model_grid(m, f->cam.w, f->cam.h, &hp, &wp);
+    rc = fg_clip_image_grid(fg_clip_model_clip(m), f->cam.w, f->cam.h, &hp, &wp);
     if (rc == 0 && cache_read(path, f, hp, wp, E)) {
       pr.cached++;
       fg_metrics_add_clip_feature_frames(0, 1);

@@ -21,22 +21,12 @@
 #include <jansson.h>
 
 #include "clip/clip.h"
+#include "clip/recipes.h"
 #include "clip/tokenizer.h"
 #include "conf/conf.h"
 
 typedef struct fg_clip_svc fg_clip_svc;
 typedef struct fg_clip_model fg_clip_model;
-
-/* Most texts one call of fg_clip_model_embed_texts (and one POST /v1/embed/text) takes, and
- * the longest text in bytes (the tokenizer's cost grows with the length of a word; 75 tokens
- * are far fewer bytes than this). */
-#define FG_CLIP_MAX_TEXTS 256
-#define FG_CLIP_MAX_TEXT_BYTES 4096
-
-/* Most patch tokens of one image: an image whose preprocessed grid (short side image_size)
- * has more patches than this has too extreme an aspect ratio (attention grows with the square
- * of the token count). ViT-B/16 takes up to about 10:1. */
-#define FG_CLIP_MAX_PATCHES 2048
 
 /* Creates a service with no model. On success the caller owns *out (fg_clip_svc_free). */
 int fg_clip_svc_new(fg_clip_svc **out);
@@ -79,35 +69,5 @@ int fg_clip_model_threads(const fg_clip_model *m);
 /* The model object of the API: {"fingerprint", "dtype", "embed_dim", "image_size",
  * "patch_size", "context_length", "naming"}. New reference, NULL on allocation failure. */
 json_t *fg_clip_model_json(const fg_clip_model *m);
-
-/* Text embeddings (CLIP's encode_text) of n texts (1..FG_CLIP_MAX_TEXTS) into out [n][E]
- * (caller-owned). truncate cuts texts longer than the context to it instead of failing;
- * normalize scales each row to unit L2 norm. On failure *bad (may be NULL) is the index of
- * the text at fault, or -1: FG_EINVAL (empty, longer than FG_CLIP_MAX_TEXT_BYTES, invalid
- * UTF-8), FG_ERANGE (more tokens than the context takes, without truncate), FG_ENOMEM. */
-int fg_clip_model_embed_texts(fg_clip_model *m, const char *const *texts, int n, int truncate,
-                              int normalize, float *out, int *bad);
-
-/* The grid [*hp][*wp] of the dense features of a w x h image: F3RM's resize (short side
- * image_size, long side int(image_size * long / short)), then whole patches. FG_ERANGE when
- * it has more than FG_CLIP_MAX_PATCHES patches, FG_EINVAL for a size below 1. */
-int fg_clip_model_grid(const fg_clip_model *m, int w, int h, int *hp, int *wp);
-
-/* Dense MaskCLIP features of an RGB image rgb [h][w][3] in [0, 1] (sRGB), preprocessed as
- * F3RM does (short side to image_size, no crop, 8-bit rounding as PIL on 8-bit images): on
- * success *out is a malloc'd [*hp][*wp][E] the caller frees. FG_ERANGE when the grid has
- * more than FG_CLIP_MAX_PATCHES patches (checked before any work); FG_EINVAL, FG_ENOMEM. */
-int fg_clip_model_dense(fg_clip_model *m, const float *rgb, int w, int h, float **out, int *hp,
-                        int *wp);
-
-/* The pooled image embedding (CLIP's encode_image) of rgb [h][w][3] as CLIP's own
- * preprocessing gives it: the F3RM preprocessing above, then the centre image_size x
- * image_size crop (offsets rounded half to even, as torchvision's CenterCrop). out [E]
- * (caller-owned). FG_ERANGE when the resized image would exceed FG_IMAGE_MAX_PIXELS;
- * FG_EINVAL, FG_ENOMEM. */
-int fg_clip_model_pooled(fg_clip_model *m, const float *rgb, int w, int h, float *out);
-
-/* Scales v [n] to unit L2 norm (in double). FG_EINVAL when its norm is 0 or not finite. */
-int fg_l2_normalize(float *v, int n);
 
 #endif

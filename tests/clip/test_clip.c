@@ -9,9 +9,12 @@
 #include <unistd.h>
 
 #include "clip/clip.h"
+#include "clip/recipes.h"
+#include "clip/tokenizer.h"
 #include "clipgen.h"
 #include "core/error.h"
 #include "core/fsutil.h"
+#include "core/norm.h"
 #include "io/image.h"
 #include "io/npy.h"
 #include "test.h"
@@ -396,6 +399,98 @@ static void check_preprocess(const char *model, const char *png, const char *wan
   fg_clip_free(c);
 }
 
+/* The recipes (recipes.h) against the model's own calls: texts tokenised, encoded and
+ * normalised; the grid of an image and its limits; dense features and the pooled embedding of
+ * an image as its preprocessing and the encoder give them; and the refusals. */
+static void check_recipes(const char *path) {
+  const char *shared = getenv("FG_SHARED_DATA");
+  if (!shared) FG_TEST_FAIL("FG_SHARED_DATA is not set (run through meson test)");
+  char *vocab = fg_path_join(shared, "clip/bpe_simple_vocab_16e6.txt.gz");
+  fg_tokenizer *tok;
+  ASSERT_OK(fg_tokenizer_load(&tok, vocab));
+  free(vocab);
+  fg_clip *c;
+  ASSERT_OK(fg_clip_load(&c, path));
+  const fg_clip_info *in = fg_clip_get_info(c);
+  const int E = in->embed_dim, ctx = in->context_length, S = in->image_size;
+
+  /* texts: the embeddings of their ids, each scaled to unit length */
+  const char *const texts[] = {"a mug", "a photo of a cat on a table"};
+  float *got = malloc(2 * (size_t)E * sizeof *got), *want = malloc(2 * (size_t)E * sizeof *want);
+  int32_t *ids = malloc(2 * (size_t)ctx * sizeof *ids);
+  int bad = 7;
+  ASSERT_OK(fg_clip_embed_texts(c, tok, texts, 2, 0, 1, got, &bad));
+  for (int i = 0; i < 2; i++)
+    ASSERT_OK(fg_tokenizer_encode(tok, texts[i], ctx, 0, ids + (size_t)i * ctx, NULL));
+  ASSERT_OK(fg_clip_text(c, ids, 2, want));
+  for (int i = 0; i < 2; i++) {
+    ASSERT_OK(fg_l2_normalize(want + (size_t)i * E, E));
+    double n2 = 0;
+    for (int k = 0; k < E; k++) n2 += (double)got[(size_t)i * E + k] * got[(size_t)i * E + k];
+    ASSERT_NEAR(n2, 1.0, 1e-5);
+  }
+  ASSERT(max_abs_diff(got, want, 2 * (size_t)E) <= 1e-6);
+  /* refusals, naming the text at fault */
+  const char *const blank[] = {"a mug", " \t\n"};
+  ASSERT_ERR(fg_clip_embed_texts(c, tok, blank, 2, 0, 1, got, &bad), FG_EINVAL, "empty");
+  ASSERT_EQ(bad, 1);
+  char *long_text = malloc(FG_CLIP_MAX_TEXT_BYTES + 2);
+  memset(long_text, 'a', FG_CLIP_MAX_TEXT_BYTES + 1);
+  long_text[FG_CLIP_MAX_TEXT_BYTES + 1] = '\0';
+  const char *const too_long[] = {long_text};
+  ASSERT_ERR(fg_clip_embed_texts(c, tok, too_long, 1, 1, 1, got, &bad), FG_EINVAL, "limit");
+  ASSERT_EQ(bad, 0);
+  free(long_text);
+  ASSERT_ERR(fg_clip_embed_texts(c, tok, texts, 0, 0, 1, got, &bad), FG_EINVAL, "texts");
+  free(ids);
+  free(want);
+  free(got);
+
+  /* the grid: whole patches of the image resized to a short side of S, within the limit */
+  int hp, wp;
+  ASSERT_OK(fg_clip_image_grid(c, 3 * S, S, &hp, &wp));
+  ASSERT_EQ(hp, S / in->patch_size);
+  ASSERT_EQ(wp, 3 * S / in->patch_size);
+  ASSERT_ERR(fg_clip_image_grid(c, 0, 10, &hp, &wp), FG_EINVAL, "pixels");
+  ASSERT_ERR(fg_clip_image_grid(c, 20000, 1, &hp, &wp), FG_ERANGE, "patches");
+
+  /* an image: dense features and the pooled embedding as the encoder gives them */
+  const int w = S + 5, h = S;
+  float *rgb = malloc((size_t)w * h * 3 * sizeof *rgb);
+  for (size_t i = 0; i < (size_t)w * h * 3; i++) rgb[i] = (float)((i * 37) % 101) / 100.0f;
+  float *dense = NULL, *x = NULL;
+  ASSERT_OK(fg_clip_dense_features(c, rgb, w, h, &dense, &hp, &wp));
+  int H, W;
+  ASSERT_OK(fg_clip_preprocess(c, rgb, w, h, 1, &x, &H, &W));
+  float *dense_want = malloc((size_t)hp * wp * E * sizeof *dense_want);
+  ASSERT_OK(fg_clip_image_dense(c, x, 1, H, W, dense_want));
+  ASSERT(max_abs_diff(dense, dense_want, (size_t)hp * wp * E) == 0.0);
+  /* pooled: the centre S x S crop of the preprocessed image, its offset W - S = 5 halved and
+   * rounded to even: 2 */
+  ASSERT_EQ(H, S);
+  ASSERT_EQ(W, S + 5);
+  float *crop = malloc((size_t)3 * S * S * sizeof *crop);
+  for (int ch = 0; ch < 3; ch++)
+    for (int y = 0; y < S; y++)
+      memcpy(crop + ((size_t)ch * S + y) * S, x + ((size_t)ch * H + y) * W + 2,
+             (size_t)S * sizeof *crop);
+  float *pooled = malloc((size_t)E * sizeof *pooled);
+  float *pooled_want = malloc((size_t)E * sizeof *pooled_want);
+  ASSERT_OK(fg_clip_pooled_embedding(c, rgb, w, h, pooled));
+  ASSERT_OK(fg_clip_image_pooled(c, crop, 1, pooled_want));
+  ASSERT(max_abs_diff(pooled, pooled_want, (size_t)E) == 0.0);
+  ASSERT_ERR(fg_clip_pooled_embedding(c, rgb, 0, h, pooled), FG_EINVAL, "pixels");
+  free(pooled_want);
+  free(pooled);
+  free(crop);
+  free(dense_want);
+  free(x);
+  free(dense);
+  free(rgb);
+  fg_clip_free(c);
+  fg_tokenizer_free(tok);
+}
+
 int main(void) {
   ASSERT(mkdtemp(tmpdir));
   g_dense_in = load_golden("golden_dense_input.npy");
@@ -423,6 +518,7 @@ int main(void) {
   check_batch_and_threads(f32);
   check_concurrent(f32);
   check_bad_inputs(f32);
+  check_recipes(f32);
   check_incomplete_models();
   check_preprocess(f32, "preprocess_in.png", "preprocess_golden.npy");
   check_preprocess(f32, "preprocess_in_20x14.png", "preprocess_golden_20x14.npy");
