@@ -2,8 +2,10 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
 
 static _Thread_local char detail[1024];
+static _Thread_local const char *reason;
 
 const char *fg_strerror(int err) {
   switch (err) {
@@ -28,14 +30,35 @@ const char *fg_strerror(int err) {
   }
 }
 
+/* Formats into a copy first: the arguments may include the detail itself. */
+static void record(const char *why, const char *fmt, va_list ap) {
+  char msg[sizeof detail];
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  memcpy(detail, msg, sizeof detail);
+  reason = why;
+}
+
 int fg_fail(int err, const char *fmt, ...) {
   va_list ap;
   va_start(ap, fmt);
-  vsnprintf(detail, sizeof detail, fmt, ap);
+  record(NULL, fmt, ap);
+  va_end(ap);
+  return err;
+}
+
+int fg_fail_as(int err, const char *why, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  record(why, fmt, ap);
   va_end(ap);
   return err;
 }
 
 const char *fg_error_detail(void) { return detail; }
 
-void fg_error_clear(void) { detail[0] = '\0'; }
+const char *fg_error_reason(void) { return reason; }
+
+void fg_error_clear(void) {
+  detail[0] = '\0';
+  reason = NULL;
+}

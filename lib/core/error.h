@@ -37,9 +37,17 @@ const char *fg_strerror(int err);
  * paths stay one line: `return fg_fail(FG_EINVAL, "w must be positive, got %d", w);` */
 int fg_fail(int err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
+/* fg_fail with a reason: a short, stable name of what went wrong for a client to act on
+ * ("task_not_found"), a string literal. The daemon answers with it as the error's code. */
+int fg_fail_as(int err, const char *reason, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
 /* The calling thread's last detail message; "" when none. Valid until the next fg_fail()
- * or fg_error_clear() on this thread. */
+ * or fg_error_clear() on this thread. The detail may be an argument of the next fg_fail:
+ * `fg_fail(rc, "demo %d: %s", id, fg_error_detail())` wraps it. */
 const char *fg_error_detail(void);
+/* The reason of the calling thread's last fg_fail_as; NULL after a plain fg_fail. */
+const char *fg_error_reason(void);
 void fg_error_clear(void);
 
 /* Propagates a failing call's code; the callee has already recorded the detail. */

@@ -28,6 +28,19 @@ static void test_error(void) {
   big[sizeof big - 1] = '\0';
   fg_fail(FG_EIO, "%s", big);
   ASSERT(strlen(fg_error_detail()) < sizeof big - 1);
+  /* A failure wraps the one below it; a reason names it until a plain failure. */
+  fg_fail(FG_EIO, "disk full");
+  ASSERT(fg_error_reason() == NULL);
+  ASSERT_EQ(fg_fail_as(FG_ENOENT, "task_not_found", "task %s: %s", "cup", fg_error_detail()),
+            FG_ENOENT);
+  ASSERT_STREQ(fg_error_detail(), "task cup: disk full");
+  ASSERT_STREQ(fg_error_reason(), "task_not_found");
+  fg_fail(FG_EINVAL, "later: %s", fg_error_detail());
+  ASSERT_STREQ(fg_error_detail(), "later: task cup: disk full");
+  ASSERT(fg_error_reason() == NULL);
+  fg_fail_as(FG_EBUSY, "busy", "x");
+  fg_error_clear();
+  ASSERT(fg_error_reason() == NULL);
 }
 
 static void test_half(void) {
