@@ -12,6 +12,8 @@
 #include "core/pose.h"
 #include "field/model.h"
 #include "grasp/grasp.h"
+#include "grasp/plan.h"
+#include "query/query.h"
 #include "query/voxfeat.h"
 #include "test.h"
 
@@ -430,6 +432,115 @@ static void test_cost(void) {
   fg_voxel_features_free(vf);
 }
 
+/* ---------------------------------------------------------------- plans */
+
+/* fg_grasp_plan_run on the synthetic scene: retrieval by fg_grasp_task_similarity, the
+ * language mask, the opening, the pre-grasps and a placement's missing lift, each against
+ * the search run by hand. demo: the demo task (its query points p, embedding Z at T_demo);
+ * q: a unit query of D. */
+static void test_plan(const fg_grasp_field *gf, const fg_voxel_features *vf,
+                      const fg_grasp_task *demo, const double T_demo[16], const float *q) {
+  const int D = demo->dim, NQ = demo->n_points;
+  const size_t N = fg_voxel_grid_count(fg_voxel_features_grid(vf));
+  /* a second task sampled a few centimetres off the demo, one of another D, one of zeros */
+  float *Z2 = malloc((size_t)NQ * D * sizeof *Z2), *Z0 = calloc((size_t)NQ * D, sizeof *Z0);
+  double T2[16];
+  memcpy(T2, T_demo, sizeof T2);
+  T2[3] -= 0.03;
+  ASSERT_OK(fg_grasp_sample(gf, T2, demo->p_gripper, NQ, Z2));
+  fg_grasp_task tasks[4] = {{"other", 0, NQ, D, demo->p_gripper, Z2, 0.04, 0.1},
+                            {"wide_d", 0, NQ, D + 1, demo->p_gripper, Z2, 0.04, 0.1},
+                            {"empty", 0, NQ, D, demo->p_gripper, Z0, 0.04, 0.1}, *demo};
+  fg_query query = {0};
+  ASSERT_OK(fg_query_init(&query, D, q, 1, NULL, 0, 1.0f));
+  fg_grasp_plan_request r = {.tasks = tasks, .n_tasks = 4, .retrieve = 1, .query = &query};
+  fg_grasp_options_default(&r.opt);
+  r.opt.gripper = FG_GRIPPER_ROBOTIQ_2F85;
+  r.opt.top_k = 3;
+  r.opt.n_threads = 2;
+  fg_grasp_plan p;
+  ASSERT_OK(fg_grasp_plan_run(gf, &r, &p));
+  /* the two tasks of D with a defined likeness, ranked by it */
+  ASSERT_EQ(p.n_retrieval, 2);
+  const double s_other = fg_grasp_task_similarity(Z2, NQ, D, query.q),
+               s_demo = fg_grasp_task_similarity(demo->Z, NQ, D, query.q);
+  const int first = s_demo > s_other ? 3 : 0;
+  ASSERT_EQ(p.task, first);
+  ASSERT_EQ(p.retrieval[0].task, first);
+  ASSERT_EQ(p.retrieval[1].task, 3 - first);
+  ASSERT_NEAR(p.retrieval[0].score, first == 3 ? s_demo : s_other, 0.0);
+  /* the search by hand: the mask where the query scores 0.5, the task's width and approach */
+  const fg_grasp_task *t = &tasks[first];
+  float *scores = malloc(N * sizeof *scores);
+  uint8_t *mask = malloc(N);
+  ASSERT_OK(fg_voxel_features_score(vf, &query, r.opt.candidate_alpha, scores, 1));
+  size_t n_mask = 0;
+  for (size_t i = 0; i < N; i++) n_mask += mask[i] = scores[i] >= 0.5f;
+  ASSERT(n_mask > 0 && n_mask < fg_voxel_features_n_kept(vf));
+  fg_grasp_options o = r.opt;
+  o.candidate_mask = mask;
+  o.width_m = t->width_m;
+  o.approach_m = t->approach_m;
+  const fg_grasp_target target = {NQ, D, t->p_gripper, t->Z, NULL};
+  fg_grasp_result by_hand;
+  ASSERT_OK(fg_grasp_search(gf, &target, &o, &by_hand));
+  ASSERT(by_hand.n >= 1);
+  ASSERT_EQ(p.result.n, by_hand.n);
+  ASSERT(memcmp(p.result.poses, by_hand.poses, (size_t)by_hand.n * sizeof *by_hand.poses) == 0);
+  ASSERT_NEAR(p.width_m, t->width_m, 0.0);
+  for (int k = 0; k < p.result.n; k++) { /* backed off along the gripper's own -z */
+    const double *T = p.result.poses[k].T_world_gripper, *P = p.T_world_pre[k];
+    for (int a = 0; a < 3; a++) {
+      ASSERT_NEAR(P[4 * a + 3], T[4 * a + 3] - t->approach_m * T[4 * a + 2], 1e-12);
+      for (int b = 0; b < 3; b++) ASSERT_NEAR(P[4 * a + b], T[4 * a + b], 0.0);
+    }
+  }
+  fg_grasp_result_release(&by_hand);
+  fg_grasp_plan_release(&p);
+  /* a named task wider than the stroke opens to the stroke; no query, no retrieval */
+  fg_grasp_task wide = *demo;
+  wide.width_m = 0.2;
+  r = (fg_grasp_plan_request){.tasks = &wide, .n_tasks = 1, .opt = r.opt};
+  ASSERT_OK(fg_grasp_plan_run(gf, &r, &p));
+  ASSERT_NEAR(p.width_m, fg_gripper_spec_get(FG_GRIPPER_ROBOTIQ_2F85)->stroke_m, 0.0);
+  ASSERT(p.retrieval == NULL && p.n_retrieval == 0 && p.task == 0);
+  fg_grasp_plan_release(&p);
+  /* under a ceiling 5 cm above the demo, a pick's 10 cm lift is refused, a placement lets go
+   * where it is */
+  fg_motion_limits lim = {.has_box = 1, .cone_rad = M_PI, .max_force_n = 100,
+                          .max_speed_mps = 1, .max_width_m = 0.085};
+  const fg_voxel_grid *g = fg_voxel_features_grid(vf);
+  for (int a = 0; a < 3; a++) {
+    lim.box_min_m[a] = g->min[a] - 1;
+    lim.box_max_m[a] = g->max[a] + 1;
+  }
+  lim.box_max_m[2] = T_demo[11] + 0.05;
+  fg_grasp_task pick = *demo;
+  pick.approach_m = 0;
+  r = (fg_grasp_plan_request){.tasks = &pick, .n_tasks = 1, .opt = r.opt};
+  r.opt.limits = &lim;
+  r.opt.retreat_m = 0.10;
+  ASSERT_OK(fg_grasp_plan_run(gf, &r, &p));
+  ASSERT_EQ(p.result.n, 0);
+  ASSERT(strstr(p.result.reason, "limits") != NULL);
+  fg_grasp_plan_release(&p);
+  pick.place = 1;
+  ASSERT_OK(fg_grasp_plan_run(gf, &r, &p));
+  ASSERT(p.result.n >= 1);
+  fg_grasp_plan_release(&p);
+  /* nothing to retrieve; a weight without a query */
+  r = (fg_grasp_plan_request){.tasks = tasks + 1, .n_tasks = 2, .retrieve = 1, .query = &query,
+                              .opt = r.opt};
+  ASSERT_ERR(fg_grasp_plan_run(gf, &r, &p), FG_ENOENT, "D = ");
+  r.query = NULL;
+  ASSERT_ERR(fg_grasp_plan_run(gf, &r, &p), FG_EINVAL, "query");
+  fg_query_release(&query);
+  free(scores);
+  free(mask);
+  free(Z2);
+  free(Z0);
+}
+
 /* ---------------------------------------------------------------- synthetic scene */
 
 #define NX 40
@@ -636,6 +747,8 @@ static void test_search_synthetic(void) {
   ASSERT(w > 0.0);
   ASSERT_NEAR(J, -w * cosv, 1e-12);
   ASSERT_NEAR(J, fg_grasp_cost_ref(vf, &t, T_demo), 1e-4 * (1 + fabs(J)));
+  const fg_grasp_task demo = {"demo", 0, NQ, s.D, p, Z, 0.06, 0.08};
+  test_plan(gf, vf, &demo, T_demo, q);
 
   /* a mask that rules out every candidate: an empty result with a reason */
   uint8_t *mask = calloc(N, 1);
