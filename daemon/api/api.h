@@ -85,6 +85,18 @@ void fg_api_audit_finished(fg_app *app, const struct fg_robot_cmd_view *v);
 /* Most Server-Sent Events streams (GET /v1/jobs/{id}/events) open at once; more get 503. */
 #define FG_API_MAX_EVENT_STREAMS 64
 
+/* api_status.c: the one table from an error's code ("task_not_found") to its HTTP status (500
+ * for a code it does not know). A handler answers a service's failure with fg_api_fail. */
+int fg_api_status(const char *code);
+
+/* The code of the calling thread's failure rc: the reason it was given (fg_fail_as), else a
+ * default of rc (invalid_request for FG_EINVAL, ...; internal_error). */
+const char *fg_api_fail_code(int rc);
+
+/* Answers the calling thread's failure rc: its code (fg_api_fail_code), that code's status
+ * and fg_error_detail() as the message; memory_limit also gets Retry-After: 1. Returns 0. */
+int fg_api_fail(fg_resp *resp, int rc);
+
 /* Shared by handlers: the JSON body as an object, or NULL after answering 400. */
 json_t *fg_api_body_object(fg_req *req, fg_resp *resp);
 

@@ -209,11 +209,12 @@ void fg_api_audit_finished(fg_app *app, const fg_robot_cmd_view *v) {
   if (!app->audit || v->req.dry_run || v->req.wait) return;
   char when[32];
   fg_iso8601((int64_t)(v->finished_s * 1000), when);
+  const int status = v->state == FG_CMD_DONE ? 200 : fg_api_status(v->code);
   json_t *e = json_pack("{s:s, s:I, s:s, s:i, s:s}", "kind", "end", "command_id",
                         (json_int_t)v->id, "outcome", fg_cmd_state_name(v->state),
-                        "http_status", v->http_status, "finished", when);
+                        "http_status", status, "finished", when);
   if (!e) return;
-  if (v->http_status >= 400)
+  if (status >= 400)
     json_object_set_new(e, "error", json_pack("{s:s, s:s}", "code", v->code, "message",
                                               v->message));
   if (v->seq) json_object_set_new(e, "robot_seq", json_integer(v->seq));

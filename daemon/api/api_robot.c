@@ -160,7 +160,9 @@ static json_t *command_json(const fg_robot_cmd_view *v) {
  * beside it. *status gets the HTTP status. */
 static json_t *answer_json(const fg_robot_cmd_view *v, int *status) {
   json_t *cmd = command_json(v);
-  *status = v->req.dry_run ? 200 : v->finished_s == 0 ? 202 : v->http_status;
+  *status = v->req.dry_run || v->state == FG_CMD_DONE ? 200
+            : v->finished_s == 0                     ? 202
+                                                     : fg_api_status(v->code);
   if (*status < 400) return cmd;
   return json_pack("{s:{s:s, s:s}, s:o}", "error", "code", v->code, "message", v->message,
                    "command", cmd);
@@ -176,28 +178,18 @@ static void answer_send(fg_resp *resp, json_t *o, int status, uint64_t id) {
 /* The answer for an error a command stopped at before it ran; v holds what was planned (a
  * limit's refusal shows the limit and the words that were not sent). */
 static int answer_refusal(fg_resp *resp, int rc, const fg_robot_cmd_view *v) {
-  const char *d = fg_error_detail();
-  switch (rc) {
-  case FG_ELIMIT: {
-    const fg_motion_violation *mv = &v->violation;
-    fg_robot_cmd_view plan = *v; /* shown as a dry run: the words that were not sent */
-    plan.req.dry_run = 1;
-    json_t *o = json_pack("{s:{s:s, s:s, s:s?, s:o, s:o}, s:o}", "error", "code", "motion_limit",
-                          "message", d, "limit", mv->limit, "value",
-                          isfinite(mv->value) ? json_real(mv->value) : json_null(), "bound",
-                          isfinite(mv->bound) ? json_real(mv->bound) : json_null(), "command",
-                          command_json(&plan));
-    fg_resp_json(resp, 422, o);
-    return 0;
-  }
-  case FG_ESTOPPED: return fg_resp_error(resp, 409, "robot_stopped", "%s", d);
-  case FG_ERANGE: return fg_resp_error(resp, 400, "value_out_of_range", "%s", d);
-  case FG_EINVAL: return fg_resp_error(resp, 400, "invalid_request", "%s", d);
-  case FG_EBUSY: return fg_resp_error(resp, 409, "robot_busy", "%s", d);
-  case FG_EUNAVAIL: return fg_resp_error(resp, 409, "not_configured", "%s", d);
-  case FG_ENOSPC: return fg_resp_error(resp, 507, "insufficient_storage", "%s", d);
-  default: return fg_resp_error(resp, 500, "internal_error", "%s", d);
-  }
+  if (rc != FG_ELIMIT) return fg_api_fail(resp, rc);
+  const fg_motion_violation *mv = &v->violation;
+  fg_robot_cmd_view plan = *v; /* shown as a dry run: the words that were not sent */
+  plan.req.dry_run = 1;
+  const char *code = fg_api_fail_code(rc);
+  json_t *o = json_pack("{s:{s:s, s:s, s:s?, s:o, s:o}, s:o}", "error", "code", code, "message",
+                        fg_error_detail(), "limit", mv->limit, "value",
+                        isfinite(mv->value) ? json_real(mv->value) : json_null(), "bound",
+                        isfinite(mv->bound) ? json_real(mv->bound) : json_null(), "command",
+                        command_json(&plan));
+  fg_resp_json(resp, fg_api_status(code), o);
+  return 0;
 }
 
 /* ---------------------------------------------------------------- idempotency */
@@ -440,8 +432,8 @@ int fg_api_robot_stop(fg_req *req, fg_resp *resp) {
   json_decref(body);
   int written;
   uint64_t id;
-  if (fg_robot_stop(req->app->robot, why, &written, &id) < 0)
-    return fg_resp_error(resp, 409, "not_configured", "%s", fg_error_detail());
+  const int rc = fg_robot_stop(req->app->robot, why, &written, &id);
+  if (rc < 0) return fg_api_fail(resp, rc);
   fg_resp_json(resp, 200, json_pack("{s:b, s:b, s:o, s:o}", "latched", 1, "stop_written",
                                     written, "stopped_command",
                                     id ? json_integer((json_int_t)id) : json_null(), "robot",
@@ -458,11 +450,8 @@ int fg_api_robot_reset(fg_req *req, fg_resp *resp) {
     json_decref(body);
     if (n) return fg_resp_error(resp, 400, "invalid_request", "reset takes no keys");
   }
-  int rc = fg_robot_reset(req->app->robot);
-  if (rc == FG_EBUSY) return fg_resp_error(resp, 409, "robot_busy", "%s", fg_error_detail());
-  if (rc == FG_EUNAVAIL)
-    return fg_resp_error(resp, 503, "robot_disconnected", "%s", fg_error_detail());
-  if (rc < 0) return fg_resp_error(resp, 500, "state_unavailable", "%s", fg_error_detail());
+  const int rc = fg_robot_reset(req->app->robot);
+  if (rc < 0) return fg_api_fail(resp, rc);
   fg_resp_json(resp, 200, json_pack("{s:b}", "latched", 0));
   return 0;
 }

@@ -204,14 +204,12 @@ int fg_robot_svc_has_gripper(const fg_robot_svc *svc) { return svc->gripper != N
 /* ---------------------------------------------------------------- execution */
 
 /* Ends r with an outcome (under no lock); wakes the waiters. */
-static void finish(rec *r, fg_cmd_state state, int http, const char *code, const char *fmt, ...)
-    __attribute__((format(printf, 5, 6)));
-static void finish(rec *r, fg_cmd_state state, int http, const char *code, const char *fmt,
-                   ...) {
+static void finish(rec *r, fg_cmd_state state, const char *code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static void finish(rec *r, fg_cmd_state state, const char *code, const char *fmt, ...) {
   fg_robot_svc *svc = r->svc;
   pthread_mutex_lock(&svc->lock);
   r->v.state = state;
-  r->v.http_status = http;
   snprintf(r->v.code, sizeof r->v.code, "%s", code ? code : "");
   if (fmt) {
     va_list ap;
@@ -306,10 +304,8 @@ static int grip_run(fg_mb_link *l, void *arg) {
   return rc;
 }
 
-/* The HTTP answer for a failed gripper call. */
-static void gripper_outcome(int rc, int *http, const char **code) {
-  *http = rc == FG_EUNAVAIL ? 503 : rc == FG_ETIMEDOUT ? 504 : 502;
-  if (rc == FG_EPERM || rc == FG_EBUSY) *http = 409;
+/* The code of a failed gripper call (the API answers each code with its status). */
+static void gripper_outcome(int rc, const char **code) {
   *code = rc == FG_EUNAVAIL    ? "gripper_disconnected"
           : rc == FG_ETIMEDOUT ? "gripper_timeout"
           : rc == FG_EPEER     ? "gripper_fault"
@@ -335,10 +331,9 @@ static int run_gripper_step(rec *r, int i, int robot_moved, fg_mb_link *gl) {
     r->v.object_detected = fg_robotiq_object_detected(&g.status);
   pthread_mutex_unlock(&svc->lock);
   if (rc == 0) return 0;
-  int http;
   const char *code;
-  gripper_outcome(rc, &http, &code);
-  finish(r, robot_moved ? FG_CMD_FAILED : FG_CMD_ERROR, http, code, "%s: %s",
+  gripper_outcome(rc, &code);
+  finish(r, robot_moved ? FG_CMD_FAILED : FG_CMD_ERROR, code, "%s: %s",
          r->v.steps[i].name, fg_error_detail());
   return rc;
 }
@@ -352,7 +347,7 @@ static int stopped(rec *r, fg_mb_link *l, const char *stage, int by_robot) {
     svc->latch.stop_written = 1;
     pthread_mutex_unlock(&svc->lock);
   }
-  finish(r, FG_CMD_STOPPED, 409, "robot_stopped", "stopped %s during %s; POST "
+  finish(r, FG_CMD_STOPPED, "robot_stopped", "stopped %s during %s; POST "
          "/v1/robot/reset once the cell is safe", by_robot ? "by the robot (status 4)"
                                                            : "by POST /v1/robot/stop", stage);
   return FG_ECANCELED;
@@ -367,7 +362,7 @@ static int unknown(rec *r, fg_mb_link *l, int rc, const char *code, const char *
   va_start(ap, fmt);
   vsnprintf(msg, sizeof msg, fmt, ap);
   va_end(ap);
-  finish(r, FG_CMD_UNKNOWN, rc == FG_ETIMEDOUT ? 504 : 502, code,
+  finish(r, FG_CMD_UNKNOWN, code,
          "%s; the robot is stopped until POST /v1/robot/reset", msg);
   if (robot_latch_sync(r->svc, l) < 0)
     fg_warn("robot: the no-op block is written once the robot answers: %s", fg_error_detail());
@@ -384,7 +379,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
   int rc = fg_mb_link_ensure(l);
   if (rc == 0 && svc->gen_seen != fg_mb_link_generation(l)) rc = robot_idle(l, svc);
   if (rc < 0) {
-    finish(r, not_sent, 503, "robot_disconnected", "%s: nothing was sent: %s", st->name,
+    finish(r, not_sent, "robot_disconnected", "%s: nothing was sent: %s", st->name,
            fg_error_detail());
     return rc;
   }
@@ -399,7 +394,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
   const double t0 = (fg_mono_s() * 1e3);
   rc = fg_robot_write(l, &svc->rp, st->words);
   if (rc == FG_EPEER) {
-    finish(r, not_sent, 502, "modbus_exception", "the robot refused the pose write: %s",
+    finish(r, not_sent, "modbus_exception", "the robot refused the pose write: %s",
            fg_error_detail());
     return rc;
   }
@@ -407,7 +402,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
     pthread_mutex_lock(&svc->lock);
     if (svc->last_seq == seq) svc->last_seq = (uint16_t)(seq == 1 ? 65535 : seq - 1);
     pthread_mutex_unlock(&svc->lock);
-    finish(r, not_sent, 503, "robot_disconnected", "%s: nothing was sent: %s", st->name,
+    finish(r, not_sent, "robot_disconnected", "%s: nothing was sent: %s", st->name,
            fg_error_detail());
     return rc;
   }
@@ -451,7 +446,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
     return stopped(r, NULL, st->name, 1);
   }
   if (status == FG_ROBOT_FAILED) {
-    finish(r, FG_CMD_FAILED, 502, "robot_failed", "the robot reported seq %u failed (status 3)",
+    finish(r, FG_CMD_FAILED, "robot_failed", "the robot reported seq %u failed (status 3)",
            seq);
     return FG_EPEER;
   }
@@ -470,7 +465,7 @@ static int run_command(fg_mb_link *l, void *arg) {
     if (rc < 0) return rc;
     robot_moved |= r->v.steps[i].kind == FG_STEP_ROBOT;
   }
-  finish(r, FG_CMD_DONE, 200, NULL, NULL);
+  finish(r, FG_CMD_DONE, NULL, NULL);
   return 0;
 }
 
@@ -478,7 +473,7 @@ static int run_command(fg_mb_link *l, void *arg) {
 static int run_gripper_command(fg_mb_link *l, void *arg) {
   rec *r = arg;
   for (int i = 0; i < r->v.n_steps; i++) FG_TRY(run_gripper_step(r, i, 0, l));
-  finish(r, FG_CMD_DONE, 200, NULL, NULL);
+  finish(r, FG_CMD_DONE, NULL, NULL);
   return 0;
 }
 
@@ -489,7 +484,7 @@ static void job_done(void *arg, int rc) {
   const int open = r->v.finished_s == 0;
   pthread_mutex_unlock(&svc->lock);
   if (open) /* cancelled before it ran */
-    finish(r, FG_CMD_ERROR, 503, "shutting_down", "the daemon is stopping; nothing was sent");
+    finish(r, FG_CMD_ERROR, "shutting_down", "the daemon is stopping; nothing was sent");
   (void)rc;
   pthread_mutex_lock(&svc->lock);
   rec_unref_locked(r);
@@ -519,13 +514,13 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
   if (svc->stopping) {
     pthread_mutex_unlock(&svc->lock);
     free(r);
-    return fg_fail(FG_EBUSY, "the daemon is stopping");
+    return fg_fail_as(FG_EBUSY, "robot_busy", "the daemon is stopping");
   }
   if (svc->active) {
     const fg_robot_cmd_view *a = &svc->active->v;
-    int rc = fg_fail(FG_EBUSY, "command %llu (%s) is still running (stage %s); wait for it: GET "
-                     "/v1/robot/commands/%llu", (unsigned long long)a->id,
-                     command_names[a->command], a->stage, (unsigned long long)a->id);
+    int rc = fg_fail_as(FG_EBUSY, "robot_busy", "command %llu (%s) is still running (stage "
+                        "%s); wait for it: GET /v1/robot/commands/%llu", (unsigned long long)a->id,
+                        command_names[a->command], a->stage, (unsigned long long)a->id);
     pthread_mutex_unlock(&svc->lock);
     free(r);
     return rc;
@@ -533,7 +528,7 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
   if (svc->gripper_busy) {
     pthread_mutex_unlock(&svc->lock);
     free(r);
-    return fg_fail(FG_EBUSY, "a gripper action is running; wait for its answer");
+    return fg_fail_as(FG_EBUSY, "robot_busy", "a gripper action is running; wait for its answer");
   }
   int rc = robot_plan_locked(svc, &lim, req, &r->v);
   if (rc < 0) {
@@ -559,7 +554,7 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
   svc->active = r;
   pthread_mutex_unlock(&svc->lock);
   if (fg_mb_peer_post(p, fn, r, job_done) < 0) {
-    finish(r, FG_CMD_ERROR, 503, "busy", "%s", fg_error_detail());
+    finish(r, FG_CMD_ERROR, "busy", "%s", fg_error_detail());
     pthread_mutex_lock(&svc->lock);
     rec_unref_locked(r);
     pthread_mutex_unlock(&svc->lock);
@@ -574,7 +569,6 @@ static int start_and_wait(fg_robot_svc *svc, const fg_robot_request *req, fg_mb_
   while (r->v.finished_s == 0 && !(!req->wait && r->v.state == FG_CMD_ACKNOWLEDGED))
     if (pthread_cond_timedwait(&svc->cond, &svc->lock, &until) != 0) break;
   *v = r->v;
-  if (v->finished_s == 0) v->http_status = 202;
   rec_unref_locked(r);
   pthread_mutex_unlock(&svc->lock);
   return 0;
@@ -584,8 +578,9 @@ int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cm
   const int c = req->command;
   const int gripper_only = svc->gripper && (c == FG_ROBOT_OPEN || c == FG_ROBOT_CLOSE);
   if (!gripper_only && !svc->robot)
-    return fg_fail(FG_EUNAVAIL, "no robot is configured: set [robot] transport = tcp (host, "
-                   "port) or rtu (device) in the configuration file and restart the daemon");
+    return fg_fail_as(FG_EUNAVAIL, "not_configured", "no robot is configured: set [robot] "
+                      "transport = tcp (host, port) or rtu (device) in the configuration file "
+                      "and restart the daemon");
   return start_and_wait(svc, req, gripper_only ? svc->gripper : svc->robot,
                         gripper_only ? run_gripper_command : run_command, v);
 }
@@ -655,17 +650,20 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
   }
   if (req->dry_run) return 0;
   if (!svc->gripper)
-    return fg_fail(FG_EUNAVAIL, "no gripper is configured: set [gripper.modbus] transport = "
-                   "rtu (device, baud) or tcp (host, port) and restart the daemon");
+    return fg_fail_as(FG_EUNAVAIL, "not_configured", "no gripper is configured: set "
+                      "[gripper.modbus] transport = rtu (device, baud) or tcp (host, port) and "
+                      "restart the daemon");
   pthread_mutex_lock(&svc->lock);
   if (svc->active) {
     /* not between the steps of a pick or place */
     const fg_robot_cmd_view *a = &svc->active->v;
-    rc = fg_fail(FG_EBUSY, "command %llu (%s) is running (stage %s); the gripper is part of "
-                 "it: wait for it: GET /v1/robot/commands/%llu", (unsigned long long)a->id,
-                 command_names[a->command], a->stage, (unsigned long long)a->id);
+    rc = fg_fail_as(FG_EBUSY, "robot_busy", "command %llu (%s) is running (stage %s); the "
+                    "gripper is part of it: wait for it: GET /v1/robot/commands/%llu",
+                    (unsigned long long)a->id, command_names[a->command], a->stage,
+                    (unsigned long long)a->id);
   } else if (svc->gripper_busy) {
-    rc = fg_fail(FG_EBUSY, "another gripper action is running; wait for its answer");
+    rc = fg_fail_as(FG_EBUSY, "robot_busy", "another gripper action is running; wait for its "
+                    "answer");
   } else if (svc->latch.latched) { /* latched since the plan */
     rc = fg_fail(FG_ESTOPPED, "the robot is stopped (%s); POST /v1/robot/reset first",
                  svc->latch.reason);
@@ -689,10 +687,9 @@ int fg_gripper_action(fg_robot_svc *svc, const char *action, const fg_robot_requ
     v->object_detected = fg_robotiq_object_detected(&g.status);
   if (rc == 0) {
     v->state = FG_CMD_DONE;
-    v->http_status = 200;
   } else {
     const char *code;
-    gripper_outcome(rc, &v->http_status, &code);
+    gripper_outcome(rc, &code);
     v->state = FG_CMD_ERROR;
     snprintf(v->code, sizeof v->code, "%s", code);
     snprintf(v->message, sizeof v->message, "%s", fg_error_detail());

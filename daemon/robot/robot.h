@@ -89,8 +89,7 @@ typedef struct fg_robot_cmd_view {
   int robot_status;      /* last status word read, -1 before */
   int object_detected;   /* pick with a gripper: 0/1 after the close; -1 otherwise */
   double gripper_width_m; /* after the last gripper step; NaN without one */
-  int http_status;       /* the answer for this outcome (200, 202, 4xx, 5xx) */
-  char code[40];         /* error code when http_status >= 400 */
+  char code[40];         /* what went wrong when state is not done: "robot_timeout", ... */
   fg_motion_violation violation; /* the limit a plan refused (FG_ELIMIT); limit NULL else */
   char message[512];
   double created_s, finished_s; /* CLOCK_REALTIME; finished 0 while running */
@@ -149,7 +148,7 @@ int fg_robot_svc_has_gripper(const fg_robot_svc *svc);
 int fg_robot_plan(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v);
 
 /* Plans and starts req, then waits until it is acknowledged (req->wait = 0) or finished,
- * and copies its record to *v. 0 when it ran (its outcome is in v->state/http_status), or:
+ * and copies its record to *v. 0 when it ran (its outcome is in v->state and v->code), or:
  * the plan's errors, FG_EBUSY when another command is running (detail names it). */
 int fg_robot_execute(fg_robot_svc *svc, const fg_robot_request *req, fg_robot_cmd_view *v);
 

@@ -121,8 +121,8 @@ int fg_robot_stop(fg_robot_svc *svc, const char *reason, int *written, uint64_t 
   *written = 0;
   *stopped_id = 0;
   if (!svc->robot)
-    return fg_fail(FG_EUNAVAIL, "no robot is configured ([robot] transport = none): there is "
-                   "nothing to stop");
+    return fg_fail_as(FG_EUNAVAIL, "not_configured", "no robot is configured ([robot] "
+                      "transport = none): there is nothing to stop");
   pthread_mutex_lock(&svc->lock);
   if (svc->active) *stopped_id = svc->active->v.id;
   robot_latch_set_locked(svc, reason, *stopped_id, 1);
@@ -154,16 +154,17 @@ int fg_robot_reset(fg_robot_svc *svc) {
   pthread_mutex_lock(&svc->lock);
   int rc = 0;
   if (svc->active || svc->gripper_busy)
-    rc = fg_fail(FG_EBUSY, "a command is still running; wait for it to end, then reset");
+    rc = fg_fail_as(FG_EBUSY, "robot_busy", "a command is still running; wait for it to end, "
+                    "then reset");
   const int latched = svc->latch.latched;
   pthread_mutex_unlock(&svc->lock);
   if (rc < 0) return rc;
   if (svc->robot && (rc = fg_mb_peer_call(svc->robot, reset_run, svc)) < 0)
-    return fg_fail(FG_EUNAVAIL, "the robot could not be reached to clear its stop register "
-                   "(%s); the stop stays latched", fg_error_detail());
+    return fg_fail_as(FG_EUNAVAIL, "robot_disconnected", "the robot could not be reached to "
+                      "clear its stop register (%s); the stop stays latched", fg_error_detail());
   if (latched && unlink(svc->latch_path) < 0 && errno != ENOENT)
-    return fg_fail(FG_EIO, "cannot remove %s (%s); the stop stays latched", svc->latch_path,
-                   strerror(errno));
+    return fg_fail_as(FG_EIO, "state_unavailable", "cannot remove %s (%s); the stop stays "
+                      "latched", svc->latch_path, strerror(errno));
   pthread_mutex_lock(&svc->lock);
   memset(&svc->latch, 0, sizeof svc->latch);
   svc->latch_stop = 0;
