@@ -7,6 +7,7 @@
 #include "api_query.h"
 #include "robot/audit.h"
 #include "robot/robot.h"
+#include "state/scene_voxels.h"
 #include "state/voxcache.h"
 
 #include "config.h"
@@ -103,13 +104,7 @@ void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info) {
 }
 
 int fg_api_storage_error(fg_resp *resp, int rc, const char *what) {
-  if (rc == FG_ENOSPC)
-    return fg_resp_error(resp, 507, "insufficient_storage", "%s was not stored: the state "
-                         "dir's file system is full; nothing of this request was kept and what "
-                         "was stored before is intact; free space and send it again (%s)",
-                         what, fg_error_detail());
-  return fg_resp_error(resp, 500, "internal_error", "%s was not stored: %s", what,
-                       fg_error_detail());
+  return fg_api_fail(resp, fg_state_write_failed(rc, what));
 }
 
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
@@ -121,48 +116,10 @@ fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp) {
   return s;
 }
 
-int fg_api_field_error(fg_resp *resp, int rc) {
-  if (rc == FG_EBUSY || rc == FG_ENOMEM) {
-    snprintf(resp->header, sizeof resp->header, "Retry-After: 1");
-    return fg_resp_error(resp, 503, "memory_limit", "%s", fg_error_detail());
-  }
-  return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
-}
-
-fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp) {
+fg_field_ref *fg_api_scene_field(fg_scene *s, fg_resp *resp) {
   fg_field_ref *ref;
-  int rc = fg_scene_field_acquire(s, &ref);
-  if (rc != 0) return fg_api_field_error(resp, rc), NULL;
-  if (ref) return ref;
-  /* Asked again: a checkpoint that no longer loads shows only now. */
-  fg_scene_info now;
-  fg_scene_get_info(s, &now);
-  if (now.checkpoint_error[0])
-    fg_resp_error(resp, 409, "not_trained", "scene '%s' has no trained field: its checkpoint "
-                  "does not load (%s); POST /v1/scenes/%s/train to train it again, and wait "
-                  "until the job is done", info->name, now.checkpoint_error, info->name);
-  else
-    fg_resp_error(resp, 409, "not_trained", "scene '%s' is not trained yet; train it first: "
-                  "POST /v1/scenes/%s/train, and wait until the job is done", info->name,
-                  info->name);
-  return NULL;
-}
-
-int fg_api_scene_voxels(fg_field_ref *ref, const fg_voxel_grid *g, const char *name,
-                        int n_threads, fg_voxels **out, fg_resp *resp) {
-  double built_s = 0;
-  if (fg_voxcache_get(fg_field_ref_voxcache(ref), fg_field_ref_field(ref), g, n_threads, out,
-                      &built_s) != 0)
-    return fg_resp_error(resp, 500, "internal_error", "cannot build the voxel features of "
-                         "scene '%s': %s", name, fg_error_detail()), -1;
-  if (built_s > 0) {
-    const fg_voxel_features *vf = fg_voxels_features(*out);
-    fg_metrics_add_voxel_build(built_s);
-    fg_info("scene %s: voxel features built in %.2f s: %zu voxels at %g m, %zu occupied, %.1f MB",
-            name, built_s, fg_voxel_grid_count(g), g->voxel_size, fg_voxel_features_n_kept(vf),
-            (double)fg_voxel_features_bytes(vf) / 1048576.0);
-  }
-  return 0;
+  const int rc = fg_scene_field_get(s, &ref);
+  return rc == 0 ? ref : (fg_api_fail(resp, rc), NULL);
 }
 
 int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, int n_threads,
@@ -178,14 +135,14 @@ int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, 
   if (rc != 0)
     return fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info->name,
                          fg_error_detail()), -1;
-  out->ref = fg_api_scene_field(s, info, resp);
+  out->ref = fg_api_scene_field(s, resp);
   if (!out->ref) return -1;
   const fg_voxel_grid *g = &out->grid;
   const fg_field *field = fg_field_ref_field(out->ref);
   if (field->cfg.feature_dim > 0 && g->voxel_size == info->params.voxel_size) {
-    if (fg_api_scene_voxels(out->ref, g, info->name, n_threads, &out->vox, resp) != 0) {
+    if ((rc = fg_field_voxels(out->ref, g, info->name, n_threads, &out->vox)) != 0) {
       fg_api_solid_release(out);
-      return -1;
+      return fg_api_fail(resp, rc), -1;
     }
     out->alpha = fg_voxel_features_alpha(fg_voxels_features(out->vox));
     return 0;
@@ -210,19 +167,6 @@ void fg_api_solid_release(fg_api_solid *sv) {
   sv->vox = NULL;
   sv->ref = NULL;
   sv->alpha = NULL;
-}
-
-int fg_api_query_fits(const fg_field *f, const fg_query *q, const char *name, fg_resp *resp) {
-  if (f->cfg.feature_dim == 0)
-    return fg_resp_error(resp, 409, "no_features", "scene '%s' was trained on colour only, "
-                         "without features, so a query has nothing to score; upload frames "
-                         "with \"features\" (.npy) or configure [clip], then train it again",
-                         name), -1;
-  if (f->cfg.feature_dim != q->dim)
-    return fg_resp_error(resp, 409, "feature_dim_mismatch", "scene '%s' was trained again "
-                         "meanwhile and its features now have D = %d, not %d; ask again with "
-                         "a query of that D", name, f->cfg.feature_dim, q->dim), -1;
-  return 0;
 }
 
 /* ---------------------------------------------------------------- health and metrics */

@@ -109,31 +109,16 @@ void fg_api_scene_info_refresh(fg_app *app, fg_scene_info *info);
 struct fg_clip_model;
 struct fg_clip_model *fg_api_clip_model(fg_req *req, fg_resp *resp);
 
-/* Answers a failed write to the state dir: 507 insufficient_storage when the disk (or the
- * quota) is full (rc FG_ENOSPC), telling the client that nothing was stored and to retry once
- * space is freed; else 500 internal_error. `what` says what was not stored ("the frame"); the
- * message ends with the detail of the failure. Returns 0. */
+/* Answers a failed write to the state dir (store.h: fg_state_write_failed): 507
+ * insufficient_storage when the disk is full, else 500 internal_error. Returns 0. */
 int fg_api_storage_error(fg_resp *resp, int rc, const char *what);
 
 /* The scene named by the first path parameter with a reference, or NULL after answering 404. */
 fg_scene *fg_api_scene_param(fg_req *req, fg_resp *resp);
 
-/* The scene's field with a reference (fg_field_ref_release), or NULL after answering 409
- * not_trained with a message that says to train it first (and why its checkpoint did not
- * load, when it did not), or fg_api_field_error's answer. info is the scene's description. */
-fg_field_ref *fg_api_scene_field(fg_scene *s, const fg_scene_info *info, fg_resp *resp);
-
-/* Answers an error of fg_scene_field_acquire: 503 memory_limit with Retry-After when the
- * field cannot be loaded now (FG_EBUSY, FG_ENOMEM), else 500. Returns 0. */
-int fg_api_field_error(fg_resp *resp, int rc);
-
-/* The voxel features of ref's field on grid g from the field's voxel cache (voxcache.h),
- * built on first use: a build is counted in the metrics and logged for scene `name`. 0 and
- * *out (fg_voxels_release), or -1 after answering 500. */
-struct fg_voxels;
-struct fg_voxel_grid;
-int fg_api_scene_voxels(fg_field_ref *ref, const struct fg_voxel_grid *g, const char *name,
-                        int n_threads, struct fg_voxels **out, fg_resp *resp);
+/* Scene s's field with a reference (fg_field_ref_release), or NULL after answering
+ * fg_scene_field_get's failure (409 not_trained, 503 memory_limit). */
+fg_field_ref *fg_api_scene_field(fg_scene *s, fg_resp *resp);
 
 /* A scene's trained field with its voxel opacities on a grid of its workspace: what the
  * geometry and the point cloud are made of. */
@@ -146,7 +131,7 @@ typedef struct fg_api_solid {
 } fg_api_solid;
 
 /* Fills *out for scene s (info: its state now) at voxel_size metres. The opacities come from
- * the field's voxel cache (fg_api_scene_voxels) when the grid is the scene's own (the voxel
+ * the field's voxel cache (fg_field_voxels) when the grid is the scene's own (the voxel
  * size of info) and the field has features (only then is there a cache); else they are
  * sampled for this request alone, so that a one-off grid does not evict the cache that
  * heatmaps use. 0 on success (release with fg_api_solid_release); else -1 after answering
@@ -156,12 +141,5 @@ int fg_api_solid_get(fg_scene *s, const fg_scene_info *info, double voxel_size, 
 
 /* Releases what *sv holds (each part may be NULL already). */
 void fg_api_solid_release(fg_api_solid *sv);
-
-/* 0 when query q (api_query.h) can score field f of scene `name`; else answers 409 no_features (a
- * field trained on colour only) or 409 feature_dim_mismatch (a training of another D was
- * committed since q was checked) and returns -1. */
-struct fg_query;
-int fg_api_query_fits(const fg_field *f, const struct fg_query *q, const char *name,
-                      fg_resp *resp);
 
 #endif

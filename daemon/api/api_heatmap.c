@@ -7,7 +7,7 @@
 #include "state/json.h"
 #include "metrics/metrics.h"
 #include "api_query.h"
-#include "state/voxcache.h"
+#include "state/scene_voxels.h"
 
 #include "core/error.h"
 #include "core/log.h"
@@ -207,97 +207,80 @@ static char *heatmap_json(const fg_heatmap *hm, size_t *len) {
 
 /* ---------------------------------------------------------------- the handler */
 
-int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
-  fg_scene *s = fg_api_scene_param(req, resp);
-  if (!s) return 0;
-  json_t *body = fg_api_body_object(req, resp);
-  fg_field_ref *ref = NULL;
-  fg_voxels *vox = NULL;
-  fg_query q = {0};
-  fg_heatmap hm = {0};
-  if (!body) goto out;
-  fg_scene_info info;
-  fg_scene_get_info(s, &info);
-  fg_api_heatmap_req r;
-  if (fg_api_parse_heatmap(body, &info.params, &r, resp) != 0) goto out;
-  fg_voxel_grid grid;
-  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
-                              info.params.voxel_size);
-  if (rc == FG_ERANGE) {
-    fg_resp_error(resp, 400, "grid_too_large", "scene '%s': its workspace at voxel_size %g m "
-                  "has more than %zu voxels, the most a heatmap takes (%s); create the scene "
-                  "with a larger \"voxel_size\" or a smaller \"workspace\"", info.name,
-                  info.params.voxel_size, FG_QUERY_MAX_VOXELS, fg_error_detail());
-    goto out;
-  }
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "scene '%s': %s", info.name, fg_error_detail());
-    goto out;
-  }
-  /* The query is checked first, against the trained field's D, else the frames'. */
-  if (fg_query_parse(req, resp, body, info.field_feature_dim ? info.field_feature_dim
-                     : info.feature_dim, &q) != 0)
-    goto out;
-  ref = fg_api_scene_field(s, &info, resp);
-  if (!ref) goto out;
-  const fg_field *field = fg_field_ref_field(ref);
-  if (fg_api_query_fits(field, &q, info.name, resp) != 0) goto out;
-
-  int threads = fg_conf_threads(req->conf);
-  if (fg_api_scene_voxels(ref, &grid, info.name, threads, &vox, resp) != 0) goto out;
-  /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
-  fg_field_ref_release(ref);
-  ref = NULL;
-
-  fg_heatmap_options o;
-  fg_heatmap_options_default(&o);
-  o.alpha_threshold = r.alpha_threshold;
-  o.min_score = r.min_score;
-  o.max_points = r.max_points;
-  o.want_dense = r.format == FG_API_HEATMAP_NPY;
-  o.want_points = r.format != FG_API_HEATMAP_NPY;
-  o.n_threads = threads;
-  rc = fg_heatmap_compute(fg_voxels_features(vox), &q, &o, &hm);
-  if (rc != 0) {
-    if (rc == FG_EINVAL)
-      fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
-    else
-      fg_resp_error(resp, 500, "internal_error", "cannot compute the heatmap: %s",
-                    fg_error_detail());
-    goto out;
-  }
+/* Answers heatmap hm in format f. */
+static void send_heatmap(fg_resp *resp, const fg_heatmap *hm, fg_api_heatmap_format f) {
   uint8_t *bytes = NULL;
   size_t len = 0;
-  if (r.format == FG_API_HEATMAP_JSON) {
-    char *text = heatmap_json(&hm, &len);
+  if (f == FG_API_HEATMAP_JSON) {
+    char *text = heatmap_json(hm, &len);
     if (!text) {
       fg_resp_error(resp, 500, "internal_error", "out of memory writing %zu points",
-                    hm.n_points);
-      goto out;
+                    hm->n_points);
+      return;
     }
     fg_resp_take(resp, 200, "application/json", text, len);
     fg_metrics_count_heatmap(FG_METRICS_HEATMAP_JSON);
-  } else if (r.format == FG_API_HEATMAP_NPY) {
-    if (fg_heatmap_encode_npy(&hm, &bytes, &len) != 0) {
+  } else if (f == FG_API_HEATMAP_NPY) {
+    if (fg_heatmap_encode_npy(hm, &bytes, &len) != 0) {
       fg_resp_error(resp, 500, "internal_error", "cannot encode the grid: %s", fg_error_detail());
-      goto out;
+      return;
     }
     fg_resp_take(resp, 200, "application/x-npy", (char *)bytes, len);
     fg_metrics_count_heatmap(FG_METRICS_HEATMAP_NPY);
   } else {
-    if (fg_heatmap_encode_ply(&hm, NAN, NAN, &bytes, &len) != 0) {
+    if (fg_heatmap_encode_ply(hm, NAN, NAN, &bytes, &len) != 0) {
       fg_resp_error(resp, 500, "internal_error", "cannot encode the point cloud: %s",
                     fg_error_detail());
-      goto out;
+      return;
     }
     fg_resp_take(resp, 200, "application/octet-stream", (char *)bytes, len);
     fg_metrics_count_heatmap(FG_METRICS_HEATMAP_PLY);
   }
+}
+
+/* The heatmap of query q on voxel features vf as request r asks for it. */
+static int compute(const fg_voxel_features *vf, const fg_query *q, const fg_api_heatmap_req *r,
+                   int n_threads, fg_heatmap *hm) {
+  fg_heatmap_options o;
+  fg_heatmap_options_default(&o);
+  o.alpha_threshold = r->alpha_threshold;
+  o.min_score = r->min_score;
+  o.max_points = r->max_points;
+  o.want_dense = r->format == FG_API_HEATMAP_NPY;
+  o.want_points = r->format != FG_API_HEATMAP_NPY;
+  o.n_threads = n_threads;
+  const int rc = fg_heatmap_compute(vf, q, &o, hm);
+  if (rc != 0 && rc != FG_EINVAL)
+    return fg_fail(rc, "cannot compute the heatmap: %s", fg_error_detail());
+  return rc;
+}
+
+int fg_api_scene_heatmap(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  fg_query q = {0};
+  fg_scene_voxels sv = {0};
+  fg_heatmap hm = {0};
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  fg_api_heatmap_req r;
+  /* The query is checked first, against the trained field's D, else the frames'. */
+  if (!body || fg_api_parse_heatmap(body, &info.params, &r, resp) != 0 ||
+      fg_query_parse(req, resp, body, info.field_feature_dim ? info.field_feature_dim
+                     : info.feature_dim, &q) != 0)
+    goto out;
+  const int threads = fg_conf_threads(req->conf);
+  int rc = fg_scene_voxels_acquire(s, q.dim, "a query has nothing to score", threads, &sv);
+  if (rc == 0) rc = compute(sv.vf, &q, &r, threads, &hm);
+  if (rc == 0)
+    send_heatmap(resp, &hm, r.format);
+  else
+    fg_api_fail(resp, rc);
 out:
   fg_heatmap_release(&hm);
+  fg_scene_voxels_release(&sv);
   fg_query_release(&q);
-  fg_voxels_release(vox);
-  fg_field_ref_release(ref);
   json_decref(body);
   fg_scene_unref(s);
   return 0;

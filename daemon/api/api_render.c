@@ -5,6 +5,7 @@
 #include "api_decode.h"
 #include "decoder/decoder.h"
 #include "state/json.h"
+#include "state/scene_voxels.h"
 #include "metrics/metrics.h"
 #include "api_query.h"
 
@@ -274,10 +275,15 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   if (r.heatmap && fg_query_parse(req, resp, body, info.field_feature_dim ? info.field_feature_dim
                                   : info.feature_dim, &q) != 0)
     goto out;
-  ref = fg_api_scene_field(s, &info, resp);
+  ref = fg_api_scene_field(s, resp);
   if (!ref) goto out;
   const fg_field *field = fg_field_ref_field(ref);
-  if (r.heatmap && fg_api_query_fits(field, &q, info.name, resp) != 0) goto out;
+  int rc = r.heatmap ? fg_field_features_fit(field, info.name, q.dim,
+                                                "a query has nothing to score") : 0;
+  if (rc != 0) {
+    fg_api_fail(resp, rc);
+    goto out;
+  }
   size_t n = (size_t)r.cam.w * (size_t)r.cam.h;
   pixels = malloc(n * (r.depth ? sizeof(uint16_t) : 3));
   if (!pixels) {
@@ -291,7 +297,7 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   /* Normals read the density half a voxel of the scene's grid to either side: the surface the
    * voxels show, not the hash grid's millimetre-scale roughness. */
   const float step_m = (float)(0.5 * info.params.voxel_size);
-  int rc = r.heatmap ? render_heatmap(field, &r, &q, bg, threads, pixels)
+  rc = r.heatmap ? render_heatmap(field, &r, &q, bg, threads, pixels)
                      : render_image(field, &r, bg, step_m, threads, pixels);
   if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "render failed: %s", fg_error_detail());

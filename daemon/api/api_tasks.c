@@ -6,7 +6,7 @@
 #include "api_decode.h"
 #include "state/json.h"
 #include "state/tasks.h"
-#include "state/voxcache.h"
+#include "state/scene_grasps.h"
 
 #include "core/error.h"
 #include "core/log.h"
@@ -241,15 +241,6 @@ int fg_api_parse_demo(json_t *body, const fg_conf *conf, const fg_task *t,
   return fg_api_parse_query_points(body, t, conf->gripper_model, d, resp);
 }
 
-/* The 409 of a demo that does not fit its task (fg_task_check_demo's detail). */
-static int answer_misfit(fg_resp *resp, fg_task_fit fit) {
-  const char *code = fit == FG_TASK_QUERY_POINTS_DIFFER ? "query_points_mismatch"
-                     : fit == FG_TASK_KIND_DIFFERS      ? "kind_mismatch"
-                     : fit == FG_TASK_DIM_DIFFERS       ? "feature_dim_mismatch"
-                                                        : "too_many_demos";
-  return fg_resp_error(resp, 409, code, "%s", fg_error_detail());
-}
-
 int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
   const char *name = req->params[0];
   if (fg_scene_name_validate(name) != 0)
@@ -257,12 +248,8 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
                          fg_error_detail());
   json_t *body = fg_api_body_object(req, resp);
   if (!body) return 0;
-  const fg_task *t = fg_tasks_get(req->app->tasks, name);
+  const fg_task *t = fg_tasks_get(req->app->tasks, name), *nt = NULL;
   fg_scene *s = NULL;
-  fg_field_ref *ref = NULL;
-  fg_voxels *vox = NULL;
-  float *p = NULL, *z = NULL;
-  const fg_task *nt = NULL;
   fg_task_demo_new d = {0};
   if (fg_api_parse_demo(body, req->conf, t, &d, resp) != 0) goto out;
   s = fg_store_get(req->app->store, d.scene);
@@ -271,104 +258,18 @@ int fg_api_task_demo_add(fg_req *req, fg_resp *resp) {
                   "them", d.scene);
     goto out;
   }
-  fg_scene_info info;
-  fg_scene_get_info(s, &info);
-  const double *T = d.T_world_gripper;
-  for (int a = 0; a < 3; a++) {
-    const double x = T[4 * a + 3];
-    if (!(x >= info.params.workspace_min[a] && x <= info.params.workspace_max[a])) {
-      fg_resp_error(resp, 400, "pose_outside_workspace", "the pose's position [%g, %g, %g] is "
-                    "outside scene '%s''s workspace [%g, %g, %g] .. [%g, %g, %g]; a demo "
-                    "shows the gripper where the scene's field is", T[3], T[7], T[11],
-                    info.name, info.params.workspace_min[0], info.params.workspace_min[1],
-                    info.params.workspace_min[2], info.params.workspace_max[0],
-                    info.params.workspace_max[1], info.params.workspace_max[2]);
-      goto out;
-    }
-  }
-  ref = fg_api_scene_field(s, &info, resp);
-  if (!ref) goto out;
-  const fg_field *field = fg_field_ref_field(ref);
-  d.dim = field->cfg.feature_dim;
-  if (d.dim == 0) {
-    fg_resp_error(resp, 409, "no_features", "scene '%s' was trained on colour only, without "
-                  "features, so a demo has nothing to sample; upload frames with \"features\" "
-                  "(.npy) or configure [clip], then train it again", info.name);
-    goto out;
-  }
-  fg_task_fit fit = fg_task_check_demo(t, &d);
-  if (fit != FG_TASK_FITS) {
-    answer_misfit(resp, fit);
-    goto out;
-  }
-  fg_voxel_grid grid;
-  int rc = fg_voxel_grid_init(&grid, info.params.workspace_min, info.params.workspace_max,
-                              info.params.voxel_size);
-  const int threads = fg_conf_threads(req->conf);
-  if (rc == 0) rc = fg_voxcache_get(fg_field_ref_voxcache(ref), field, &grid, threads, &vox, NULL);
-  if (rc != 0) {
-    fg_resp_error(resp, rc == FG_ERANGE ? 400 : 500, rc == FG_ERANGE ? "grid_too_large"
-                  : "internal_error", "cannot build the voxel features of scene '%s': %s",
-                  info.name, fg_error_detail());
-    goto out;
-  }
-  /* The voxels do not refer to the field: let a new training's field replace it meanwhile. */
-  fg_field_ref_release(ref);
-  ref = NULL;
-  p = malloc((size_t)d.n_points * 3 * sizeof *p);
-  z = malloc((size_t)d.n_points * (size_t)d.dim * sizeof *z);
-  if (!p || !z) {
-    fg_resp_error(resp, 500, "internal_error", "out of memory");
-    goto out;
-  }
-  const fg_grasp_field *gf = NULL;
-  if (fg_voxels_grasp_field(vox, threads, &gf, NULL) != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot build the grasp field of scene '%s': "
-                  "%s", info.name, fg_error_detail());
-    goto out;
-  }
-  if (fg_grasp_query_points_layout(d.qp_layout, d.n_points, d.qp_mean_m, d.qp_std_m,
-                                   d.qp_size_m, p) != 0 ||
-      fg_grasp_sample(gf, T, p, d.n_points, z) != 0) {
-    fg_resp_error(resp, 400, "invalid_query_points", "%s", fg_error_detail());
-    goto out;
-  }
-  double zz = 0;
-  for (size_t k = 0; k < (size_t)d.n_points * (size_t)d.dim; k++) zz += (double)z[k] * z[k];
-  if (!(zz > 0)) {
-    fg_resp_error(resp, 400, "demo_in_free_space", "at this pose every query point of the "
-                  "gripper lies in free space of scene '%s''s field, so the demo would show "
-                  "nothing; give the pose of the gripper at the object (the TCP between the "
-                  "fingertips, +z the approach direction)", info.name);
-    goto out;
-  }
-  d.z = z;
   int id = 0;
-  rc = fg_tasks_add_demo(req->app->tasks, name, &d, &fit, &nt, &id);
-  if (rc == FG_EEXIST) {
-    answer_misfit(resp, fit);
-    goto out;
-  }
-  if (rc == FG_EBUSY) {
-    fg_resp_error(resp, 409, "task_unreadable", "%s", fg_error_detail());
-    goto out;
-  }
+  const int rc = fg_scene_demo_add(s, req->app->tasks, name, t, &d, fg_conf_threads(req->conf),
+                                   &nt, &id);
   if (rc != 0) {
-    fg_api_storage_error(resp, rc, "the demo");
+    fg_api_fail(resp, rc);
     goto out;
   }
-  const fg_task_demo *nd = &nt->demos[nt->n_demos - 1];
   snprintf(resp->location, sizeof resp->location, "/v1/tasks/%s", name);
-  fg_resp_json(resp, 201, json_pack("{s:o, s:o}", "demo", demo_json(nd), "task",
-                                    task_json(nt, 0)));
-  fg_info("task %s: demo %d on scene %s (%d query points, D = %d)", name, id, d.scene,
-          d.n_points, d.dim);
+  fg_resp_json(resp, 201, json_pack("{s:o, s:o}", "demo", demo_json(&nt->demos[nt->n_demos - 1]),
+                                    "task", task_json(nt, 0)));
 out:
   fg_task_unref(nt);
-  free(p);
-  free(z);
-  fg_voxels_release(vox);
-  fg_field_ref_release(ref);
   if (s) fg_scene_unref(s);
   fg_task_unref(t);
   json_decref(body);

@@ -853,3 +853,12 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
   pthread_mutex_unlock(&st->lock);
   return first;
 }
+
+int fg_state_write_failed(int rc, const char *what) {
+  if (rc == FG_ENOSPC)
+    return fg_fail_as(rc, "insufficient_storage", "%s was not stored: the state dir's file "
+                      "system is full; nothing of this request was kept and what was stored "
+                      "before is intact; free space and send it again (%s)", what,
+                      fg_error_detail());
+  return fg_fail_as(rc, "internal_error", "%s was not stored: %s", what, fg_error_detail());
+}

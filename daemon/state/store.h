@@ -207,4 +207,10 @@ void fg_scene_set_last_job(fg_scene *scene, const char *id, const char *state);
 /* Whether the scene was deleted (a job holding it must not write into its folder). */
 int fg_scene_deleted(fg_scene *scene);
 
+/* Wraps the failure rc of a write to the state dir: insufficient_storage when the disk (or
+ * the quota) is full (FG_ENOSPC), saying that nothing was stored and to retry once space is
+ * freed; else internal_error. `what` says what was not stored ("the frame"); the message ends
+ * with the failure's detail. Returns rc. */
+int fg_state_write_failed(int rc, const char *what);
+
 #endif

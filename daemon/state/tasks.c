@@ -14,7 +14,6 @@
 
 #include <dirent.h>
 #include <errno.h>
-#include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -31,7 +30,7 @@
 typedef struct task_obj {
   fg_task pub; /* first: fg_task_unref casts back */
   atomic_int refs;
-  float *p_gripper, *Z, *feature;
+  float *p_gripper, *Z;
   fg_task_demo *demos;
   float **z; /* (n_demos) owned z of each demo */
 } task_obj;
@@ -59,7 +58,6 @@ static void obj_free(task_obj *o) {
   free(o->demos);
   free(o->p_gripper);
   free(o->Z);
-  free(o->feature);
   free(o);
 }
 
@@ -74,9 +72,11 @@ static const fg_task *obj_ref(task_obj *o) {
   return &o->pub;
 }
 
+const fg_task *fg_task_ref(const fg_task *t) { return obj_ref((task_obj *)t); }
+
 /* A snapshot of n_demos demos (copied from demos, whose z are copied too, (n_points, dim)
  * each) and the task's other fields from base into *out; the derived fields (means, Z,
- * feature, the query points) are computed here. FG_ENOMEM, or FG_EINVAL for bad query
+ * the query points) are computed here. FG_ENOMEM, or FG_EINVAL for bad query
  * points. */
 static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos,
                      task_obj **out) {
@@ -93,9 +93,8 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
     o->demos = calloc((size_t)n_demos, sizeof *o->demos);
     o->z = calloc((size_t)n_demos, sizeof *o->z);
     o->Z = calloc((size_t)nq * (size_t)D, sizeof *o->Z);
-    o->feature = calloc((size_t)D, sizeof *o->feature);
   }
-  if (!o->p_gripper || (n_demos && (!o->demos || !o->z || !o->Z || !o->feature))) {
+  if (!o->p_gripper || (n_demos && (!o->demos || !o->z || !o->Z))) {
     obj_free(o);
     return fg_fail(FG_ENOMEM, "out of memory");
   }
@@ -126,23 +125,6 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
       for (int i = 0; i < n_demos; i++) s += o->z[i][k];
       o->Z[k] = (float)(s / n_demos);
     }
-    double norm = 0;
-    double *f = calloc((size_t)D, sizeof *f);
-    if (!f) {
-      obj_free(o);
-      return fg_fail(FG_ENOMEM, "out of memory");
-    }
-    for (int p = 0; p < nq; p++)
-      for (int d = 0; d < D; d++) f[d] += o->Z[(size_t)p * D + d];
-    for (int d = 0; d < D; d++) norm += f[d] * f[d];
-    norm = sqrt(norm);
-    if (norm > 0 && isfinite(norm)) {
-      for (int d = 0; d < D; d++) o->feature[d] = (float)(f[d] / norm);
-    } else {
-      free(o->feature);
-      o->feature = NULL;
-    }
-    free(f);
     o->pub.width_m = width / n_demos;
     o->pub.approach_m = approach / n_demos;
   } else {
@@ -151,7 +133,6 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
   o->pub.p_gripper = o->p_gripper;
   o->pub.demos = o->demos;
   o->pub.Z = o->Z;
-  o->pub.feature = o->feature;
   *out = o;
   return 0;
 }

@@ -64,8 +64,6 @@ typedef struct fg_task {
   int n_demos;
   const fg_task_demo *demos; /* (n_demos) by id */
   const float *Z;            /* (n_points, dim) mean of the demos' z; NULL without demos */
-  const float *feature;      /* (dim) mean over the points of Z, unit length; NULL without
-                              * demos or when that mean is zero (F3RM's retrieval key) */
 } fg_task;
 
 typedef struct fg_tasks fg_tasks;
@@ -80,6 +78,8 @@ void fg_tasks_free(fg_tasks *ts);
 const fg_task *fg_tasks_get(fg_tasks *ts, const char *name);
 /* Accepts NULL. */
 void fg_task_unref(const fg_task *t);
+/* Another reference to t (fg_task_unref); returns t. */
+const fg_task *fg_task_ref(const fg_task *t);
 
 /* Every task by name, each with a reference, in a malloc'd array; the caller drops them with
  * fg_tasks_list_free. FG_ENOMEM. */
