@@ -3,7 +3,6 @@
 #include "api.h"
 #include "api_decode.h"
 #include "state/clip_svc.h"
-#include "decoder/decoder.h"
 #include "state/json.h"
 #include "metrics/metrics.h"
 
@@ -154,92 +153,68 @@ out:
 
 /* ---------------------------------------------------------------- POST /v1/embed/image */
 
-int fg_api_embed_image(fg_req *req, fg_resp *resp) {
-  fg_clip_model *m = fg_api_clip_model(req, resp);
-  if (!m) return 0;
-  fg_image img = {0};
-  float *dense = NULL;
+/* Reads ?output= (*pooled) and checks that the body is an image file; answers 400 or 415
+ * itself and returns -1 otherwise. */
+static int parse_embed_image(const fg_req *req, int *pooled, fg_resp *resp) {
   const char *output = fg_req_query(req, "output");
-  int pooled = 0;
-  if (output && strcmp(output, "pooled") == 0) {
-    pooled = 1;
-  } else if (output && strcmp(output, "dense") != 0) {
-    fg_resp_error(resp, 400, "invalid_request", "?output= must be \"dense\" (the default: "
-                  "MaskCLIP features [h, w, E] as .npy) or \"pooled\" (the image embedding as "
-                  "JSON), got \"%.40s\"", output);
-    goto out;
-  }
-  if (req->body_len == 0) {
-    fg_resp_error(resp, 400, "invalid_request", "the body is empty; send the image file itself "
-                  "as the body (PNG, JPEG, OpenEXR or TIFF), e.g. curl --data-binary @photo.png "
-                  "-H 'Content-Type: image/png'");
-    goto out;
-  }
-  if (!fg_image_sniff(req->body, req->body_len)) {
-    fg_resp_error(resp, 415, "unsupported_media_type", "the body is not PNG, JPEG, OpenEXR or "
-                  "TIFF data; send the image file itself as the body (curl --data-binary "
-                  "@photo.png), not a form (curl -F)");
-    goto out;
-  }
-  /* Transparent pixels are composited on white, the default background of scenes. */
-  static const float white[3] = {1, 1, 1};
-  int rc = fg_decoder_decode(req->app->decoder, req->body, req->body_len, white, &img);
-  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM) {
-    fg_resp_error(resp, 500, "internal_error", "cannot decode the image: %s", fg_error_detail());
-    goto out;
-  }
-  if (rc != 0) {
-    fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
-    goto out;
-  }
-  const fg_clip_info *info = fg_clip_model_info(m);
-  const int E = info->embed_dim;
-  if (pooled) {
-    float *v = malloc((size_t)E * sizeof *v);
-    rc = v ? fg_clip_pooled_embedding(fg_clip_model_clip(m), img.rgb, img.w, img.h, v)
-           : fg_fail(FG_ENOMEM, "out of memory");
-    json_t *arr = rc == 0 ? float_array(v, E) : NULL;
-    free(v);
-    json_t *model = rc == 0 ? fg_clip_model_json(m) : NULL;
-    if (rc == 0 && arr && model) {
-      fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_IMAGE_POOLED, 1);
-      fg_resp_json(resp, 200, json_pack("{s:o,s:i,s:o}", "embedding", arr, "dim", E, "model",
-                                        model));
-    } else {
+  *pooled = output && strcmp(output, "pooled") == 0;
+  if (output && !*pooled && strcmp(output, "dense") != 0)
+    return fg_resp_error(resp, 400, "invalid_request", "?output= must be \"dense\" (the "
+                         "default: MaskCLIP features [h, w, E] as .npy) or \"pooled\" (the "
+                         "image embedding as JSON), got \"%.40s\"", output), -1;
+  if (req->body_len == 0)
+    return fg_resp_error(resp, 400, "invalid_request", "the body is empty; send the image file "
+                         "itself as the body (PNG, JPEG, OpenEXR or TIFF), e.g. curl "
+                         "--data-binary @photo.png -H 'Content-Type: image/png'"), -1;
+  if (!fg_image_sniff(req->body, req->body_len))
+    return fg_resp_error(resp, 415, "unsupported_media_type", "the body is not PNG, JPEG, "
+                         "OpenEXR or TIFF data; send the image file itself as the body (curl "
+                         "--data-binary @photo.png), not a form (curl -F)"), -1;
+  return 0;
+}
+
+/* Answers embedding e of model m: pooled as JSON, dense as .npy. */
+static void send_embedding(fg_resp *resp, const fg_clip_model *m,
+                           const fg_clip_image_embedding *e) {
+  if (e->hp == 0) {
+    json_t *arr = float_array(e->data, e->dim), *model = fg_clip_model_json(m);
+    if (!arr || !model) {
       json_decref(arr);
       json_decref(model);
-      if (rc == FG_EINVAL || rc == FG_ERANGE)
-        fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
-      else
-        fg_resp_error(resp, 500, "internal_error", "cannot embed the image: %s",
-                      rc ? fg_error_detail() : "out of memory");
+      fg_resp_error(resp, 500, "internal_error", "cannot embed the image: out of memory");
+      return;
     }
-    goto out;
+    fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_IMAGE_POOLED, 1);
+    fg_resp_json(resp, 200, json_pack("{s:o,s:i,s:o}", "embedding", arr, "dim", e->dim, "model",
+                                      model));
+    return;
   }
-  int hp, wp;
-  rc = fg_clip_dense_features(fg_clip_model_clip(m), img.rgb, img.w, img.h, &dense, &hp, &wp);
-  if (rc == FG_EINVAL || rc == FG_ERANGE) {
-    fg_resp_error(resp, 400, "invalid_image", "%s", fg_error_detail());
-    goto out;
-  }
-  if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot compute the features: %s",
-                  fg_error_detail());
-    goto out;
-  }
-  const size_t shape[3] = {(size_t)hp, (size_t)wp, (size_t)E};
+  const size_t shape[3] = {(size_t)e->hp, (size_t)e->wp, (size_t)e->dim};
   uint8_t *npy = NULL;
   size_t npy_len = 0;
-  if (fg_npy_encode(FG_DTYPE_F32, 3, shape, dense, &npy, &npy_len) != 0) {
+  if (fg_npy_encode(FG_DTYPE_F32, 3, shape, e->data, &npy, &npy_len) != 0) {
     fg_resp_error(resp, 500, "internal_error", "cannot encode the features: %s",
                   fg_error_detail());
-    goto out;
+    return;
   }
   fg_metrics_add_clip_embeddings(FG_METRICS_CLIP_IMAGE_DENSE, 1);
   fg_resp_take(resp, 200, "application/x-npy", (char *)npy, npy_len);
-out:
-  free(dense);
-  fg_image_release(&img);
+}
+
+int fg_api_embed_image(fg_req *req, fg_resp *resp) {
+  fg_clip_model *m = fg_api_clip_model(req, resp);
+  if (!m) return 0;
+  int pooled;
+  fg_clip_image_embedding e = {0};
+  if (parse_embed_image(req, &pooled, resp) == 0) {
+    const int rc = fg_clip_model_embed_image(m, req->app->decoder, req->body, req->body_len,
+                                             pooled, &e);
+    if (rc != 0)
+      fg_api_fail(resp, rc);
+    else
+      send_embedding(resp, m, &e);
+  }
+  free(e.data);
   fg_clip_model_release(m);
   return 0;
 }

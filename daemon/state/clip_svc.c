@@ -2,6 +2,7 @@
 #include "clip_svc.h"
 
 #include "conf/conf.h"
+#include "decoder/decoder.h"
 
 #include "core/error.h"
 #include "core/log.h"
@@ -263,4 +264,31 @@ json_t *fg_clip_model_json(const fg_clip_model *m) {
                    info->dtype, "embed_dim", info->embed_dim, "image_size", info->image_size,
                    "patch_size", info->patch_size, "context_length", info->context_length,
                    "naming", info->naming ? "hf" : "openai");
+}
+
+int fg_clip_model_embed_image(fg_clip_model *m, fg_decoder *dec, const void *bytes, size_t len,
+                              int pooled, fg_clip_image_embedding *out) {
+  memset(out, 0, sizeof *out);
+  static const float white[3] = {1, 1, 1};
+  fg_image img = {0};
+  int rc = fg_decoder_decode(dec, bytes, len, white, &img);
+  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM)
+    return fg_fail_as(rc, "internal_error", "cannot decode the image: %s", fg_error_detail());
+  if (rc != 0) return fg_fail_as(rc, "invalid_image", "%s", fg_error_detail());
+  out->dim = fg_clip_model_info(m)->embed_dim;
+  if (pooled) {
+    out->data = malloc((size_t)out->dim * sizeof *out->data);
+    rc = out->data ? fg_clip_pooled_embedding(m->clip, img.rgb, img.w, img.h, out->data)
+                   : fg_fail(FG_ENOMEM, "out of memory");
+  } else {
+    rc = fg_clip_dense_features(m->clip, img.rgb, img.w, img.h, &out->data, &out->hp, &out->wp);
+  }
+  fg_image_release(&img);
+  if (rc == 0) return 0;
+  free(out->data);
+  out->data = NULL;
+  if (rc == FG_EINVAL || rc == FG_ERANGE)
+    return fg_fail_as(rc, "invalid_image", "%s", fg_error_detail());
+  return fg_fail_as(rc, "internal_error", "%s: %s", pooled ? "cannot embed the image"
+                    : "cannot compute the features", fg_error_detail());
 }

@@ -70,4 +70,19 @@ int fg_clip_model_threads(const fg_clip_model *m);
  * "patch_size", "context_length", "naming"}. New reference, NULL on allocation failure. */
 json_t *fg_clip_model_json(const fg_clip_model *m);
 
+/* An image's CLIP embedding: pooled, one vector (hp = wp = 0), or MaskCLIP's dense features
+ * on the patch grid (hp, wp). data: (hp, wp, dim) or (dim), malloc'd. */
+typedef struct fg_clip_image_embedding {
+  float *data;
+  int hp, wp, dim;
+} fg_clip_image_embedding;
+
+/* The embedding of an encoded image (PNG, JPEG, OpenEXR or TIFF, decoded by dec in a child
+ * process; transparent pixels on white, the scenes' default background) by model m into
+ * *out (free out->data), pooled or dense. Failures carry their reason: invalid_image (an
+ * image that does not decode, or that the model cannot take), internal_error. */
+struct fg_decoder;
+int fg_clip_model_embed_image(fg_clip_model *m, struct fg_decoder *dec, const void *bytes,
+                              size_t len, int pooled, fg_clip_image_embedding *out);
+
 #endif
