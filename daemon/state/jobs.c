@@ -444,6 +444,13 @@ static void dequeue_locked(fg_jobs *jobs, fg_job *j) {
   }
 }
 
+/* Lets go of j->lock after a change of j->info when `changed`: every change a reader may see
+ * gets a new version (GET .../events sends one event per version). */
+static void unlock_changed(fg_job *j, int changed) {
+  if (changed) j->info.version++;
+  pthread_mutex_unlock(&j->lock);
+}
+
 /* Cancels j; the caller holds jobs->lock. Returns 0, or FG_EBUSY with a detail. */
 static int cancel_locked(fg_jobs *jobs, fg_job *j) {
   pthread_mutex_lock(&j->lock);
@@ -463,9 +470,8 @@ static int cancel_locked(fg_jobs *jobs, fg_job *j) {
     j->info.state = FG_JOB_CANCELLED;
     j->info.eta_s = NAN;
     j->info.finished_ms = fg_real_ms();
-    j->info.version++;
   }
-  pthread_mutex_unlock(&j->lock);
+  unlock_changed(j, rc == 0);
   if (rc == 0 && st == FG_JOB_QUEUED) dequeue_locked(jobs, j);
   return rc;
 }
@@ -535,10 +541,7 @@ fg_job_info *fg_job_update_begin(fg_job *j) {
   return &j->info;
 }
 
-void fg_job_update_end(fg_job *j) {
-  j->info.version++;
-  pthread_mutex_unlock(&j->lock);
-}
+void fg_job_update_end(fg_job *j) { unlock_changed(j, 1); }
 
 void fg_job_set_phase(fg_job *j, const char *phase) {
   fg_job_info *info = fg_job_update_begin(j);
@@ -554,15 +557,15 @@ void fg_job_fail(fg_job *j, const char *fmt, ...) {
   va_end(ap);
   pthread_mutex_lock(&j->lock);
   j->committing = 0;
-  if (j->info.state == FG_JOB_RUNNING) {
+  const int running = j->info.state == FG_JOB_RUNNING;
+  if (running) {
     j->info.state = FG_JOB_FAILED;
     snprintf(j->info.error, sizeof j->info.error, "%s", msg);
     j->info.eta_s = NAN;
     j->info.elapsed_s = fg_mono_s() - j->started_mono;
     j->info.finished_ms = fg_real_ms();
-    j->info.version++;
   }
-  pthread_mutex_unlock(&j->lock);
+  unlock_changed(j, running);
   fg_warn("job %s: failed: %s", j->info.id, msg);
 }
 
@@ -596,8 +599,7 @@ void fg_job_finish(fg_job *j, fg_job_state state) {
   j->info.eta_s = info.eta_s;
   j->info.elapsed_s = info.elapsed_s;
   j->info.finished_ms = info.finished_ms;
-  j->info.version++;
-  pthread_mutex_unlock(&j->lock);
+  unlock_changed(j, 1);
 }
 
 void fg_job_lower_priority(int n_threads) {
@@ -639,9 +641,8 @@ static void *worker_main(void *arg) {
       j->info.state = FG_JOB_RUNNING;
       j->info.started_ms = fg_real_ms();
       j->started_mono = fg_mono_s();
-      j->info.version++;
     }
-    pthread_mutex_unlock(&j->lock);
+    unlock_changed(j, go);
     if (go) {
       persist(jobs, j);
       fg_info("job %s: %s of scene %s started", j->info.id, j->kind->name, j->info.scene);
