@@ -55,14 +55,8 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
                             "A-Z a-z 0-9 _ . -");
   if (rc > 0) rc = fg_api_parse_scene_params(body, &p);
   if (rc == 0) rc = fg_store_create(req->app->store, name, &p, 0);
-  if (rc == FG_EEXIST) {
-    fg_resp_error(resp, 409, "scene_exists", "%s", fg_error_detail());
-  } else if (rc == FG_ERANGE) {
-    fg_resp_error(resp, 507, "scene_limit", "%s", fg_error_detail());
-  } else if (rc == FG_EINVAL) {
-    fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
-  } else if (rc != 0) {
-    fg_api_storage_error(resp, rc, "the scene");
+  if (rc != 0) {
+    fg_api_fail(resp, rc);
   } else {
     fg_scene *s = fg_store_get(req->app->store, name);
     fg_scene_info info;
@@ -92,9 +86,7 @@ int fg_api_scene_get(fg_req *req, fg_resp *resp) {
 
 int fg_api_scene_delete(fg_req *req, fg_resp *resp) {
   int rc = fg_store_delete(req->app->store, req->params[0]);
-  if (rc == FG_ENOENT)
-    return fg_resp_error(resp, 404, "scene_not_found", "no scene named '%s'", req->params[0]);
-  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  if (rc != 0) return fg_api_fail(resp, rc);
   /* After the store's delete, so that a training submitted meanwhile is caught too. */
   if (req->app->jobs) fg_jobs_cancel_scene(req->app->jobs, req->params[0]);
   fg_resp_json(resp, 200, json_pack("{s:s}", "deleted", req->params[0]));

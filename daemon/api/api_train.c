@@ -126,13 +126,8 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
   }
   fg_job_info job;
   int rc = fg_jobs_submit(req->app->jobs, FG_JOB_KIND_TRAIN, s, &p, NULL, &job);
-  if (rc == FG_EBUSY) {
-    fg_resp_error(resp, 409, "training_in_progress", "%s", fg_error_detail());
-  } else if (rc == FG_ENOENT) {
-    fg_resp_error(resp, 404, "scene_not_found", "%s", fg_error_detail());
-  } else if (rc != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot queue the training: %s",
-                  fg_error_detail());
+  if (rc != 0) {
+    fg_api_fail(resp, rc);
   } else {
     snprintf(resp->location, sizeof resp->location, "/v1/jobs/%s", job.id);
     fg_resp_json(resp, 202, json_pack("{s:s,s:s}", "job", job.id, "state",
@@ -158,14 +153,9 @@ int fg_api_jobs_list(fg_req *req, fg_resp *resp) {
   return 0;
 }
 
-static int job_not_found(fg_resp *resp, const char *id) {
-  return fg_resp_error(resp, 404, "job_not_found", "no job '%s'; GET /v1/jobs lists them (a "
-                       "scene's last job is kept across restarts, older ones are not)", id);
-}
-
 int fg_api_job_get(fg_req *req, fg_resp *resp) {
   fg_job *j = fg_jobs_get(req->app->jobs, req->params[0]);
-  if (!j) return job_not_found(resp, req->params[0]);
+  if (!j) return fg_api_fail(resp, FG_ENOENT);
   fg_job_info info;
   fg_job_get_info(j, &info);
   fg_job_unref(j);
@@ -176,9 +166,7 @@ int fg_api_job_get(fg_req *req, fg_resp *resp) {
 int fg_api_job_cancel(fg_req *req, fg_resp *resp) {
   fg_job_info info;
   int rc = fg_jobs_cancel(req->app->jobs, req->params[0], &info);
-  if (rc == FG_ENOENT) return job_not_found(resp, req->params[0]);
-  if (rc == FG_EBUSY) return fg_resp_error(resp, 409, "job_finished", "%s", fg_error_detail());
-  if (rc != 0) return fg_resp_error(resp, 500, "internal_error", "%s", fg_error_detail());
+  if (rc != 0) return fg_api_fail(resp, rc);
   fg_resp_json(resp, 200, fg_job_info_json(&info));
   return 0;
 }
@@ -272,7 +260,7 @@ static const fg_stream_ops sse_ops = {sse_read, sse_ready, sse_free};
 
 int fg_api_job_events(fg_req *req, fg_resp *resp) {
   fg_job *j = fg_jobs_get(req->app->jobs, req->params[0]);
-  if (!j) return job_not_found(resp, req->params[0]);
+  if (!j) return fg_api_fail(resp, FG_ENOENT);
   if (atomic_fetch_add(&n_streams, 1) >= FG_API_MAX_EVENT_STREAMS) {
     atomic_fetch_sub(&n_streams, 1);
     fg_job_unref(j);

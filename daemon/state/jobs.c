@@ -302,11 +302,18 @@ static void prune_locked(fg_jobs *jobs) {
   }
 }
 
+/* The job with that id, or NULL with the failure recorded; the caller holds jobs->lock. */
+static fg_job *find_locked(fg_jobs *jobs, const char *id) {
+  for (fg_job *j = jobs->all; j; j = j->next)
+    if (strcmp(j->info.id, id) == 0) return j;
+  fg_fail_as(FG_ENOENT, "job_not_found", "no job '%s'; GET /v1/jobs lists them (a scene's "
+             "last job is kept across restarts, older ones are not)", id);
+  return NULL;
+}
+
 fg_job *fg_jobs_get(fg_jobs *jobs, const char *id) {
   pthread_mutex_lock(&jobs->lock);
-  fg_job *found = NULL;
-  for (fg_job *j = jobs->all; j && !found; j = j->next)
-    if (strcmp(j->info.id, id) == 0) found = j;
+  fg_job *found = find_locked(jobs, id);
   if (found) atomic_fetch_add(&found->refs, 1);
   pthread_mutex_unlock(&jobs->lock);
   return found;
@@ -372,9 +379,11 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
                    const fg_job_params *params, void *kind_params, fg_job_info *out) {
   const char *name = fg_scene_name(scene);
   const fg_job_kind *kind = kind_find(jobs, kind_name);
-  if (!kind) return fg_fail(FG_EINVAL, "no job kind '%s' is registered", kind_name);
+  if (!kind)
+    return fg_fail_as(FG_EINVAL, "internal_error", "cannot queue the job: no job kind '%s' is "
+                      "registered", kind_name);
   fg_job *j = job_new();
-  if (!j) return fg_fail(FG_ENOMEM, "out of memory");
+  if (!j) return fg_fail_as(FG_ENOMEM, "internal_error", "cannot queue the job: out of memory");
   pthread_mutex_lock(&jobs->lock);
   for (fg_job *k = jobs->all; k; k = k->next) {
     if (strcmp(k->info.scene, name) != 0) continue;
@@ -386,9 +395,9 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
     if (st == FG_JOB_QUEUED || st == FG_JOB_RUNNING) {
       pthread_mutex_unlock(&jobs->lock);
       fg_job_unref(j);
-      return fg_fail(FG_EBUSY, "scene %s already has job %s %s; wait for it (GET /v1/jobs/%s) "
-                     "or cancel it (DELETE /v1/jobs/%s)", name, id, fg_job_state_name(st), id,
-                     id);
+      return fg_fail_as(FG_EBUSY, "training_in_progress", "scene %s already has job %s %s; wait "
+                        "for it (GET /v1/jobs/%s) or cancel it (DELETE /v1/jobs/%s)", name, id,
+                        fg_job_state_name(st), id, id);
     }
   }
   make_id(j->info.id);
@@ -407,7 +416,7 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
   if (fg_scene_deleted(scene)) {
     pthread_mutex_unlock(&jobs->lock);
     fg_job_unref(j);
-    return fg_fail(FG_ENOENT, "scene %s was deleted", name);
+    return fg_fail_as(FG_ENOENT, "scene_not_found", "scene %s was deleted", name);
   }
   atomic_fetch_add(&j->refs, 1); /* one for the registry, one for the queue */
   fg_scene_ref(scene);
@@ -457,11 +466,11 @@ static int cancel_locked(fg_jobs *jobs, fg_job *j) {
   fg_job_state st = j->info.state;
   int rc = 0;
   if (fg_job_state_finished(st)) {
-    rc = fg_fail(FG_EBUSY, "job %s has finished (%s); only queued or running jobs can be "
-                 "cancelled", j->info.id, fg_job_state_name(st));
+    rc = fg_fail_as(FG_EBUSY, "job_finished", "job %s has finished (%s); only queued or "
+                    "running jobs can be cancelled", j->info.id, fg_job_state_name(st));
   } else if (j->committing) {
-    rc = fg_fail(FG_EBUSY, "job %s has finished training and is installing the new field; it "
-                 "is too late to cancel it", j->info.id);
+    rc = fg_fail_as(FG_EBUSY, "job_finished", "job %s has finished training and is installing "
+                    "the new field; it is too late to cancel it", j->info.id);
   } else {
     if (st == FG_JOB_RUNNING) {
       j->cancel = 1;
@@ -478,12 +487,10 @@ static int cancel_locked(fg_jobs *jobs, fg_job *j) {
 
 int fg_jobs_cancel(fg_jobs *jobs, const char *id, fg_job_info *out) {
   pthread_mutex_lock(&jobs->lock);
-  fg_job *j = NULL;
-  for (fg_job *k = jobs->all; k && !j; k = k->next)
-    if (strcmp(k->info.id, id) == 0) j = k;
+  fg_job *j = find_locked(jobs, id);
   if (!j) {
     pthread_mutex_unlock(&jobs->lock);
-    return fg_fail(FG_ENOENT, "no job '%s'; GET /v1/jobs lists them", id);
+    return FG_ENOENT;
   }
   atomic_fetch_add(&j->refs, 1);
   int rc = cancel_locked(jobs, j);

@@ -136,7 +136,8 @@ int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind);
 int fg_jobs_submit(fg_jobs *jobs, const char *kind, fg_scene *scene,
                    const fg_job_params *params, void *kind_params, fg_job_info *out);
 
-/* The job with that id, with a reference (fg_job_unref); NULL when unknown. */
+/* The job with that id, with a reference (fg_job_unref); NULL when unknown, with the failure
+ * recorded (FG_ENOENT job_not_found). */
 fg_job *fg_jobs_get(fg_jobs *jobs, const char *id);
 void fg_job_unref(fg_job *job);
 void fg_job_get_info(fg_job *job, fg_job_info *out);

@@ -649,20 +649,20 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   int rc = 0;
   fg_scene *s = NULL;
   if (store_find_locked(st, name, NULL)) {
-    rc = fg_fail(FG_EEXIST, "a scene named '%s' exists already; delete it first or pick another "
-                 "name", name);
+    rc = fg_fail_as(FG_EEXIST, "scene_exists", "a scene named '%s' exists already; delete it "
+                    "first or pick another name", name);
     goto out;
   }
   if (st->limits.max_scenes > 0 && st->n >= st->limits.max_scenes) {
-    rc = fg_fail(FG_ERANGE, "scene '%s' was not created: the daemon holds %zu scenes, its limit "
-                 "([state] max_scenes = %zu); delete a scene (DELETE /v1/scenes/{s}) or raise "
-                 "[state] max_scenes in the configuration file and reload it", name, st->n,
-                 st->limits.max_scenes);
+    rc = fg_fail_as(FG_ERANGE, "scene_limit", "scene '%s' was not created: the daemon holds "
+                    "%zu scenes, its limit ([state] max_scenes = %zu); delete a scene (DELETE "
+                    "/v1/scenes/{s}) or raise [state] max_scenes in the configuration file and "
+                    "reload it", name, st->n, st->limits.max_scenes);
     goto out;
   }
   s = scene_alloc(st, name);
   if (!s) {
-    rc = fg_fail(FG_ENOMEM, "out of memory");
+    rc = fg_state_write_failed(fg_fail(FG_ENOMEM, "out of memory"), "the scene");
     goto out;
   }
   s->params = *params;
@@ -672,10 +672,14 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   if (rc == 0) rc = write_scene_json(s);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
   if (rc == 0) rc = store_insert(st, s);
-  if (rc == 0) s = NULL;
-  /* Not created (a full disk, say): the folder goes too, or the next start would find a
-   * scene folder without its scene.json. */
-  else if (s) fg_rmtree(s->dir);
+  if (rc == 0) {
+    s = NULL;
+  } else {
+    rc = fg_state_write_failed(rc, "the scene");
+    /* Not created (a full disk, say): the folder goes too, or the next start would find a
+     * scene folder without its scene.json. */
+    fg_rmtree(s->dir);
+  }
 out:
   pthread_mutex_unlock(&st->lock);
   scene_free(s);
@@ -696,7 +700,7 @@ int fg_store_delete(fg_store *st, const char *name) {
   fg_scene *s = store_find_locked(st, name, &pos);
   if (!s) {
     pthread_mutex_unlock(&st->lock);
-    return fg_fail(FG_ENOENT, "no scene named '%s'", name);
+    return fg_fail_as(FG_ENOENT, "scene_not_found", "no scene named '%s'", name);
   }
   char trash[128];
   snprintf(trash, sizeof trash, ".trash-%s-%ld-%u", name, (long)getpid(),
