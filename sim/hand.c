@@ -1,46 +1,15 @@
 /* The simulated gripper as MJCF (hand.h). */
 #include "hand.h"
 
+#include "core/strbuf.h"
+
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 
 #define FINGER_MASS_KG 0.08 /* a finger's pad and holder ... */
 #define LINK_MASS_KG 0.01   /* ... and its link: a contact's stiffness in newtons per metre
                              * scales with the body's mass, so the pads' body is the heavy one */
-
-typedef struct {
-  char *s;
-  size_t n, cap;
-  int oom;
-} strbuf;
-
-static void sb_printf(strbuf *b, const char *fmt, ...) {
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(b->s ? b->s + b->n : NULL, b->s ? b->cap - b->n : 0, fmt, ap);
-    va_end(ap);
-    if (k < 0) {
-      b->oom = 1;
-      return;
-    }
-    if (b->s && b->n + (size_t)k < b->cap) {
-      b->n += (size_t)k;
-      return;
-    }
-    size_t cap = b->cap ? b->cap * 2 : 4096;
-    while (cap < b->n + (size_t)k + 1) cap *= 2;
-    char *s = realloc(b->s, cap);
-    if (!s) {
-      b->oom = 1;
-      return;
-    }
-    b->s = s;
-    b->cap = cap;
-  }
-}
 
 /* The finger bodies, by part: finger_l stands at -y and closes along +y. */
 const char *const sim_hand_finger[2] = {"finger_l", "finger_r"};
@@ -104,11 +73,11 @@ char *sim_hand_xml(const char *scene_file, fg_gripper_model model, double mass_k
   for (int i = 0; i < FG_GRIPPER_N_BOXES; i++)
     if (i != FG_GRIPPER_BOX_LINK_MINUS_Y && i != FG_GRIPPER_BOX_LINK_PLUS_Y)
       volume[box[i].part] += box[i].half_m[0] * box[i].half_m[1] * box[i].half_m[2];
-  strbuf b = {0};
-  sb_printf(&b, "<mujoco model=\"fieldgrip cell\">\n  <include file=\"%s\"/>\n", scene_file);
-  sb_printf(&b, "  <worldbody>\n    <body name=\"fg_target\" mocap=\"true\" pos=\"0.3 0 0.4\" "
+  fg_strbuf b = {0};
+  fg_strbuf_printf(&b, "<mujoco model=\"fieldgrip cell\">\n  <include file=\"%s\"/>\n", scene_file);
+  fg_strbuf_printf(&b, "  <worldbody>\n    <body name=\"fg_target\" mocap=\"true\" pos=\"0.3 0 0.4\" "
                 "quat=\"0 1 0 0\"/>\n");
-  sb_printf(&b, "    <body name=\"fg_hand\" pos=\"0.3 0 0.4\" quat=\"0 1 0 0\">\n"
+  fg_strbuf_printf(&b, "    <body name=\"fg_hand\" pos=\"0.3 0 0.4\" quat=\"0 1 0 0\">\n"
                 "      <freejoint name=\"fg_hand\"/>\n");
   for (int part = FG_GRIPPER_PALM; part < FG_GRIPPER_N_PARTS; part++) {
     const int finger = part != FG_GRIPPER_PALM;
@@ -116,12 +85,12 @@ char *sim_hand_xml(const char *scene_file, fg_gripper_model model, double mass_k
     const double mass =
         finger ? FINGER_MASS_KG : mass_kg - 2 * (FINGER_MASS_KG + LINK_MASS_KG);
     if (finger) {
-      sb_printf(&b, "      <body name=\"fg_%s\">\n        <joint name=\"fg_%s\" type=\"slide\" "
+      fg_strbuf_printf(&b, "      <body name=\"fg_%s\">\n        <joint name=\"fg_%s\" type=\"slide\" "
                     "axis=\"0 %d 0\" limited=\"true\" range=\"0 %.6f\" damping=\"%.1f\"/>\n",
                 name, name, part == FG_GRIPPER_FINGER_MINUS_Y ? 1 : -1, s->stroke_m / 2,
                 SIM_FINGER_KD);
       if (rise_max > 0)
-        sb_printf(&b, "        <joint name=\"fg_%s_rise\" type=\"slide\" axis=\"0 0 1\" "
+        fg_strbuf_printf(&b, "        <joint name=\"fg_%s_rise\" type=\"slide\" axis=\"0 0 1\" "
                       "limited=\"true\" range=\"-0.001 %.6f\" damping=\"%.1f\"/>\n",
                   name, rise_max + 0.001, SIM_FINGER_KD);
     }
@@ -130,12 +99,12 @@ char *sim_hand_xml(const char *scene_file, fg_gripper_model model, double mass_k
       if ((int)x->part != part) continue;
       const int link = i == FG_GRIPPER_BOX_LINK_MINUS_Y || i == FG_GRIPPER_BOX_LINK_PLUS_Y;
       if (link && spread > 0)
-        sb_printf(&b, "        <body name=\"fg_%s_link\">\n          <joint name=\"fg_%s_link\" "
+        fg_strbuf_printf(&b, "        <body name=\"fg_%s_link\">\n          <joint name=\"fg_%s_link\" "
                       "type=\"slide\" axis=\"0 %d 0\" limited=\"true\" range=\"%.6f 0.001\" "
                       "damping=\"%.1f\"/>\n",
                   name, name, part == FG_GRIPPER_FINGER_MINUS_Y ? 1 : -1,
                   -spread * s->stroke_m / 2 - 0.001, SIM_FINGER_KD);
-      sb_printf(&b, "%*s<geom name=\"fg_%s\" type=\"box\" pos=\"%.6f %.6f %.6f\" "
+      fg_strbuf_printf(&b, "%*s<geom name=\"fg_%s\" type=\"box\" pos=\"%.6f %.6f %.6f\" "
                     "size=\"%.6f %.6f %.6f\" mass=\"%.4f\" contype=\"2\" conaffinity=\"1\"%s/>\n",
                 finger ? (link && spread > 0 ? 10 : 8) : 6, "", fg_gripper_box_name(i),
                 x->centre_m[0], x->centre_m[1], x->centre_m[2], x->half_m[0], x->half_m[1],
@@ -145,33 +114,29 @@ char *sim_hand_xml(const char *scene_file, fg_gripper_model model, double mass_k
                 x->pad ? " friction=\"1 0.01 0.0001\" condim=\"4\" solref=\"0.004 1\" "
                          "solimp=\"0.95 0.99 0.001\""
                 : finger ? " solref=\"0.004 1\" solimp=\"0.95 0.99 0.001\"" : "");
-      if (link && spread > 0) sb_printf(&b, "        </body>\n");
+      if (link && spread > 0) fg_strbuf_printf(&b, "        </body>\n");
     }
-    if (finger) sb_printf(&b, "      </body>\n");
+    if (finger) fg_strbuf_printf(&b, "      </body>\n");
   }
-  sb_printf(&b, "    </body>\n  </worldbody>\n");
-  sb_printf(&b, "  <equality>\n    <weld body1=\"fg_target\" body2=\"fg_hand\" "
+  fg_strbuf_printf(&b, "    </body>\n  </worldbody>\n");
+  fg_strbuf_printf(&b, "  <equality>\n    <weld body1=\"fg_target\" body2=\"fg_hand\" "
                 "solref=\"0.005 1\"/>\n    <joint joint1=\"fg_finger_r\" joint2=\"fg_finger_l\" "
                 "polycoef=\"0 1 0 0 0\" solref=\"0.005 1\"/>\n");
   for (int k = 0; k < 2; k++) {
     if (rise_max > 0)
-      sb_printf(&b, "    <joint joint1=\"fg_%s_rise\" joint2=\"fg_%s\" polycoef=\"0 %.9g %.9g "
+      fg_strbuf_printf(&b, "    <joint joint1=\"fg_%s_rise\" joint2=\"fg_%s\" polycoef=\"0 %.9g %.9g "
                     "%.9g %.9g\" solref=\"0.005 1\"/>\n",
                 sim_hand_finger[k], sim_hand_finger[k], rise[1], rise[2], rise[3], rise[4]);
     if (spread > 0)
-      sb_printf(&b, "    <joint joint1=\"fg_%s_link\" joint2=\"fg_%s\" polycoef=\"0 %.9g 0 0 0\" "
+      fg_strbuf_printf(&b, "    <joint joint1=\"fg_%s_link\" joint2=\"fg_%s\" polycoef=\"0 %.9g 0 0 0\" "
                     "solref=\"0.005 1\"/>\n",
                 sim_hand_finger[k], sim_hand_finger[k], -spread);
   }
-  sb_printf(&b, "  </equality>\n  <actuator>\n");
+  fg_strbuf_printf(&b, "  </equality>\n  <actuator>\n");
   for (int k = 0; k < 2; k++)
-    sb_printf(&b, "    <motor name=\"fg_%s\" joint=\"fg_%s\" ctrllimited=\"true\" "
+    fg_strbuf_printf(&b, "    <motor name=\"fg_%s\" joint=\"fg_%s\" ctrllimited=\"true\" "
                   "ctrlrange=\"-%.1f %.1f\"/>\n",
               sim_hand_finger[k], sim_hand_finger[k], force_max_n, force_max_n);
-  sb_printf(&b, "  </actuator>\n</mujoco>\n");
-  if (b.oom) {
-    free(b.s);
-    return NULL;
-  }
-  return b.s;
+  fg_strbuf_printf(&b, "  </actuator>\n</mujoco>\n");
+  return fg_strbuf_take(&b, NULL);
 }

@@ -11,6 +11,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/strbuf.h"
 #include "query/heatmap.h"
 
 #include <float.h>
@@ -84,39 +85,12 @@ int fg_api_parse_heatmap(json_t *body, const fg_scene_params *params,
 
 /* ---------------------------------------------------------------- the JSON reply */
 
-typedef struct jbuf {
-  char *p;
-  size_t n, cap;
-  int failed;
-} jbuf;
-
-static void jb_reserve(jbuf *b, size_t extra) {
-  if (b->failed || b->n + extra + 1 <= b->cap) return;
-  size_t cap = b->cap ? b->cap : 4096;
-  while (cap < b->n + extra + 1) cap *= 2;
-  char *p = realloc(b->p, cap);
-  if (!p) {
-    b->failed = 1;
-    return;
-  }
-  b->p = p;
-  b->cap = cap;
-}
-
-static void jb_add(jbuf *b, const char *s) {
-  size_t k = strlen(s);
-  jb_reserve(b, k);
-  if (b->failed) return;
-  memcpy(b->p + b->n, s, k + 1);
-  b->n += k;
-}
-
 /* x with six decimals, trailing zeros dropped ("0.105", "-1", "0.000001"); null when not
  * finite. Fixed point keeps a reply of 10^5 points to a few milliseconds, where printf's %g
  * takes ten times longer; micrometres and 1e-6 of a score are finer than the grid's truth. */
-static void jb_num(jbuf *b, double x) {
+static void put_num(fg_strbuf *b, double x) {
   if (!isfinite(x) || fabs(x) > 9e12) {
-    jb_add(b, isfinite(x) ? (x > 0 ? "9e12" : "-9e12") : "null");
+    fg_strbuf_puts(b, isfinite(x) ? (x > 0 ? "9e12" : "-9e12") : "null");
     return;
   }
   char tmp[40], *e = tmp + sizeof tmp, *p = e;
@@ -139,21 +113,16 @@ static void jb_num(jbuf *b, double x) {
     ip /= 10;
   } while (ip);
   if (neg && (u != 0)) *--p = '-';
-  size_t k = (size_t)(e - p);
-  jb_reserve(b, k);
-  if (b->failed) return;
-  memcpy(b->p + b->n, p, k);
-  b->n += k;
-  b->p[b->n] = 0;
+  fg_strbuf_add(b, p, (size_t)(e - p));
 }
 
-static void jb_vec(jbuf *b, const double *v, int n) {
-  jb_add(b, "[");
+static void put_vec(fg_strbuf *b, const double *v, int n) {
+  fg_strbuf_puts(b, "[");
   for (int i = 0; i < n; i++) {
-    if (i) jb_add(b, ",");
-    jb_num(b, v[i]);
+    if (i) fg_strbuf_puts(b, ",");
+    put_num(b, v[i]);
   }
-  jb_add(b, "]");
+  fg_strbuf_puts(b, "]");
 }
 
 /* The json format: {"voxel_size", "alpha_threshold", "grid": {"min", "max", "shape"},
@@ -161,48 +130,41 @@ static void jb_vec(jbuf *b, const double *v, int n) {
  * ...]} with the points by score, best first. Written by hand: a reply has up to millions of
  * numbers. A malloc'd NUL-terminated text, or NULL when out of memory. */
 static char *heatmap_json(const fg_heatmap *hm, size_t *len) {
-  jbuf b = {0};
-  char tmp[160];
+  fg_strbuf b = {0};
   const fg_voxel_grid *g = &hm->grid;
-  jb_add(&b, "{\"voxel_size\":");
-  jb_num(&b, g->voxel_size);
-  jb_add(&b, ",\"alpha_threshold\":");
-  jb_num(&b, hm->alpha_threshold);
-  jb_add(&b, ",\"grid\":{\"min\":");
-  jb_vec(&b, g->min, 3);
-  jb_add(&b, ",\"max\":");
-  jb_vec(&b, g->max, 3);
-  snprintf(tmp, sizeof tmp, ",\"shape\":[%d,%d,%d]},\"occupied\":%zu,\"returned\":%zu,\"best\":",
-           g->nz, g->ny, g->nx, hm->n_occupied, hm->n_points);
-  jb_add(&b, tmp);
+  fg_strbuf_puts(&b, "{\"voxel_size\":");
+  put_num(&b, g->voxel_size);
+  fg_strbuf_puts(&b, ",\"alpha_threshold\":");
+  put_num(&b, hm->alpha_threshold);
+  fg_strbuf_puts(&b, ",\"grid\":{\"min\":");
+  put_vec(&b, g->min, 3);
+  fg_strbuf_puts(&b, ",\"max\":");
+  put_vec(&b, g->max, 3);
+  fg_strbuf_printf(&b, ",\"shape\":[%d,%d,%d]},\"occupied\":%zu,\"returned\":%zu,"
+                   "\"best\":", g->nz, g->ny, g->nx, hm->n_occupied, hm->n_points);
   if (hm->has_best) {
-    jb_add(&b, "{\"position\":");
-    jb_vec(&b, hm->best_p_world, 3);
-    jb_add(&b, ",\"score\":");
-    jb_num(&b, hm->best_score);
-    jb_add(&b, "}");
+    fg_strbuf_puts(&b, "{\"position\":");
+    put_vec(&b, hm->best_p_world, 3);
+    fg_strbuf_puts(&b, ",\"score\":");
+    put_num(&b, hm->best_score);
+    fg_strbuf_puts(&b, "}");
   } else {
-    jb_add(&b, "null");
+    fg_strbuf_puts(&b, "null");
   }
-  jb_add(&b, ",\"points\":[");
-  jb_reserve(&b, hm->n_points * 48);
+  fg_strbuf_puts(&b, ",\"points\":[");
+  fg_strbuf_reserve(&b, hm->n_points * 48);
   for (size_t i = 0; i < hm->n_points; i++) {
     const fg_heatmap_point *pt = &hm->points[i];
-    jb_add(&b, i ? ",[" : "[");
+    fg_strbuf_puts(&b, i ? ",[" : "[");
     for (int k = 0; k < 3; k++) {
-      jb_num(&b, pt->p_world[k]);
-      jb_add(&b, ",");
+      put_num(&b, pt->p_world[k]);
+      fg_strbuf_puts(&b, ",");
     }
-    jb_num(&b, pt->score);
-    jb_add(&b, "]");
+    put_num(&b, pt->score);
+    fg_strbuf_puts(&b, "]");
   }
-  jb_add(&b, "]}");
-  if (b.failed) {
-    free(b.p);
-    return NULL;
-  }
-  *len = b.n;
-  return b.p;
+  fg_strbuf_puts(&b, "]}");
+  return fg_strbuf_take(&b, len);
 }
 
 /* ---------------------------------------------------------------- the handler */

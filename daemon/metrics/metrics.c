@@ -1,9 +1,9 @@
 #include "metrics.h"
 
 #include "config.h"
+#include "core/strbuf.h"
 
 #include <dirent.h>
-#include <stdarg.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -117,39 +117,6 @@ void fg_metrics_add_voxel_build(double seconds) {
   atomic_fetch_add(&voxel_build_us, (unsigned long long)(seconds > 0 ? seconds * 1e6 : 0));
 }
 
-typedef struct {
-  char *buf;
-  size_t len, cap;
-  int failed;
-} sbuf;
-
-static void sb_printf(sbuf *sb, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void sb_printf(sbuf *sb, const char *fmt, ...) {
-  if (sb->failed) return;
-  for (;;) {
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(sb->buf + sb->len, sb->cap - sb->len, fmt, ap);
-    va_end(ap);
-    if (n < 0) {
-      sb->failed = 1;
-      return;
-    }
-    if ((size_t)n < sb->cap - sb->len) {
-      sb->len += (size_t)n;
-      return;
-    }
-    size_t cap = (sb->cap + (size_t)n + 1) * 2;
-    char *p = realloc(sb->buf, cap);
-    if (!p) {
-      sb->failed = 1;
-      return;
-    }
-    sb->buf = p;
-    sb->cap = cap;
-  }
-}
-
 /* ---------------------------------------------------------------- process metrics */
 
 /* What /proc/self says about this process; a field that could not be read is negative and
@@ -224,13 +191,13 @@ static void proc_read(proc_sample *s) {
 }
 
 /* One process_* family of one sample, unless it could not be read. */
-static void proc_family(sbuf *sb, const char *name, const char *type, const char *help,
+static void proc_family(fg_strbuf *sb, const char *name, const char *type, const char *help,
                         double v) {
   if (v < 0) return;
-  sb_printf(sb, "# HELP %s %s\n# TYPE %s %s\n%s %.17g\n", name, help, name, type, name, v);
+  fg_strbuf_printf(sb, "# HELP %s %s\n# TYPE %s %s\n%s %.17g\n", name, help, name, type, name, v);
 }
 
-static void render_process(sbuf *sb) {
+static void render_process(fg_strbuf *sb) {
   proc_sample s;
   proc_read(&s);
   proc_family(sb, "process_cpu_seconds_total", "counter",
@@ -248,38 +215,38 @@ static void render_process(sbuf *sb) {
 }
 
 /* The image decoder pool (decoder.h). */
-static void render_decoder(sbuf *sb, const fg_decoder_stats *d) {
+static void render_decoder(fg_strbuf *sb, const fg_decoder_stats *d) {
   static const char *const results[FG_DECODER_RESULTS] = {"ok", "refused", "crashed",
                                                           "timeout", "error"};
-  sb_printf(sb, "# HELP fieldgrip_decoder_processes Image decoder child processes alive, by "
+  fg_strbuf_printf(sb, "# HELP fieldgrip_decoder_processes Image decoder child processes alive, by "
                 "state.\n# TYPE fieldgrip_decoder_processes gauge\n"
                 "fieldgrip_decoder_processes{state=\"idle\"} %d\n"
                 "fieldgrip_decoder_processes{state=\"busy\"} %d\n", d->idle, d->busy);
-  sb_printf(sb, "# HELP fieldgrip_decoder_starts_total Image decoder child processes started "
+  fg_strbuf_printf(sb, "# HELP fieldgrip_decoder_starts_total Image decoder child processes started "
                 "(on demand, and in place of one that died).\n"
                 "# TYPE fieldgrip_decoder_starts_total counter\n"
                 "fieldgrip_decoder_starts_total %llu\n", (unsigned long long)d->started);
-  sb_printf(sb, "# HELP fieldgrip_decoder_requests_total Images decoded or encoded in the "
+  fg_strbuf_printf(sb, "# HELP fieldgrip_decoder_requests_total Images decoded or encoded in the "
                 "decoder children, by result: ok; refused (not a valid image, or too large "
                 "for a child's memory); crashed (the child died on it); timeout (ended for "
                 "taking too long, in wall or CPU time); error (no child could run it).\n"
                 "# TYPE fieldgrip_decoder_requests_total counter\n");
   for (int i = 0; i < FG_DECODER_RESULTS; i++)
-    sb_printf(sb, "fieldgrip_decoder_requests_total{result=\"%s\"} %llu\n", results[i],
+    fg_strbuf_printf(sb, "fieldgrip_decoder_requests_total{result=\"%s\"} %llu\n", results[i],
               (unsigned long long)d->requests[i]);
-  sb_printf(sb, "# HELP fieldgrip_decoder_idle_deaths_total Image decoder children found dead "
+  fg_strbuf_printf(sb, "# HELP fieldgrip_decoder_idle_deaths_total Image decoder children found dead "
                 "while idle (killed from outside, out of memory); each is replaced.\n"
                 "# TYPE fieldgrip_decoder_idle_deaths_total counter\n"
                 "fieldgrip_decoder_idle_deaths_total %llu\n", (unsigned long long)d->died_idle);
 }
 
 char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
-  sbuf sb = {malloc(8192), 0, 8192, 0};
-  if (!sb.buf) return NULL;
-  sb_printf(&sb, "# HELP fieldgrip_build_info Version of the running daemon.\n"
+  fg_strbuf sb = {0};
+  fg_strbuf_reserve(&sb, 8192);
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_build_info Version of the running daemon.\n"
                  "# TYPE fieldgrip_build_info gauge\n"
                  "fieldgrip_build_info{version=\"%s\"} 1\n", FG_VERSION);
-  sb_printf(&sb, "# HELP fieldgrip_http_requests_total HTTP requests answered, by route template, "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_http_requests_total HTTP requests answered, by route template, "
                  "method and status code.\n# TYPE fieldgrip_http_requests_total counter\n");
   for (int s = 0; s < N_SLOTS; s++) {
     const char *route = s == FG_METRICS_MAX_ROUTES ? "unmatched" : slots[s].route;
@@ -291,11 +258,11 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
       char code[16];
       if (k == N_STATUS - 1) snprintf(code, sizeof code, "other");
       else snprintf(code, sizeof code, "%d", statuses[k]);
-      sb_printf(&sb, "fieldgrip_http_requests_total{route=\"%s\",method=\"%s\",code=\"%s\"} %llu\n",
+      fg_strbuf_printf(&sb, "fieldgrip_http_requests_total{route=\"%s\",method=\"%s\",code=\"%s\"} %llu\n",
                 route, method, code, v);
     }
   }
-  sb_printf(&sb, "# HELP fieldgrip_http_request_duration_seconds Time from the request's "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_http_request_duration_seconds Time from the request's "
                  "headers to the end of its response, by route template.\n"
                  "# TYPE fieldgrip_http_request_duration_seconds histogram\n");
   for (int s = 0; s < N_SLOTS; s++) {
@@ -306,11 +273,11 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
     unsigned long long cum = 0;
     for (size_t b = 0; b < N_BUCKETS; b++) {
       cum += atomic_load(&slots[s].bucket[b]);
-      sb_printf(&sb,
+      fg_strbuf_printf(&sb,
                 "fieldgrip_http_request_duration_seconds_bucket{route=\"%s\",method=\"%s\","
                 "le=\"%g\"} %llu\n", route, method, buckets[b], cum);
     }
-    sb_printf(&sb,
+    fg_strbuf_printf(&sb,
               "fieldgrip_http_request_duration_seconds_bucket{route=\"%s\",method=\"%s\","
               "le=\"+Inf\"} %llu\n"
               "fieldgrip_http_request_duration_seconds_sum{route=\"%s\",method=\"%s\"} %.6f\n"
@@ -322,7 +289,7 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
     [FG_METRICS_CLOSE_SHED] = "shed", [FG_METRICS_CLOSE_HEADER_TIMEOUT] = "header_timeout",
     [FG_METRICS_CLOSE_IDLE_TIMEOUT] = "idle_timeout",
     [FG_METRICS_CLOSE_BODY_TOO_SLOW] = "body_too_slow"};
-  sb_printf(&sb, "# HELP fieldgrip_http_connections Client connections open, this one "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_http_connections Client connections open, this one "
                  "included.\n# TYPE fieldgrip_http_connections gauge\n"
                  "fieldgrip_http_connections %lld\n"
                  "# HELP fieldgrip_http_connections_closed_total Client connections the daemon "
@@ -330,9 +297,9 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "# TYPE fieldgrip_http_connections_closed_total counter\n",
             atomic_load(&http_connections));
   for (int r = 0; r < FG_METRICS_CLOSE_REASONS; r++)
-    sb_printf(&sb, "fieldgrip_http_connections_closed_total{reason=\"%s\"} %llu\n",
+    fg_strbuf_printf(&sb, "fieldgrip_http_connections_closed_total{reason=\"%s\"} %llu\n",
               close_reasons[r], atomic_load(&http_closed[r]));
-  sb_printf(&sb, "# HELP fieldgrip_http_offload_threads Threads that run long requests.\n"
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_http_offload_threads Threads that run long requests.\n"
                  "# TYPE fieldgrip_http_offload_threads gauge\nfieldgrip_http_offload_threads %d\n"
                  "# HELP fieldgrip_http_offload_running Long requests running on them now.\n"
                  "# TYPE fieldgrip_http_offload_running gauge\nfieldgrip_http_offload_running %d\n"
@@ -344,28 +311,28 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "fieldgrip_http_offload_rejected_total %llu\n",
             atomic_load(&offload_threads), atomic_load(&offload_running),
             atomic_load(&offload_queued), atomic_load(&offload_rejected));
-  sb_printf(&sb, "# HELP fieldgrip_scenes Scenes in the state dir.\n# TYPE fieldgrip_scenes gauge\n"
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_scenes Scenes in the state dir.\n# TYPE fieldgrip_scenes gauge\n"
                  "fieldgrip_scenes %zu\n", g->scenes);
-  sb_printf(&sb, "# HELP fieldgrip_frames Frames stored, over all scenes.\n"
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_frames Frames stored, over all scenes.\n"
                  "# TYPE fieldgrip_frames gauge\nfieldgrip_frames %zu\n", g->frames);
-  sb_printf(&sb, "# HELP fieldgrip_frames_ingested_total Frames accepted by upload or import "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_frames_ingested_total Frames accepted by upload or import "
                  "since start.\n# TYPE fieldgrip_frames_ingested_total counter\n"
                  "fieldgrip_frames_ingested_total %llu\n", atomic_load(&frames_ingested));
-  sb_printf(&sb, "# HELP fieldgrip_config_reloads_total Configuration reloads on SIGHUP, by "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_config_reloads_total Configuration reloads on SIGHUP, by "
                  "result.\n# TYPE fieldgrip_config_reloads_total counter\n"
                  "fieldgrip_config_reloads_total{result=\"ok\"} %llu\n"
                  "fieldgrip_config_reloads_total{result=\"failed\"} %llu\n",
             atomic_load(&reloads_ok), atomic_load(&reloads_failed));
   static const char *const job_states[FG_METRICS_JOB_STATES] = {"queued", "running", "done",
                                                                 "failed", "cancelled"};
-  sb_printf(&sb, "# HELP fieldgrip_jobs Jobs the daemon knows (this run's, and each scene's "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_jobs Jobs the daemon knows (this run's, and each scene's "
                  "last one from before), by state.\n# TYPE fieldgrip_jobs gauge\n");
   for (int i = 0; i < FG_METRICS_JOB_STATES; i++)
-    sb_printf(&sb, "fieldgrip_jobs{state=\"%s\"} %zu\n", job_states[i], g->jobs[i]);
-  sb_printf(&sb, "# HELP fieldgrip_trained_scenes Scenes holding a trained field.\n"
+    fg_strbuf_printf(&sb, "fieldgrip_jobs{state=\"%s\"} %zu\n", job_states[i], g->jobs[i]);
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_trained_scenes Scenes holding a trained field.\n"
                  "# TYPE fieldgrip_trained_scenes gauge\nfieldgrip_trained_scenes %zu\n",
             g->trained_scenes);
-  sb_printf(&sb, "# HELP fieldgrip_fields_loaded Trained fields in memory, with their voxel "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_fields_loaded Trained fields in memory, with their voxel "
                  "caches; at most fieldgrip_fields_loaded_max unless that is 0 (no limit).\n"
                  "# TYPE fieldgrip_fields_loaded gauge\nfieldgrip_fields_loaded %zu\n"
                  "# HELP fieldgrip_fields_loaded_max [state] max_loaded_fields.\n"
@@ -378,23 +345,23 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
                  "# TYPE fieldgrip_field_evictions_total counter\n"
                  "fieldgrip_field_evictions_total %llu\n",
             g->fields_loaded, g->max_loaded_fields, g->field_loads, g->field_evictions);
-  sb_printf(&sb, "# HELP fieldgrip_training_steps_total Training steps taken since start, over "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_training_steps_total Training steps taken since start, over "
                  "all jobs.\n# TYPE fieldgrip_training_steps_total counter\n"
                  "fieldgrip_training_steps_total %llu\n", atomic_load(&training_steps));
-  sb_printf(&sb, "# HELP fieldgrip_training_samples_per_second Samples per second of the last "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_training_samples_per_second Samples per second of the last "
                  "training step measured (0 before any).\n"
                  "# TYPE fieldgrip_training_samples_per_second gauge\n"
                  "fieldgrip_training_samples_per_second %.6g\n",
             atomic_load(&training_samples_per_s));
-  sb_printf(&sb, "# HELP fieldgrip_clip_model_loaded Whether a CLIP model ([clip]) is being "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_clip_model_loaded Whether a CLIP model ([clip]) is being "
                  "served.\n# TYPE fieldgrip_clip_model_loaded gauge\n"
                  "fieldgrip_clip_model_loaded %d\n", g->clip_loaded ? 1 : 0);
-  sb_printf(&sb, "# HELP fieldgrip_clip_loads_total Loads of the [clip] weights and vocabulary "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_clip_loads_total Loads of the [clip] weights and vocabulary "
                  "at start-up and reloads, by result.\n# TYPE fieldgrip_clip_loads_total counter\n"
                  "fieldgrip_clip_loads_total{result=\"ok\"} %llu\n"
                  "fieldgrip_clip_loads_total{result=\"failed\"} %llu\n",
             atomic_load(&clip_loads_ok), atomic_load(&clip_loads_failed));
-  sb_printf(&sb, "# HELP fieldgrip_clip_embeddings_total CLIP embeddings computed for POST "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_clip_embeddings_total CLIP embeddings computed for POST "
                  "/v1/embed/text (one per text) and /v1/embed/image, by kind.\n"
                  "# TYPE fieldgrip_clip_embeddings_total counter\n"
                  "fieldgrip_clip_embeddings_total{kind=\"text\"} %llu\n"
@@ -403,13 +370,13 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
             atomic_load(&clip_embeddings[FG_METRICS_CLIP_TEXT]),
             atomic_load(&clip_embeddings[FG_METRICS_CLIP_IMAGE_DENSE]),
             atomic_load(&clip_embeddings[FG_METRICS_CLIP_IMAGE_POOLED]));
-  sb_printf(&sb, "# HELP fieldgrip_clip_feature_frames_total Frames whose CLIP features a "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_clip_feature_frames_total Frames whose CLIP features a "
                  "training computed, or read from the scene's cache.\n"
                  "# TYPE fieldgrip_clip_feature_frames_total counter\n"
                  "fieldgrip_clip_feature_frames_total{source=\"computed\"} %llu\n"
                  "fieldgrip_clip_feature_frames_total{source=\"cached\"} %llu\n",
             atomic_load(&clip_frames_computed), atomic_load(&clip_frames_cached));
-  sb_printf(&sb, "# HELP fieldgrip_heatmaps_total Heatmaps served: POST "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_heatmaps_total Heatmaps served: POST "
                  "/v1/scenes/{s}/heatmap by format, and renders with output heatmap.\n"
                  "# TYPE fieldgrip_heatmaps_total counter\n"
                  "fieldgrip_heatmaps_total{format=\"json\"} %llu\n"
@@ -420,7 +387,7 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
             atomic_load(&heatmaps[FG_METRICS_HEATMAP_NPY]),
             atomic_load(&heatmaps[FG_METRICS_HEATMAP_PLY]),
             atomic_load(&heatmaps[FG_METRICS_HEATMAP_RENDER]));
-  sb_printf(&sb, "# HELP fieldgrip_voxel_cache_builds_total Voxel feature caches built (the "
+  fg_strbuf_printf(&sb, "# HELP fieldgrip_voxel_cache_builds_total Voxel feature caches built (the "
                  "trained field sampled on the workspace grid).\n"
                  "# TYPE fieldgrip_voxel_cache_builds_total counter\n"
                  "fieldgrip_voxel_cache_builds_total %llu\n"
@@ -435,10 +402,5 @@ char *fg_metrics_render(const fg_metrics_gauges *g, size_t *len) {
             g->voxel_cache_bytes);
   render_decoder(&sb, &g->decoder);
   render_process(&sb);
-  if (sb.failed) {
-    free(sb.buf);
-    return NULL;
-  }
-  *len = sb.len;
-  return sb.buf;
+  return fg_strbuf_take(&sb, len);
 }

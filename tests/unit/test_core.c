@@ -7,6 +7,7 @@
 #include "core/fsutil.h"
 #include "core/half.h"
 #include "core/pose.h"
+#include "core/strbuf.h"
 #include "core/threads.h"
 
 #include <sys/stat.h>
@@ -41,6 +42,35 @@ static void test_error(void) {
   fg_fail_as(FG_EBUSY, "busy", "x");
   fg_error_clear();
   ASSERT(fg_error_reason() == NULL);
+}
+
+static void test_strbuf(void) {
+  fg_strbuf b = {0};
+  size_t len = 99;
+  char *s = fg_strbuf_take(&b, &len); /* nothing appended: "" */
+  ASSERT(s && s[0] == '\0' && len == 0);
+  free(s);
+  /* appends across the first growth, printf longer than the room left */
+  char big[5000];
+  memset(big, 'y', sizeof big - 1);
+  big[sizeof big - 1] = '\0';
+  fg_strbuf_puts(&b, "ab");
+  fg_strbuf_add(&b, "cdef", 2);
+  fg_strbuf_printf(&b, "[%d:%s]", 42, big);
+  fg_strbuf_printf(&b, "%s", "");
+  s = fg_strbuf_take(&b, &len);
+  ASSERT(s != NULL);
+  ASSERT_EQ(len, strlen(s));
+  ASSERT_EQ(len, 4 + 4 + sizeof big - 1 + 1);
+  ASSERT(strncmp(s, "abcd[42:yyy", 11) == 0 && s[len - 1] == ']');
+  ASSERT(b.s == NULL && b.n == 0);
+  free(s);
+  /* a failed append is sticky: nothing more is written and take says so */
+  fg_strbuf_puts(&b, "x");
+  b.failed = 1;
+  fg_strbuf_puts(&b, "more");
+  ASSERT_EQ(b.n, 1);
+  ASSERT(fg_strbuf_take(&b, &len) == NULL);
 }
 
 static void test_half(void) {
@@ -297,6 +327,7 @@ static void test_threads(void) {
 
 int main(void) {
   test_error();
+  test_strbuf();
   test_clock();
   test_threads();
   test_sha256();
