@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/log.h"
+#include "core/ref.h"
 #include "io/image.h"
 
 #include <errno.h>
@@ -27,7 +28,7 @@ typedef struct file_id {
 } file_id;
 
 struct fg_clip_model {
-  atomic_int refs;
+  fg_ref ref;
   fg_clip *clip;       /* owned */
   fg_tokenizer *tok;   /* owned */
   char *weights_path;  /* owned, as configured */
@@ -54,7 +55,7 @@ static void model_free(fg_clip_model *m) {
 }
 
 void fg_clip_model_release(fg_clip_model *m) {
-  if (m && atomic_fetch_sub(&m->refs, 1) == 1) model_free(m);
+  if (m && fg_ref_put(&m->ref)) model_free(m);
 }
 
 fg_clip *fg_clip_model_clip(const fg_clip_model *m) { return m->clip; }
@@ -103,7 +104,7 @@ static int model_load(const fg_conf *conf, fg_clip_model **out) {
   char at[PATH_MAX + 64];
   fg_clip_model *m = calloc(1, sizeof *m);
   if (!m) return fg_fail(FG_ENOMEM, "out of memory");
-  atomic_init(&m->refs, 1);
+  fg_ref_init(&m->ref, 1);
   m->weights_path = strdup(conf->clip_weights);
   m->vocab_path = strdup(conf->clip_vocab);
   m->threads = clip_threads(conf);
@@ -174,7 +175,7 @@ void fg_clip_svc_free(fg_clip_svc *svc) {
 fg_clip_model *fg_clip_svc_acquire(fg_clip_svc *svc) {
   pthread_mutex_lock(&svc->lock);
   fg_clip_model *m = svc->current;
-  if (m) atomic_fetch_add(&m->refs, 1);
+  if (m) fg_ref_get(&m->ref);
   pthread_mutex_unlock(&svc->lock);
   return m;
 }

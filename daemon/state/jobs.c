@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
+#include "core/ref.h"
 
 #include <errno.h>
 #include <malloc.h>
@@ -31,7 +32,7 @@
 #define MAX_FINISHED_JOBS 1000
 
 struct fg_job {
-  atomic_int refs;
+  fg_ref ref;
   pthread_mutex_t lock; /* guards everything below */
   fg_job_info info;
   double started_mono;  /* CLOCK_MONOTONIC seconds when it started running */
@@ -77,14 +78,14 @@ int fg_job_state_finished(fg_job_state s) {
 static fg_job *job_new(void) {
   fg_job *j = calloc(1, sizeof *j);
   if (!j) return NULL;
-  atomic_init(&j->refs, 1);
+  fg_ref_init(&j->ref, 1);
   pthread_mutex_init(&j->lock, NULL);
   j->info.loss = j->info.psnr = j->info.eta_s = j->info.samples_per_s = NAN;
   return j;
 }
 
 void fg_job_unref(fg_job *j) {
-  if (!j || atomic_fetch_sub(&j->refs, 1) != 1) return;
+  if (!j || !fg_ref_put(&j->ref)) return;
   if (j->scene) fg_scene_unref(j->scene);
   if (j->kind && j->kind->params_free) j->kind->params_free(j->kind_params);
   pthread_mutex_destroy(&j->lock);
@@ -314,7 +315,7 @@ static fg_job *find_locked(fg_jobs *jobs, const char *id) {
 fg_job *fg_jobs_get(fg_jobs *jobs, const char *id) {
   pthread_mutex_lock(&jobs->lock);
   fg_job *found = find_locked(jobs, id);
-  if (found) atomic_fetch_add(&found->refs, 1);
+  if (found) fg_ref_get(&found->ref);
   pthread_mutex_unlock(&jobs->lock);
   return found;
 }
@@ -418,7 +419,7 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
     fg_job_unref(j);
     return fg_fail_as(FG_ENOENT, "scene_not_found", "scene %s was deleted", name);
   }
-  atomic_fetch_add(&j->refs, 1); /* one for the registry, one for the queue */
+  fg_ref_get(&j->ref); /* one for the registry, one for the queue */
   fg_scene_ref(scene);
   j->scene = scene;
   j->jobs = jobs;
@@ -492,7 +493,7 @@ int fg_jobs_cancel(fg_jobs *jobs, const char *id, fg_job_info *out) {
     pthread_mutex_unlock(&jobs->lock);
     return FG_ENOENT;
   }
-  atomic_fetch_add(&j->refs, 1);
+  fg_ref_get(&j->ref);
   int rc = cancel_locked(jobs, j);
   pthread_mutex_unlock(&jobs->lock);
   if (rc == 0) {

@@ -8,6 +8,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "core/log.h"
+#include "core/ref.h"
 #include "field/checkpoint.h"
 
 #include <jansson.h>
@@ -27,7 +28,7 @@
 struct fg_field_ref {
   fg_field *field;      /* owned */
   fg_voxcache *voxels;  /* owned: the field's voxel features, built at the first heatmap */
-  atomic_int refs;
+  fg_ref ref;
 };
 
 static atomic_uint name_counter;
@@ -130,10 +131,10 @@ static void scene_free(fg_scene *s) {
   free(s);
 }
 
-void fg_scene_ref(fg_scene *s) { atomic_fetch_add(&s->refs, 1); }
+void fg_scene_ref(fg_scene *s) { fg_ref_get(&s->ref); }
 
 void fg_scene_unref(fg_scene *s) {
-  if (s && atomic_fetch_sub(&s->refs, 1) == 1) scene_free(s);
+  if (s && fg_ref_put(&s->ref)) scene_free(s);
 }
 
 static fg_scene *scene_alloc(fg_store *store, const char *name) {
@@ -143,7 +144,7 @@ static fg_scene *scene_alloc(fg_store *store, const char *name) {
   snprintf(s->name, sizeof s->name, "%s", name);
   s->dir = fg_path_join(store->scenes_dir, name);
   s->frames_dir = s->dir ? fg_path_join(s->dir, "frames") : NULL;
-  atomic_init(&s->refs, 1);
+  fg_ref_init(&s->ref, 1);
   pthread_mutex_init(&s->lock, NULL);
   if (!s->frames_dir) {
     scene_free(s);
@@ -167,7 +168,7 @@ static fg_field_ref *field_ref_new(fg_field *f) {
     return NULL;
   }
   r->field = f;
-  atomic_init(&r->refs, 1);
+  fg_ref_init(&r->ref, 1);
   return r;
 }
 
@@ -179,7 +180,7 @@ static void field_ref_discard(fg_field_ref *r) {
 }
 
 void fg_field_ref_release(fg_field_ref *r) {
-  if (r && atomic_fetch_sub(&r->refs, 1) == 1) {
+  if (r && fg_ref_put(&r->ref)) {
     fg_voxcache_free(r->voxels);
     fg_field_free(r->field);
     free(r);
@@ -230,7 +231,7 @@ static size_t fields_loaded(fg_store *st) {
  * overwrites; it is in field.fgc only once fg_scene_keep_partial moved it. Under the
  * scene's lock. */
 static int field_evictable(const fg_scene *s) {
-  if (!s->field || atomic_load(&s->field->refs) != 1) return 0;
+  if (!s->field || !fg_ref_only(&s->field->ref)) return 0;
   if (!s->partial) return 1;
   char *final = fg_path_join(s->dir, "field.fgc");
   int there = final && access(final, F_OK) == 0;
@@ -287,7 +288,7 @@ static int field_take(fg_scene *s, fg_field_ref **out) {
   pthread_mutex_lock(&s->lock);
   int done = 1;
   if (s->field) {
-    atomic_fetch_add(&s->field->refs, 1);
+    fg_ref_get(&s->field->ref);
     field_touch(s);
     *out = s->field;
   } else {
@@ -328,7 +329,7 @@ static int field_load(fg_scene *s, fg_field_ref **out) {
     s->field = r;
     scene_note_field(s, f);
     field_touch(s);
-    atomic_fetch_add(&r->refs, 1); /* the caller's, beside the scene's */
+    fg_ref_get(&r->ref); /* the caller's, beside the scene's */
     *out = r;
     r = NULL;
     atomic_fetch_add(&s->store->field_loads, 1);
@@ -689,7 +690,7 @@ out:
 fg_scene *fg_store_get(fg_store *st, const char *name) {
   pthread_mutex_lock(&st->lock);
   fg_scene *s = store_find_locked(st, name, NULL);
-  if (s) atomic_fetch_add(&s->refs, 1);
+  if (s) fg_ref_get(&s->ref);
   pthread_mutex_unlock(&st->lock);
   return s;
 }

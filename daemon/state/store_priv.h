@@ -6,6 +6,8 @@
 #include "conf/conf.h"
 #include "store.h"
 
+#include "core/ref.h"
+
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -15,7 +17,7 @@ struct fg_scene {
   char name[FG_SCENE_NAME_MAX + 1];
   char *dir;        /* <state>/scenes/<name> */
   char *frames_dir; /* <dir>/frames */
-  atomic_int refs;
+  fg_ref ref;
   pthread_mutex_t lock; /* guards everything below */
   fg_scene_params params;
   int declared;

@@ -9,6 +9,7 @@
 #include "core/fsutil.h"
 #include "core/log.h"
 #include "core/pose.h"
+#include "core/ref.h"
 #include "grasp/grasp.h"
 #include "io/npy.h"
 
@@ -29,7 +30,7 @@
 /* A snapshot with its reference count and the allocations behind its const pointers. */
 typedef struct task_obj {
   fg_task pub; /* first: fg_task_unref casts back */
-  atomic_int refs;
+  fg_ref ref;
   float *p_gripper, *Z;
   fg_task_demo *demos;
   float **z; /* (n_demos) owned z of each demo */
@@ -64,11 +65,11 @@ static void obj_free(task_obj *o) {
 void fg_task_unref(const fg_task *t) {
   if (!t) return;
   task_obj *o = (task_obj *)t;
-  if (atomic_fetch_sub(&o->refs, 1) == 1) obj_free(o);
+  if (fg_ref_put(&o->ref)) obj_free(o);
 }
 
 static const fg_task *obj_ref(task_obj *o) {
-  atomic_fetch_add(&o->refs, 1);
+  fg_ref_get(&o->ref);
   return &o->pub;
 }
 
@@ -83,7 +84,7 @@ static int obj_build(const fg_task *base, const fg_task_demo *demos, int n_demos
   *out = NULL;
   task_obj *o = calloc(1, sizeof *o);
   if (!o) return fg_fail(FG_ENOMEM, "out of memory");
-  atomic_init(&o->refs, 1);
+  fg_ref_init(&o->ref, 1);
   o->pub = *base;
   const int nq = base->n_points, D = n_demos ? base->dim : 0;
   o->pub.dim = D;

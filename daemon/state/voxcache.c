@@ -3,6 +3,7 @@
 
 #include "core/error.h"
 #include "core/clock.h"
+#include "core/ref.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
@@ -12,7 +13,7 @@
 
 struct fg_voxels {
   fg_voxel_features *vf; /* owned */
-  atomic_int refs;
+  fg_ref ref;
   pthread_mutex_t lock;  /* guards the three below */
   pthread_cond_t done;   /* signalled when a grasp field build ends */
   int gf_building;
@@ -46,7 +47,7 @@ void fg_voxcache_free(fg_voxcache *c) {
 const fg_voxel_features *fg_voxels_features(const fg_voxels *v) { return v->vf; }
 
 void fg_voxels_release(fg_voxels *v) {
-  if (v && atomic_fetch_sub(&v->refs, 1) == 1) {
+  if (v && fg_ref_put(&v->ref)) {
     fg_grasp_field_free(v->gf); /* before the features it reads */
     fg_voxel_features_free(v->vf);
     pthread_cond_destroy(&v->done);
@@ -100,7 +101,7 @@ int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, i
   pthread_mutex_lock(&c->lock);
   while (c->building) pthread_cond_wait(&c->done, &c->lock);
   if (c->current && same_grid(c->current, g)) {
-    atomic_fetch_add(&c->current->refs, 1);
+    fg_ref_get(&c->current->ref);
     *out = c->current;
     pthread_mutex_unlock(&c->lock);
     return 0;
@@ -122,7 +123,7 @@ int fg_voxcache_get(fg_voxcache *c, const fg_field *f, const fg_voxel_grid *g, i
   pthread_mutex_lock(&c->lock);
   c->building = 0;
   if (rc == 0) {
-    atomic_init(&v->refs, 2); /* the cache's and the caller's */
+    fg_ref_init(&v->ref, 2); /* the cache's and the caller's */
     old = c->current;
     c->current = v;
     *out = v;
