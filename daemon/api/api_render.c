@@ -259,6 +259,17 @@ static int render_heatmap(const fg_field *f, const fg_api_render_req *r, const f
   return rc;
 }
 
+/* Answers the render's pixels as a PNG, encoded in a decoder child. */
+static void send_png(fg_req *req, fg_resp *resp, const fg_api_render_req *r, const void *pixels) {
+  uint8_t *png = NULL;
+  size_t png_len = 0;
+  if (fg_decoder_encode_png(req->app->decoder, pixels, r->cam.w, r->cam.h, r->depth ? 1 : 3,
+                            r->depth ? 16 : 8, &png, &png_len) != 0)
+    fg_resp_error(resp, 500, "internal_error", "cannot encode the PNG: %s", fg_error_detail());
+  else
+    fg_resp_take(resp, 200, "image/png", (char *)png, png_len);
+}
+
 int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
@@ -306,14 +317,7 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   if (r.heatmap) fg_metrics_count_heatmap(FG_METRICS_HEATMAP_RENDER);
   fg_field_ref_release(ref);
   ref = NULL;
-  uint8_t *png = NULL;
-  size_t png_len = 0;
-  if (fg_decoder_encode_png(req->app->decoder, pixels, r.cam.w, r.cam.h, r.depth ? 1 : 3,
-                            r.depth ? 16 : 8, &png, &png_len) != 0) {
-    fg_resp_error(resp, 500, "internal_error", "cannot encode the PNG: %s", fg_error_detail());
-    goto out;
-  }
-  fg_resp_take(resp, 200, "image/png", (char *)png, png_len);
+  send_png(req, resp, &r, pixels);
 out:
   fg_query_release(&q);
   fg_field_ref_release(ref);
