@@ -325,11 +325,13 @@ static void test_normal_render(void) {
 
 /* ---------------------------------------------------------------- entry points */
 
-void geometry_checks_untrained(void) {
-  expect_error("sg", "", 409, "not_trained");
-  h_resp *r = geometry("sg", "kind=points");
+void geometry_checks_untrained(const char *scene) {
+  expect_error(scene, "", 409, "not_trained");
+  h_resp *r = geometry(scene, "kind=points");
   ASSERT_HTTP_ERROR(r, 409, "not_trained");
-  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "POST /v1/scenes/sg/train");
+  char *how = h_fmt("POST /v1/scenes/%s/train", scene);
+  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), how);
+  free(how);
   h_resp_free(r);
   expect_error("nope", "", 404, "scene_not_found");
 }

@@ -13,9 +13,9 @@ typedef struct geometry_data_set {
   int views, w, h, dim; /* frames, their size, the feature dimension */
 } geometry_data_set;
 
-/* Before training: the geometry of "sg" is 409 not_trained (naming the train route), an
+/* The geometry of untrained scene `scene` is 409 not_trained (naming the train route), an
  * unknown scene's 404. */
-void geometry_checks_untrained(void);
+void geometry_checks_untrained(const char *scene);
 
 /* After training: mesh, points, another voxel size, bad parameters and the normal render
  * (see geometry_checks.c). Reads the voxel cache a heatmap of "sg" built, or builds it. */

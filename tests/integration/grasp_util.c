@@ -8,14 +8,22 @@ static char *g_data;
 
 char *g_dataset(const char *scenegen) {
   char *imports = h_fmt("%s/imports", h_tmpdir());
-  g_data = h_fmt("%s/sg", imports);
-  t_scenegen(scenegen, g_data, G_VIEWS, G_W, G_H, G_DIM, G_PATCH);
+  char *dir = h_fmt("%s/sg", imports);
+  t_scenegen(scenegen, dir, G_VIEWS, G_W, G_H, G_DIM, G_PATCH);
+  g_dataset_at(dir);
+  free(dir);
+  return imports;
+}
+
+void g_dataset_at(const char *dir) {
+  free(g_data);
+  g_data = h_fmt("%s", dir);
   char *path = h_fmt("%s/gt.json", g_data);
   json_error_t e;
+  json_decref(g_gt_json);
   g_gt_json = json_load_file(path, 0, &e);
   ASSERT(g_gt_json != NULL);
   free(path);
-  return imports;
 }
 
 json_t *g_gt(void) { return g_gt_json; }

@@ -17,7 +17,11 @@
  * imports folder (caller frees). */
 char *g_dataset(const char *scenegen);
 
-/* gt.json and the data set's folder, after g_dataset. */
+/* Takes the data set in dir (made by scenegen with the G_* parameters) as the tests' one:
+ * loads its gt.json. */
+void g_dataset_at(const char *dir);
+
+/* gt.json and the data set's folder, after g_dataset or g_dataset_at. */
 json_t *g_gt(void);
 const char *g_dir(void);
 
