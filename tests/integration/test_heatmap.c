@@ -407,6 +407,7 @@ int main(int argc, char **argv) {
   char *imports = f_dataset(argv[2]);
   t_write_config(imports);
   g_dir = h_fmt("%s/sg", imports);
+  free(imports);
   char *gt_path = h_fmt("%s/gt.json", g_dir), *tf_path = h_fmt("%s/transforms.json", g_dir);
   json_error_t jerr;
   g_gt = json_load_file(gt_path, 0, &jerr);
