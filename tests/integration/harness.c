@@ -3,6 +3,7 @@
 #include "harness.h"
 
 #include <curl/curl.h>
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <ftw.h>
@@ -94,7 +95,7 @@ static void cleanup(void) {
     if (getenv("FG_KEEP_TMP"))
       fprintf(stderr, "keeping %s\n", g_tmp);
     else
-      nftw(g_tmp, rm_cb, 16, FTW_DEPTH | FTW_PHYS);
+      h_remove_tree(g_tmp);
   }
 }
 
@@ -425,6 +426,35 @@ int h_count_files(const char *dir, const char *needle) {
   pthread_mutex_unlock(&g_count_lock);
   return n;
 }
+
+void h_copy_tree(const char *from, const char *to) {
+  h_mkdirs(to);
+  DIR *d = opendir(from);
+  if (!d) FG_TEST_FAIL("opendir %s: %s", from, strerror(errno));
+  struct dirent *e;
+  while ((e = readdir(d)) != NULL) {
+    if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+    char *src = h_fmt("%s/%s", from, e->d_name), *dst = h_fmt("%s/%s", to, e->d_name);
+    struct stat st;
+    if (lstat(src, &st) != 0) FG_TEST_FAIL("stat %s: %s", src, strerror(errno));
+    if (S_ISDIR(st.st_mode)) {
+      h_copy_tree(src, dst);
+    } else if (S_ISREG(st.st_mode)) {
+      size_t len;
+      char *data = h_read_file(src, &len);
+      if (!data) FG_TEST_FAIL("read %s: %s", src, strerror(errno));
+      h_write_file(dst, data, len);
+      free(data);
+    } else {
+      FG_TEST_FAIL("copy %s: neither a file nor a folder", src);
+    }
+    free(src);
+    free(dst);
+  }
+  closedir(d);
+}
+
+void h_remove_tree(const char *path) { nftw(path, rm_cb, 16, FTW_DEPTH | FTW_PHYS); }
 
 char *h_shared_data(void) {
   const char *d = getenv("FG_SHARED_DATA");

@@ -236,6 +236,11 @@ void h_write_file(const char *path, const void *data, size_t len);
 void h_mkdirs(const char *path);
 /* Reads a whole file; NULL when it cannot be read. Caller frees. */
 char *h_read_file(const char *path, size_t *len);
+/* Copies folder from, with its folders, into to (made if missing): each file's bytes, never a
+ * link, so that a test may change its copy. */
+void h_copy_tree(const char *from, const char *to);
+/* Removes path and, when it is a folder, everything under it; a missing path is no error. */
+void h_remove_tree(const char *path);
 /* Number of files under dir (recursive) whose name contains needle. */
 int h_count_files(const char *dir, const char *needle);
 /* realpath of $FG_SHARED_DATA; fails the test when it is unset or missing. Caller frees. */

@@ -19,13 +19,6 @@ static void write_nofeat(const char *dir) {
   free(tf);
 }
 
-/* Copies folder from into to with cp, which keeps the files as they are. */
-static void copy(const char *from, const char *to) {
-  char *cmd = h_fmt("cp -r '%s' '%s'", from, to);
-  ASSERT_EQ(system(cmd), 0);
-  free(cmd);
-}
-
 int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 4) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN OUT", argv[0]);
@@ -44,11 +37,18 @@ int main(int argc, char **argv) {
   t_train_done("t60", "{\"steps\": 60}", 3000);
   t_train_done("nofeat", "{\"steps\": 2}", 3000);
   h_stop();
+  /* a copied scene starts with no job of its own */
+  const char *const trained[] = {"t250", "t60", "nofeat"};
+  for (size_t i = 0; i < sizeof trained / sizeof *trained; i++) {
+    char *last = h_fmt("%s/scenes/%s/last_job.json", h_state_dir(), trained[i]);
+    h_remove_tree(last);
+    free(last);
+  }
   h_mkdirs(argv[3]);
   char *scenes = h_fmt("%s/scenes", h_state_dir()), *out_scenes = h_fmt("%s/scenes", argv[3]);
   char *out_sg = h_fmt("%s/sg", argv[3]);
-  copy(scenes, out_scenes);
-  copy(g_dir(), out_sg);
+  h_copy_tree(scenes, out_scenes);
+  h_copy_tree(g_dir(), out_sg);
   printf("trained fixture in %s: %.1f s\n", argv[3], t_now() - t0);
   free(out_sg);
   free(out_scenes);

@@ -3,7 +3,6 @@
 
 #include "grasp_util.h"
 
-#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
@@ -43,6 +42,16 @@ static int run(const char *const *argv, const char *log) {
 
 const char *f_fixture(const char *scenegen) {
   if (g_fixture[0]) return g_fixture;
+  const char *given = getenv("FG_IT_FIXTURE");
+  if (given && *given) {
+    char *keyfile = h_fmt("%s/key", given);
+    if (access(keyfile, R_OK) != 0)
+      FG_TEST_FAIL("FG_IT_FIXTURE=%s holds no built fixture (no %s)", given, keyfile);
+    printf("the trained fixture of another build of this tree: %s\n", given);
+    snprintf(g_fixture, sizeof g_fixture, "%s", given);
+    free(keyfile);
+    return g_fixture;
+  }
   const char *build = getenv("FG_BUILD_DIR");
   if (!build) FG_TEST_FAIL("FG_BUILD_DIR is not set (meson test sets it)");
   char *dir = h_fmt("%s/tests/integration/it-fixture", build);
@@ -54,16 +63,17 @@ const char *f_fixture(const char *scenegen) {
     printf("building the trained fixture %s (about a minute on two idle cores)\n", dir);
     char *tmp = h_fmt("%s.new", dir), *log = h_fmt("%s.log", dir);
     char *builder = h_fmt("%s/tests/integration/it_make_fixture", build);
-    const char *rm_tmp[] = {"/bin/rm", "-rf", tmp, NULL}, *rm_dir[] = {"/bin/rm", "-rf", dir, NULL};
     const char *argv[] = {builder, h_daemon_path(), scenegen, tmp, NULL};
-    if (run(rm_tmp, "/dev/null") != 0 || run(argv, log) != 0) {
+    h_remove_tree(tmp);
+    if (run(argv, log) != 0) {
       char *out = h_read_file(log, NULL);
       FG_TEST_FAIL("the trained fixture could not be built; %s said:\n%s", builder,
                    out ? out : "(nothing)");
     }
     char *tmpkey = h_fmt("%s/key", tmp);
     h_write_file(tmpkey, key, strlen(key));
-    if (run(rm_dir, "/dev/null") != 0 || rename(tmp, dir) != 0)
+    h_remove_tree(dir);
+    if (rename(tmp, dir) != 0)
       FG_TEST_FAIL("rename %s to %s: %s", tmp, dir, strerror(errno));
     free(tmpkey);
     free(builder);
@@ -81,36 +91,10 @@ const char *f_fixture(const char *scenegen) {
   return g_fixture;
 }
 
-/* Copies the files of folder from (and of its folders, one level down) into to. */
-static void copy_tree(const char *from, const char *to, int depth) {
-  h_mkdirs(to);
-  DIR *d = opendir(from);
-  if (!d) FG_TEST_FAIL("opendir %s: %s", from, strerror(errno));
-  struct dirent *e;
-  while ((e = readdir(d)) != NULL) {
-    if (e->d_name[0] == '.') continue;
-    char *src = h_fmt("%s/%s", from, e->d_name), *dst = h_fmt("%s/%s", to, e->d_name);
-    struct stat st;
-    if (stat(src, &st) != 0) FG_TEST_FAIL("stat %s: %s", src, strerror(errno));
-    if (S_ISDIR(st.st_mode) && depth > 0) {
-      copy_tree(src, dst, depth - 1);
-    } else if (S_ISREG(st.st_mode) && strcmp(e->d_name, "last_job.json") != 0) {
-      size_t len;
-      char *data = h_read_file(src, &len);
-      if (!data) FG_TEST_FAIL("read %s", src);
-      h_write_file(dst, data, len); /* a copy, never a link: tests change their files */
-      free(data);
-    }
-    free(src);
-    free(dst);
-  }
-  closedir(d);
-}
-
 char *f_dataset(const char *scenegen) {
   char *from = h_fmt("%s/sg", f_fixture(scenegen));
   char *imports = h_fmt("%s/imports", h_tmpdir()), *to = h_fmt("%s/sg", imports);
-  copy_tree(from, to, 1);
+  h_copy_tree(from, to);
   g_dataset_at(to);
   free(to);
   free(from);
@@ -121,7 +105,7 @@ void f_scene(const char *from, const char *as) {
   if (!g_fixture[0]) FG_TEST_FAIL("f_scene before f_fixture");
   char *src = h_fmt("%s/scenes/%s", g_fixture, from);
   char *dst = h_fmt("%s/scenes/%s", h_state_dir(), as);
-  copy_tree(src, dst, 1);
+  h_copy_tree(src, dst);
   free(dst);
   free(src);
 }
