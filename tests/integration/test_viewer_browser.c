@@ -1,15 +1,17 @@
 /* The web viewer in a real browser: Debian's Chromium, headless with software WebGL, driven
  * over the DevTools protocol (cdp.h) against fieldgripd with a token, a robot configured but
- * not running, and a scenegen tabletop imported but not trained:
+ * not running, and the trained fixture's scenegen tabletop (trained.h) twice: "new", imported
+ * but not trained, and "sg", trained 60 steps at 2 cm:
  *   - the page loads without the token and asks for it; from the page, the data endpoints
  *     answer 401 without it; the token typed into the form is used from then on;
- *   - a training started from the page reports its progress (its job's events, read with
- *     the token) to the end, after which the page shows the field as a point cloud and runs
- *     the deep link's query (the mug's class embedding): the best voxel lies in the mug's
- *     box, and in a screenshot the heatmap's hot colours (turbo) lie where the mug's box
- *     projects through the page's camera, which the deep link fixed and the test recomputes;
- *   - the page reloaded (token kept in the tab) draws the cloud and the query again; the
- *     time from navigation to that is reported;
+ *   - a training of "new" started from the page reports its progress (its job's events, read
+ *     with the token) to the end, after which the page shows the field as a point cloud and
+ *     runs the deep link's query;
+ *   - the deep link to "sg" (same tab, token kept) draws its cloud and runs the query (the
+ *     mug's class embedding): the best voxel lies in the mug's box, and in a screenshot the
+ *     heatmap's hot colours (turbo) lie where the mug's box projects through the page's
+ *     camera, which the deep link fixed and the test recomputes; the time from navigation to
+ *     that is reported;
  *   - a click on a camera's frustum, and selectFrame, show the frame's photo and the field's
  *     render from that camera;
  *   - a task's grasps are drawn as gripper boxes where they are; a dry run shows the register
@@ -28,6 +30,7 @@
 #include "grasp_util.h"
 #include "io/image.h"
 #include "query/colormap.h"
+#include "trained.h"
 
 #define TOKEN "browser-test-token"
 #define STR_(x) #x
@@ -35,7 +38,7 @@
 #define PAGE_W 1200
 #define PAGE_H 800
 
-#define STEPS 200 /* trained from the page */
+#define STEPS 60 /* trained from the page: the fewest that leave solid voxels */
 #define ALPHA "0.1" /* the deep link's drawing threshold */
 
 /* The deep link's view: from the front (-y) and above, onto the table's middle. */
@@ -235,7 +238,7 @@ static void check_console(void) {
 
 /* ---------------------------------------------------------------- steps */
 
-static char *g_url;
+static char *g_url, *g_train_url; /* the deep link to "sg", the same to "new" */
 
 /* The page before the token: it asks for it; the data needs it, the files do not. */
 static void test_token(void) {
@@ -323,13 +326,14 @@ static void test_heatmap_pixels(json_t *s) {
   free(sh.rgb);
 }
 
-/* Reloaded with the token in the tab: the cloud and the query come back; how long it took. */
-static json_t *test_reload(void) {
+/* The deep link to the trained "sg", with the token in the tab: the cloud and the query; how
+ * long it took. */
+static json_t *test_deep_link(void) {
   const double t0 = t_now();
   cdp_navigate(g_session, g_url, 60);
   json_t *s = wait_page("s.phase === 'ready' && s.busy === 0 && s.heatmap && s.drawn", 120);
   const double secs = t_now() - t0;
-  printf("reload: %lld points drawn with the heatmap %.2f s after navigating (page clock: "
+  printf("deep link: %lld points drawn with the heatmap %.2f s after navigating (page clock: "
          "%.0f ms to the first cloud, %.0f ms to the heatmap)\n", JINT(s, "points"), secs,
          JNUM(s, "loadedMs"), JNUM(s, "heatmapMs"));
   /* the page's own clock of its load: the heatmap comes with or after the cloud */
@@ -403,8 +407,8 @@ static void test_frames(json_t *s) {
 
 /* A task's grasps drawn; dry run; a confirmed execute's error in the banner. */
 static void test_grasps(json_t *s) {
-  char *demo = g_demo_body("sg", "mug", "");
-  h_resp *r = h_post_json("/v1/tasks/mug_grasp/demos", demo);
+  char *demo = g_demo_body("sg", "ball", "");
+  h_resp *r = h_post_json("/v1/tasks/ball_grasp/demos", demo);
   if (r->status != 201) fprintf(stderr, "demo: %s\n", r->body);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
@@ -414,7 +418,7 @@ static void test_grasps(json_t *s) {
   run_js("document.getElementById('query-clear').click()");
   json_decref(wait_page("!s.heatmap && s.drawn", 60));
   shot before = screenshot(NULL);
-  json_decref(eval("fgViewer.selectTask('mug_grasp')", 60));
+  json_decref(eval("fgViewer.selectTask('ball_grasp')", 60));
   json_t *g = eval("fgViewer.findGrasps()", 600);
   json_decref(g);
   g = wait_page("s.busy === 0 && s.drawn", 60);
@@ -457,7 +461,7 @@ static void test_grasps(json_t *s) {
   json_decref(g);
 
   /* the boxes the page drew are the [gripper] model's, as lib/grasp has them */
-  h_resp *r2 = h_post_json("/v1/scenes/sg/grasps", "{\"task\": \"mug_grasp\", \"top_k\": 1}");
+  h_resp *r2 = h_post_json("/v1/scenes/sg/grasps", "{\"task\": \"ball_grasp\", \"top_k\": 1}");
   ASSERT_STATUS(r2, 200);
   fg_gripper_box want[FG_GRIPPER_N_BOXES];
   ASSERT_OK(fg_gripper_boxes(FG_GRIPPER_PANDA, JNUM(r2->json, "gripper.width"), want));
@@ -492,7 +496,7 @@ static void test_grasps(json_t *s) {
   json_decref(g);
 
   /* &task= finds them at load */
-  char *url = h_fmt("%s&task=mug_grasp", g_url);
+  char *url = h_fmt("%s&task=ball_grasp", g_url);
   cdp_navigate(g_session, url, 60);
   g = wait_page("s.phase === 'ready' && s.busy === 0 && s.grasps > 0 && s.drawn", 600);
   ASSERT(json_is_true(JGET(g, "heatmap")));
@@ -514,16 +518,17 @@ int main(int argc, char **argv) {
     return 77;
   }
   printf("browser: %s\n", version);
-  char *imports = g_dataset(argv[2]);
+  char *imports = f_dataset(argv[2]);
   /* a robot that is configured but not there: dry runs work, real commands fail */
   /* its own lock folder: port 9 is the same "robot" for every run on this machine */
   char *robot = h_fmt("[http]\ntoken = " TOKEN "\n\n[robot]\ntransport = tcp\nhost = 127.0.0.1\n"
                       "port = 9\nlock_dir = %s\n", h_tmpdir());
   g_config(imports, robot);
   free(robot);
+  f_scene("raw", "new"); /* at 2 cm, untrained */
+  f_scene("t60", "sg");  /* at 2 cm, trained {"steps": 60} */
   h_set_token(TOKEN);
   h_start();
-  g_scene("sg", NULL);
 
   char *emb = g_class_embedding("mug"); /* "[a, b, ...]": the deep link wants "a,b,..." */
   emb[strlen(emb) - 1] = 0;
@@ -533,13 +538,14 @@ int main(int argc, char **argv) {
   for (char *c = g_url; *c; c++)
     if (*c == ' ') *c = '+'; /* no spaces in a URL; '+' is one in a query string */
   free(emb);
+  g_train_url = h_fmt("http://127.0.0.1:%d/?scene=new%s", h_port(), strchr(g_url, '&'));
 
   g_session = cdp_open_page(PAGE_W, PAGE_H);
   const double t_browser = t_now();
-  cdp_navigate(g_session, g_url, 60);
+  cdp_navigate(g_session, g_train_url, 60);
   test_token();
   test_training();
-  json_t *s = test_reload();
+  json_t *s = test_deep_link();
   test_heatmap_pixels(s);
   test_frames(s);
   test_grasps(s);
@@ -549,6 +555,7 @@ int main(int argc, char **argv) {
 
   cdp_stop();
   h_stop();
+  free(g_train_url);
   free(g_url);
   free(g_session);
   free(imports);
