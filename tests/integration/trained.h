@@ -21,7 +21,11 @@
 #define FG_IT_TRAINED_H
 
 /* The fixture's folder, built first if needed with the daemon under test and scenegen
- * (paths). Fails the test when it cannot be built, with the builder's output. */
+ * (paths). Fails the test when it cannot be built, with the builder's output.
+ * $FG_IT_FIXTURE, when set, names a fixture another build of the same tree has built (CI's
+ * sanitized stage takes its release stage's): it is used as it is, never built, so that the
+ * sanitized stage spends its time on the code that uses a trained field, not on training it
+ * again (training itself is what train, render, depth, caps and the demo test there). */
 const char *f_fixture(const char *scenegen);
 
 /* Copies the fixture's data set to <tmp>/imports/sg, loads its gt.json for g_gt() and g_dir()
