@@ -32,6 +32,12 @@ int fg_robot_read_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t *ack, 
   return 0;
 }
 
+int fg_robot_read_tcp(fg_mb_link *l, int base, double p_m[3], double rotvec_rad[3]) {
+  uint16_t w[FG_TCP_POSE_WORDS];
+  FG_TRY(fg_mb_read_registers(l, base, FG_TCP_POSE_WORDS, w));
+  return fg_tcp_pose_decode(w, p_m, rotvec_rad);
+}
+
 int fg_robot_write(fg_mb_link *l, const fg_robot_profile *rp, const uint16_t *words) {
   return fg_mb_write_registers(l, rp->base, fg_pose_block_words(rp->encoding), words);
 }

@@ -46,6 +46,11 @@ int fg_robot_wait_ack(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, i
 int fg_robot_wait_done(fg_mb_link *l, const fg_robot_profile *rp, uint16_t seq, int *status,
                        fg_mb_cancel_fn cancel, void *cancel_arg);
 
+/* Reads the TCP pose the robot reports at its six registers from base (regs.h, TCP pose):
+ * metres and a rotation vector in radians, base frame. A link error, or FG_EPEER when the
+ * words hold no pose. */
+int fg_robot_read_tcp(fg_mb_link *l, int base, double p_m[3], double rotvec_rad[3]);
+
 /* ---------------------------------------------------------------- gripper */
 
 /* Reads the status words. */

@@ -134,6 +134,34 @@ void fg_pose_block_decode(const uint16_t *w, fg_pose_encoding e, fg_pose_block *
   b->speed_mps = fg_float32_from_words(&w[21]);
 }
 
+/* ---------------------------------------------------------------- TCP pose (read back) */
+
+int fg_tcp_pose_encode(const double p_m[3], const double rotvec_rad[3], uint16_t w[6]) {
+  static const char *const pn[3] = {"x", "y", "z"}, *const rn[3] = {"rx", "ry", "rz"};
+  for (int i = 0; i < 3; i++) {
+    if (!isfinite(p_m[i]) || !isfinite(rotvec_rad[i]))
+      return fg_fail(FG_EINVAL, "the TCP pose is not finite");
+    FG_TRY(put_int16(pn[i], p_m[i], 1e4, "m", &w[i]));
+    FG_TRY(put_int16(rn[i], rotvec_rad[i], 1e3, "rad", &w[3 + i]));
+  }
+  return 0;
+}
+
+int fg_tcp_pose_decode(const uint16_t w[6], double p_m[3], double rotvec_rad[3]) {
+  double n2 = 0;
+  for (int i = 0; i < 3; i++) {
+    p_m[i] = (int16_t)w[i] * 1e-4;
+    rotvec_rad[i] = (int16_t)w[3 + i] * 1e-3;
+    n2 += rotvec_rad[i] * rotvec_rad[i];
+  }
+  /* each component is rounded to 0.5 mrad: the length by at most sqrt(3) * 0.5 mrad */
+  if (sqrt(n2) > M_PI + 0.9e-3)
+    return fg_fail(FG_EPEER, "the TCP pose registers hold no pose: rotation vector "
+                   "(%d, %d, %d) mrad is %.4f rad long, a controller's is at most pi",
+                   (int16_t)w[3], (int16_t)w[4], (int16_t)w[5], sqrt(n2));
+  return 0;
+}
+
 /* ---------------------------------------------------------------- robotiq-2f */
 
 const fg_robotiq_model fg_robotiq_2f85 = {"robotiq-2f85", 0.085, 0.020, 0.150, 20.0, 235.0};

@@ -80,6 +80,24 @@ uint16_t fg_seq_next(uint16_t s);
 void fg_float32_to_words(float v, uint16_t w[2]);
 float fg_float32_from_words(const uint16_t w[2]);
 
+/* ---------------------------------------------------------------- TCP pose (read back) */
+
+/* Where the robot reports its TCP: six holding registers, as a Universal Robots controller's
+ * Modbus server publishes them at 400-405: x y z in 0.1 mm, then rx ry rz (rotation vector)
+ * in mrad, signed 16-bit, in the base frame. Read only. */
+#define FG_TCP_POSE_BASE_DEFAULT 400
+#define FG_TCP_POSE_WORDS 6
+
+/* The pose (metres; rotation vector in radians) as the six words, rounded to the registers'
+ * resolution: FG_ERANGE naming the value that does not fit, FG_EINVAL when one is not
+ * finite. For simulators and tests. */
+int fg_tcp_pose_encode(const double p_m[3], const double rotvec_rad[3], uint16_t w[6]);
+
+/* The six words as a pose. FG_EPEER with a detail giving the words when they are not a pose
+ * a controller reports: a rotation vector longer than pi by more than the registers'
+ * rounding (a controller's is at most pi). */
+int fg_tcp_pose_decode(const uint16_t w[6], double p_m[3], double rotvec_rad[3]);
+
 /* ---------------------------------------------------------------- robotiq-2f */
 
 #define FG_ROBOTIQ_REQUEST_ADDR 0x03E8

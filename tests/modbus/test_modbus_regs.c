@@ -761,6 +761,39 @@ static void test_robotiq_faults(void) {
   }
 }
 
+/* ---------------------------------------------------------------- TCP pose */
+
+/* The six words of a UR controller's registers 400-405, by hand: two's complement for
+ * negative values, 0.1 mm and mrad. */
+static void test_tcp_pose(void) {
+  const uint16_t w[6] = {4523, (uint16_t)(65536 - 1207), 350, 0, 2221, (uint16_t)(65536 - 2221)};
+  double p[3], rv[3];
+  ASSERT_EQ(fg_tcp_pose_decode(w, p, rv), 0);
+  ASSERT_NEAR(p[0], 0.4523, 1e-12);
+  ASSERT_NEAR(p[1], -0.1207, 1e-12);
+  ASSERT_NEAR(p[2], 0.0350, 1e-12);
+  ASSERT_NEAR(rv[0], 0, 1e-12);
+  ASSERT_NEAR(rv[1], 2.221, 1e-12);
+  ASSERT_NEAR(rv[2], -2.221, 1e-12);
+  uint16_t back[6];
+  ASSERT_EQ(fg_tcp_pose_encode(p, rv, back), 0);
+  for (int i = 0; i < 6; i++) ASSERT_EQ(back[i], w[i]);
+
+  /* a half turn rounded component by component still reads; a longer vector does not */
+  const double half[3] = {M_PI / sqrt(3), M_PI / sqrt(3), -M_PI / sqrt(3)};
+  ASSERT_EQ(fg_tcp_pose_encode(p, half, back), 0);
+  ASSERT_EQ(fg_tcp_pose_decode(back, p, rv), 0);
+  const uint16_t bad[6] = {0, 0, 0, 3200, 0, 0};
+  ASSERT_EQ(fg_tcp_pose_decode(bad, p, rv), FG_EPEER);
+  ASSERT(strstr(fg_error_detail(), "(3200, 0, 0) mrad"));
+
+  /* beyond the registers: refused naming the value, never wrapped */
+  const double far[3] = {3.3, 0, 0}, zero[3] = {0, 0, 0}, nan3[3] = {0, NAN, 0};
+  ASSERT_EQ(fg_tcp_pose_encode(far, zero, back), FG_ERANGE);
+  ASSERT(strstr(fg_error_detail(), "x = 3.3"));
+  ASSERT_EQ(fg_tcp_pose_encode(nan3, zero, back), FG_EINVAL);
+}
+
 int main(void) {
   static const struct {
     const char *name;
@@ -775,6 +808,7 @@ int main(void) {
       {"seq_next", test_seq_next},
       {"float32_words", test_float32_words},
       {"rotvec", test_rotvec},
+      {"tcp_pose", test_tcp_pose},
       {"robotiq_request", test_robotiq_request},
       {"robotiq_status", test_robotiq_status},
       {"robotiq_units", test_robotiq_units},
