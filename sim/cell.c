@@ -2,6 +2,8 @@
 #include "cell.h"
 #include "hand.h"
 
+#include "core/pose.h"
+
 #include <math.h>
 #include <mujoco/mujoco.h>
 #include <stdarg.h>
@@ -108,26 +110,6 @@ static void quat_from_rv(const double rv[3], double q[4]) {
 static double quat_angle(const double a[4], const double b[4]) {
   double dot = fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
   return 2 * acos(clampd(dot, 0, 1));
-}
-
-static void quat_slerp(const double a[4], const double b0[4], double s, double out[4]) {
-  double b[4], dot = 0;
-  for (int k = 0; k < 4; k++) dot += a[k] * b0[k];
-  for (int k = 0; k < 4; k++) b[k] = dot < 0 ? -b0[k] : b0[k];
-  dot = fabs(dot);
-  double wa = 1 - s, wb = s;
-  if (dot < 0.9995) {
-    const double th = acos(dot), st = sin(th);
-    wa = sin((1 - s) * th) / st;
-    wb = sin(s * th) / st;
-  }
-  double n = 0;
-  for (int k = 0; k < 4; k++) {
-    out[k] = wa * a[k] + wb * b[k];
-    n += out[k] * out[k];
-  }
-  n = sqrt(n);
-  for (int k = 0; k < 4; k++) out[k] /= n;
 }
 
 /* The tool's +z of orientation q (w, x, y, z). */
@@ -355,7 +337,7 @@ static void program_control(sim_cell *c) {
       const double s = c->ph_T > 0 ? clampd(t / c->ph_T, 0, 1) : 1;
       double *p = c->d->mocap_pos + 3 * c->mocap, *q = c->d->mocap_quat + 4 * c->mocap;
       for (int k = 0; k < 3; k++) p[k] = c->ph_p0[k] + s * (ph->p[k] - c->ph_p0[k]);
-      quat_slerp(c->ph_q0, ph->quat, s, q);
+      fg_quat_slerp(c->ph_q0, ph->quat, s, q);
       /* complete when the hand has caught up with the target, or a moment after */
       done = s >= 1 && (dist3(c->d->xpos + 3 * c->hand, p) < 0.002 || t > c->ph_T + 0.5);
       if (!done) {

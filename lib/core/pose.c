@@ -228,6 +228,26 @@ void fg_quat_multiply(const double a[4], const double b[4], double q_a_c[4]) {
   memcpy(q_a_c, out, sizeof out);
 }
 
+void fg_quat_slerp(const double a[4], const double b0[4], double s, double out[4]) {
+  double b[4], dot = 0;
+  for (int k = 0; k < 4; k++) dot += a[k] * b0[k];
+  for (int k = 0; k < 4; k++) b[k] = dot < 0 ? -b0[k] : b0[k];
+  dot = fabs(dot);
+  double wa = 1 - s, wb = s;
+  if (dot < 0.9995) { /* nearer, the linear blend renormalised is as accurate */
+    const double th = acos(dot), st = sin(th);
+    wa = sin((1 - s) * th) / st;
+    wb = sin(s * th) / st;
+  }
+  double n = 0;
+  for (int k = 0; k < 4; k++) {
+    out[k] = wa * a[k] + wb * b[k];
+    n += out[k] * out[k];
+  }
+  n = sqrt(n);
+  for (int k = 0; k < 4; k++) out[k] /= n;
+}
+
 double fg_quat_angle_rad(const double q_a[4], const double q_b[4]) {
   /* the relative rotation conj(q_a) * q_b; 2 atan2(|v|, |w|) stays accurate at 0 and pi,
    * where acos of the dot product loses half the digits */

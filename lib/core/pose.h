@@ -92,6 +92,10 @@ void fg_rotvec_from_rotmat(const double R[9], double rotvec_rad[3]);
 /* q_a_c = q_a_b * q_b_c (Hamilton product; the quaternion of R_a_b * R_b_c). */
 void fg_quat_multiply(const double q_a_b[4], const double q_b_c[4], double q_a_c[4]);
 
+/* The rotation a fraction s (0..1) of the way from q_a to q_b along the shorter arc (unit
+ * quaternions; q_b and -q_b give the same result). */
+void fg_quat_slerp(const double q_a[4], const double q_b[4], double s, double q_out[4]);
+
 /* The geodesic angle (radians, [0, pi]) between two rotations: the angle of the rotation
  * that takes one onto the other, |rotvec(R_a^T R_b)|. Accurate near 0 and near pi. */
 double fg_rotmat_angle_rad(const double R_a[9], const double R_b[9]);

@@ -240,12 +240,36 @@ static void test_angle(void) {
   }
 }
 
+/* Slerp: the ends, the middle of a quarter turn, the shorter arc for -q, and constant speed. */
+static void test_slerp(void) {
+  const double I[4] = {1, 0, 0, 0}, qz[4] = {cos(M_PI / 4), 0, 0, sin(M_PI / 4)};
+  const double qzn[4] = {-qz[0], -qz[1], -qz[2], -qz[3]};
+  double q[4];
+  fg_quat_slerp(I, qz, 0, q);
+  ASSERT_NEAR(fg_quat_angle_rad(q, I), 0, 1e-12);
+  fg_quat_slerp(I, qz, 1, q);
+  ASSERT_NEAR(fg_quat_angle_rad(q, qz), 0, 1e-12);
+  fg_quat_slerp(I, qzn, 0.5, q);
+  ASSERT_NEAR(q[0], cos(M_PI / 8), 1e-12);
+  ASSERT_NEAR(q[3], sin(M_PI / 8), 1e-12);
+  for (int i = 0; i <= 10; i++) {
+    fg_quat_slerp(I, qz, i / 10.0, q);
+    ASSERT_NEAR(fg_quat_angle_rad(I, q), M_PI / 2 * i / 10.0, 1e-12);
+  }
+  /* nearly equal: still unit, and between them */
+  const double qs[4] = {cos(1e-5), 0, sin(1e-5), 0};
+  fg_quat_slerp(I, qs, 0.5, q);
+  ASSERT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1, 1e-15);
+  ASSERT_NEAR(fg_quat_angle_rad(I, q), 1e-5, 1e-9);
+}
+
 int main(void) {
   test_quat_rotmat_round_trip();
   test_rotvec_round_trip();
   test_rotvec_edges();
   test_compose_inverse();
   test_angle();
+  test_slerp();
   printf("pose: ok\n");
   return 0;
 }
