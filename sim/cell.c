@@ -392,6 +392,11 @@ void sim_cell_advance(sim_cell *c, int64_t now_ns) {
   }
 }
 
+void sim_cell_tcp(const sim_cell *c, double p[3], double q_wxyz[4]) {
+  memcpy(p, c->d->xpos + 3 * c->hand, 3 * sizeof *p);
+  memcpy(q_wxyz, c->d->xquat + 4 * c->hand, 4 * sizeof *q_wxyz);
+}
+
 double sim_cell_time(const sim_cell *c) { return c->d->time; }
 
 static void command_begin(sim_cell *c, int64_t now_ns) {

@@ -82,6 +82,10 @@ void sim_cell_fingers_goto(sim_cell *c, int position, int speed, int force, int6
  * progress; obj as gOBJ (0 moving, 1 stopped opening, 2 stopped closing, 3 at the position). */
 void sim_cell_fingers_status(const sim_cell *c, int *position, int *moving, int *obj);
 
+/* Where the hand is now (what physics holds, not where the target is): the TCP position
+ * (metres) and orientation (w, x, y, z), base frame. */
+void sim_cell_tcp(const sim_cell *c, double p[3], double q_wxyz[4]);
+
 /* The cell's clock, seconds. */
 double sim_cell_time(const sim_cell *c);
 

@@ -3,6 +3,8 @@
  * register. */
 #include <string.h>
 
+#include "core/pose.h"
+#include "modbus/regs.h"
 #include "sim.h"
 
 /* ---------------------------------------------------------------- robot block */
@@ -19,10 +21,16 @@ int sim_robot_init(sim_robot *r, const sim_config *cfg) {
                                             (unsigned)r->n_regs, 0, 0);
   if (!r->map) return -1;
   r->map->tab_registers[r->ack_off] = (uint16_t)cfg->ack_init;
+  if (cfg->tcp_base >= 0) {
+    r->tcp_map = modbus_mapping_new_start_address(0, 0, 0, 0, (unsigned)cfg->tcp_base,
+                                                  FG_TCP_POSE_WORDS, 0, 0);
+    if (!r->tcp_map) return -1;
+  }
   r->ack_due_ns = SIM_NEVER;
   r->done_due_ns = SIM_NEVER;
   r->tcp[0] = 0.30; /* a home pose above the table, as a robot starts at one */
   r->tcp[2] = 0.40;
+  r->q[1] = 1; /* pointing down: half a turn about x */
   return 0;
 }
 
@@ -90,13 +98,17 @@ static double path_length(const sim_robot *r) {
   return len;
 }
 
-/* Where the TCP is at time t of the motion in progress. */
-static void tcp_at(const sim_robot *r, const sim_config *cfg, int64_t t, double p[3]) {
+/* Where the TCP is at time t of the motion in progress, and how it is turned (q may be NULL):
+ * the tool turns from q0 to qt on the way to the first waypoint. */
+static void tcp_at(const sim_robot *r, const sim_config *cfg, int64_t t, double p[3],
+                   double q[4]) {
   if (cfg->time_scale == 0) { /* motions are instant: it is where it goes */
     memcpy(p, r->way[r->n_way - 1], sizeof r->way[0]);
+    if (q) memcpy(q, r->qt, sizeof r->qt);
     return;
   }
-  double left = r->speed_mps * (double)(t - r->move_t0_ns) * 1e-9 / cfg->time_scale;
+  const double covered = r->speed_mps * (double)(t - r->move_t0_ns) * 1e-9 / cfg->time_scale;
+  double left = covered, first = -1;
   memcpy(p, r->way[0], sizeof r->way[0]);
   for (int i = 1; i < r->n_way; i++) {
     double d[3], len = 0;
@@ -105,13 +117,15 @@ static void tcp_at(const sim_robot *r, const sim_config *cfg, int64_t t, double 
       len += d[k] * d[k];
     }
     len = sqrt(len);
+    if (first < 0) first = len;
     if (left <= len) {
       for (int k = 0; k < 3; k++) p[k] = r->way[i - 1][k] + (len > 0 ? d[k] * left / len : 0);
-      return;
+      break;
     }
     left -= len;
     memcpy(p, r->way[i], sizeof r->way[i]);
   }
+  if (q) fg_quat_slerp(r->q0, r->qt, first > 0 && covered < first ? covered / first : 1, q);
 }
 
 static void log_point(FILE *f, const char *name, const double p[3]) {
@@ -126,7 +140,10 @@ static int64_t robot_start(sim_robot *r, const sim_config *cfg, int64_t now) {
   r->n_way = 1;
   memcpy(r->way[0], r->tcp, sizeof r->tcp);
   const int posed = b.command == 1 || b.command == 2 || b.command == 5;
+  memcpy(r->q0, r->q, sizeof r->q);
+  memcpy(r->qt, r->q, sizeof r->q);
   if (posed) {
+    fg_quat_from_rotvec(b.rv, r->qt);
     double z[3];
     tool_z(b.rv, z);
     for (int k = 0; k < 3; k++) {
@@ -196,7 +213,10 @@ void sim_robot_advance(sim_robot *r, const sim_config *cfg, int64_t now) {
   if (now >= r->done_due_ns) {
     reg[r->status_off] = cfg->fail ? 3 : 2;
     r->done_due_ns = SIM_NEVER;
-    if (r->moving) memcpy(r->tcp, r->way[r->n_way - 1], sizeof r->tcp);
+    if (r->moving) {
+      memcpy(r->tcp, r->way[r->n_way - 1], sizeof r->tcp);
+      memcpy(r->q, r->qt, sizeof r->q);
+    }
     r->moving = 0;
   }
 }
@@ -210,7 +230,7 @@ static void robot_stop(sim_robot *r, const sim_config *cfg, int64_t now) {
   r->ack_due_ns = SIM_NEVER;
   if (r->cell) sim_cell_program_stop(r->cell, now);
   if (r->moving) {
-    tcp_at(r, cfg, now, r->tcp);
+    tcp_at(r, cfg, now, r->tcp, r->q);
     r->moving = 0;
     r->done_due_ns = SIM_NEVER;
     reg[r->status_off] = 4;
@@ -241,11 +261,35 @@ void sim_robot_on_write(sim_robot *r, const sim_config *cfg, int64_t now) {
   uint16_t seq = reg[0];
   if (cfg->never_ack || seq == 0 || seq == reg[r->ack_off]) return;
   if (r->pending && seq == r->pending_seq) return;
-  if (r->moving) tcp_at(r, cfg, now, r->tcp); /* superseded: the new path starts here */
+  if (r->moving) tcp_at(r, cfg, now, r->tcp, r->q); /* superseded: the new path starts here */
   r->moving = 0;
   r->pending = 1;
   r->pending_seq = seq;
   r->ack_due_ns = now + sim_ms_to_ns(cfg->ack_delay_ms);
   r->done_due_ns = SIM_NEVER;
   sim_robot_advance(r, cfg, now);
+}
+
+/* ---------------------------------------------------------------- TCP pose */
+
+void sim_robot_tcp_pose(const sim_robot *r, const sim_config *cfg, int64_t now, double p[3],
+                        double q[4]) {
+  if (r->cell) {
+    sim_cell_tcp(r->cell, p, q);
+  } else if (r->moving) {
+    tcp_at(r, cfg, now, p, q);
+  } else {
+    memcpy(p, r->tcp, sizeof r->tcp);
+    memcpy(q, r->q, sizeof r->q);
+  }
+}
+
+void sim_robot_publish_tcp(sim_robot *r, const sim_config *cfg, int64_t now) {
+  double p[3], q[4], rv[3];
+  sim_robot_tcp_pose(r, cfg, now, p, q);
+  fg_rotvec_from_quat(q, rv);
+  uint16_t w[FG_TCP_POSE_WORDS];
+  /* beyond the registers' 3.27 m (the kinematic robot has no reach): the last pose stays,
+   * as a controller's registers would not wrap either */
+  if (fg_tcp_pose_encode(p, rv, w) == 0) memcpy(r->tcp_map->tab_registers, w, sizeof w);
 }

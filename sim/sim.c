@@ -2,7 +2,9 @@
  *
  *   unit --robot-unit (1)    profile pose-registers: holding registers base .. base + 15
  *                            (int16) or base .. base + 25 (float32); acknowledges each new
- *                            seq like the URScript program of proto/modbus.md
+ *                            seq like the URScript program of proto/modbus.md; and the TCP
+ *                            pose, read only, at 400 .. 405 (--tcp-pose-base) as a Universal
+ *                            Robots controller publishes it
  *   unit --gripper-unit (9)  profile robotiq-2f: request registers 0x03E8..0x03EA (holding),
  *                            status registers 0x07D0..0x07D2 (input), with activation, finger
  *                            motion at the requested speed and an optional object
@@ -45,6 +47,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "modbus/regs.h"
 #include "sim.h"
 
 #define SIM_MAX_CLIENTS 32
@@ -85,6 +88,7 @@ static void usage(FILE *f) {
           "  --gripper-unit N       unit id of the Robotiq gripper (default 9)\n"
           "  --base N               first register of the robot block (default 128)\n"
           "  --encoding E           int16 | float32 (default int16)\n"
+          "  --tcp-pose-base N|none first of the six TCP pose registers (default 400)\n"
           "  --ack-init N           initial value of the ack register (default 0)\n"
           "  --ack-delay-ms N       acknowledge a new seq after N ms (default 0)\n"
           "  --never-ack            never acknowledge\n"
@@ -224,6 +228,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"approach-m", required_argument, NULL, 1001},
       {"lift-m", required_argument, NULL, 1002},
       {"reach-m", required_argument, NULL, 1003},
+      {"tcp-pose-base", required_argument, NULL, 1004},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -232,6 +237,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   cfg->time_scale = 1;
   cfg->gripper_unit = 9;
   cfg->base = 128;
+  cfg->tcp_base = 400;
   cfg->activation_ms = 100;
   cfg->stroke_ms = 200;
   cfg->object_width_mm = -1;
@@ -300,6 +306,12 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     case 1001: rc = parse_metres("--approach-m", optarg, 0, 1, &cfg->cell.approach_m); break;
     case 1002: rc = parse_metres("--lift-m", optarg, 0, 1, &cfg->cell.lift_m); break;
     case 1003: rc = parse_metres("--reach-m", optarg, 0.1, 5, &cfg->cell.reach_m); break;
+    case 1004:
+      if (strcmp(optarg, "none") == 0)
+        cfg->tcp_base = -1;
+      else
+        rc = parse_int("--tcp-pose-base", optarg, 0, 65535 - 6, &cfg->tcp_base);
+      break;
     case 'h': usage(stdout); return 1;
     default:
       fprintf(stderr, "fieldgrip-sim: unknown or incomplete option \"%s\"\n",
@@ -321,6 +333,12 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   if (cfg->robot_unit == cfg->gripper_unit) {
     fprintf(stderr, "fieldgrip-sim: --robot-unit and --gripper-unit must differ (both %d)\n",
             cfg->robot_unit);
+    return -1;
+  }
+  const int block_end = cfg->base + (cfg->float32 ? 26 : 16);
+  if (cfg->tcp_base >= 0 && cfg->tcp_base < block_end && cfg->base < cfg->tcp_base + 6) {
+    fprintf(stderr, "fieldgrip-sim: the TCP pose registers %d..%d overlap the robot block "
+            "%d..%d\n", cfg->tcp_base, cfg->tcp_base + 5, cfg->base, block_end - 1);
     return -1;
   }
   if (cfg->stroke_mm <= 0) {
@@ -427,6 +445,12 @@ static void write_apply(modbus_mapping_t *map, const sim_request *r) {
   for (int i = 0; i < r->n; i++) map->tab_registers[first + i] = r->words[i];
 }
 
+/* Whether a request addresses the TCP pose registers (any of them). */
+static int in_tcp_pose(const sim_state *s, const sim_request *r) {
+  const int base = s->cfg.tcp_base;
+  return s->robot.tcp_map && r->addr < base + FG_TCP_POSE_WORDS && r->addr + r->n > base;
+}
+
 /* Serves one request received on the current socket. Returns 0 to keep the connection,
  * -1 to close it (a send failed, or the request was the one to drop). */
 static int sim_handle(sim_state *s, modbus_t *ctx, const uint8_t *req, int len) {
@@ -456,6 +480,16 @@ static int sim_handle(sim_state *s, modbus_t *ctx, const uint8_t *req, int len) 
   }
 
   modbus_mapping_t *map = robot ? s->robot.map : s->grip.map;
+  if (robot && in_tcp_pose(s, &r)) {
+    /* read only, as a controller's are */
+    if (is_write(r.fn) || r.fn != MODBUS_FC_READ_HOLDING_REGISTERS) {
+      if (drop) return -1;
+      return modbus_reply_exception(ctx, req, MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS) < 0 ? -1
+                                                                                          : 0;
+    }
+    sim_robot_publish_tcp(&s->robot, &s->cfg, now);
+    map = s->robot.tcp_map;
+  }
   if (gripper) sim_gripper_publish(&s->grip, now);
   int applied = is_write(r.fn) && write_fits(map, &r);
   if (drop) {
@@ -650,6 +684,7 @@ static void sim_close(sim_state *s) {
     modbus_free(s->ctx);
   }
   modbus_mapping_free(s->robot.map);
+  modbus_mapping_free(s->robot.tcp_map);
   modbus_mapping_free(s->grip.map);
   if (s->log) fclose(s->log);
   if (s->robot.log) fclose(s->robot.log);

@@ -29,6 +29,7 @@ typedef struct {
   double time_scale;       /* motions take their length / speed times this (default 1) */
   int robot_unit, gripper_unit;
   int base;                /* first holding register of the robot block */
+  int tcp_base;            /* first of the six TCP pose registers (regs.h); -1: none */
   int float32;             /* 0 int16 layout (12 registers), 1 float32 layout (19) */
   int ack_init;
   int ack_delay_ms, done_delay_ms;
@@ -54,7 +55,11 @@ typedef struct {
   int64_t ack_due_ns;      /* SIM_NEVER when none */
   int64_t done_due_ns;     /* SIM_NEVER when none */
   int stopped;             /* the stop register holds 1 */
+  modbus_mapping_t *tcp_map; /* the TCP pose registers, or NULL */
   double tcp[3];           /* TCP position (metres) when not moving */
+  double q[4];             /* TCP orientation (w, x, y, z) when not moving */
+  double q0[4], qt[4];     /* the motion's: from, to (turned along the way to its first
+                            * waypoint) */
   double way[4][3];        /* the path of the command in progress */
   int n_way;
   int moving;              /* between the ack and done_due_ns */
@@ -88,6 +93,12 @@ static inline int64_t sim_ms_to_ns(double ms) { return (int64_t)llround(ms * 1e6
 int sim_robot_init(sim_robot *r, const sim_config *cfg);
 void sim_robot_advance(sim_robot *r, const sim_config *cfg, int64_t now);
 void sim_robot_on_write(sim_robot *r, const sim_config *cfg, int64_t now);
+
+/* The TCP pose now (moving or not; the hand's in the physics mode), and the TCP pose
+ * registers set to it before they are read. */
+void sim_robot_tcp_pose(const sim_robot *r, const sim_config *cfg, int64_t now, double p[3],
+                        double q[4]);
+void sim_robot_publish_tcp(sim_robot *r, const sim_config *cfg, int64_t now);
 
 /* The gripper (gripper.c), the same way; sim_gripper_publish writes its status registers. */
 int sim_gripper_init(sim_gripper *g, const sim_config *cfg);

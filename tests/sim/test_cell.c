@@ -269,6 +269,28 @@ static void test_deterministic(void) {
   free(text[1]);
 }
 
+/* Registers 400-405 report where the hand is, as physics holds it: after a move to a tilted
+ * pose, within the 2 mm at which a motion counts as arrived, and its orientation. */
+static void test_tcp_pose_registers(void) {
+  cell c;
+  cell_start(&c, "blocks.xml", "int16");
+  uint16_t w[6];
+  ASSERT_EQ(modbus_read_registers(c.robot, 400, 6, w), 6);
+  ASSERT(abs((int16_t)w[0] - 3000) <= 20 && abs((int16_t)w[2] - 4000) <= 20); /* home */
+  const double p[3] = {0.40, 0.10, 0.25}, rv[3] = {2.6, 0.5, 0};
+  ASSERT_EQ(cellproc_command(&c, 1, 5, p, rv, 0.085, 0.05, 0), 2);
+  ASSERT_EQ(modbus_read_registers(c.robot, 400, 6, w), 6);
+  for (int i = 0; i < 3; i++) {
+    if (abs((int16_t)w[i] - (int)lround(p[i] * 1e4)) > 20)
+      FG_TEST_FAIL("TCP register %d: %d, expected %.0f within 2 mm", 400 + i, (int16_t)w[i],
+                   p[i] * 1e4);
+    if (abs((int16_t)w[3 + i] - (int)lround(rv[i] * 1e3)) > 10)
+      FG_TEST_FAIL("TCP register %d: %d, expected %.0f within 10 mrad", 403 + i,
+                   (int16_t)w[3 + i], rv[i] * 1e3);
+  }
+  cellproc_stop(&c);
+}
+
 int main(int argc, char **argv) {
   if (argc < 3) FG_TEST_FAIL("usage: %s PATH-TO-fieldgrip-sim CELLS-DIR [CASE]", argv[0]);
   ASSERT(realpath(argv[1], g_sim) != NULL);
@@ -290,6 +312,7 @@ int main(int argc, char **argv) {
       {"refused_poses", test_refused_poses},
       {"refused_scenes", test_refused_scenes},
       {"deterministic", test_deterministic},
+      {"tcp_pose_registers", test_tcp_pose_registers},
   };
   const char *only = argc > 3 ? argv[3] : NULL;
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {

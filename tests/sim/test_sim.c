@@ -670,6 +670,60 @@ static void test_restart_same_port(void) {
   simproc_stop(&p);
 }
 
+/* ---------------------------------------------------------------- TCP pose */
+
+#define TCP 400
+
+static void tcp_read(modbus_t *c, int16_t v[6]) {
+  uint16_t w[6];
+  rd(c, TCP, 6, w);
+  for (int i = 0; i < 6; i++) v[i] = (int16_t)w[i];
+}
+
+/* Registers 400-405 as a UR controller's: the home pose, then where a pick ended (the worked
+ * example's pose lifted 0.10 m), read only, and none with --tcp-pose-base none. */
+static void test_tcp_pose(void) {
+  simproc p;
+  simproc_start(&p, 0, k_instant);
+  modbus_t *c = client(p.port, ROBOT);
+  int16_t v[6];
+  tcp_read(c, v);
+  const int16_t home[6] = {3000, 0, 4000, 3142, 0, 0}; /* pointing down: pi about x */
+  for (int i = 0; i < 6; i++) ASSERT_EQ(v[i], home[i]);
+
+  write_seq(c, 7);
+  uint16_t ack, status;
+  ack_status(c, &ack, &status);
+  ASSERT_EQ(status, 2);
+  tcp_read(c, v);
+  /* the block's 4523, -1207, 350 (0.1 mm) and 2902, -1202, 0 (mrad), lifted by its retreat */
+  const int16_t end[6] = {4523, -1207, 1350, 2902, -1202, 0};
+  for (int i = 0; i < 6; i++)
+    if (abs(v[i] - end[i]) > (i < 3 ? 0 : 1))
+      FG_TEST_FAIL("TCP register %d: %d, expected %d", TCP + i, v[i], end[i]);
+
+  uint16_t w[7] = {0};
+  ASSERT_FAILS_WITH(modbus_write_registers(c, TCP, 6, w), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_write_register(c, TCP + 2, 0), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, TCP, 7, w), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, TCP - 1, 2, w), EMBXILADD);
+  ASSERT_FAILS_WITH(modbus_read_input_registers(c, TCP, 6, w), EMBXILADD);
+  tcp_read(c, v); /* the writes changed nothing */
+  ASSERT_EQ(v[2], 1350);
+  client_free(c);
+  simproc_stop(&p);
+
+  const char *none[] = {"--time-scale", "0", "--tcp-pose-base", "none", NULL};
+  simproc_start(&p, 0, none);
+  c = client(p.port, ROBOT);
+  ASSERT_FAILS_WITH(modbus_read_registers(c, TCP, 6, w), EMBXILADD);
+  client_free(c);
+  simproc_stop(&p);
+  /* overlapping the robot block: refused at start */
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--tcp-pose-base", "140", NULL}), 2);
+  ASSERT_EQ(simproc_exit_status((const char *const[]){"--base", "395", NULL}), 2);
+}
+
 int main(int argc, char **argv) {
   const char *s = argc > 1 ? argv[1] : getenv("FG_SIM");
   if (!s || !*s) FG_TEST_FAIL("usage: %s PATH-TO-fieldgrip-sim", argv[0]);
@@ -694,6 +748,7 @@ int main(int argc, char **argv) {
       {"gripper_object", test_gripper_object},
       {"two_clients", test_two_clients},
       {"log", test_log},
+      {"tcp_pose", test_tcp_pose},
       {"restart_same_port", test_restart_same_port},
   };
   const char *only = argc > 2 ? argv[2] : NULL;
