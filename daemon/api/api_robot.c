@@ -456,6 +456,14 @@ int fg_api_robot_reset(fg_req *req, fg_resp *resp) {
   return 0;
 }
 
+/* The last TCP pose read (world frame) and when; null before the first. */
+static json_t *tcp_json(const fg_robot_tcp *t) {
+  if (!t->have) return json_null();
+  json_t *o = fg_json_pose_quat(t->p_m, t->q_wxyz);
+  json_object_set_new(o, "read_at", fg_json_time_ms(t->read_ms));
+  return o;
+}
+
 int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   fg_robot_state st;
   fg_robot_state_get(req->app->robot, &st);
@@ -469,6 +477,10 @@ int fg_api_robot_get(fg_req *req, fg_resp *resp) {
   json_object_set_new(o, "status", int_or_null(st.status));
   json_object_set_new(o, "limits", limits_json(req->app->robot));
   json_object_set_new(o, "latched", latch_json(req->app->robot));
+  json_object_set_new(o, "tcp_pose_base", int_or_null(st.tcp_pose_base));
+  json_object_set_new(o, "tcp_pose", tcp_json(&st.tcp));
+  json_object_set_new(o, "tcp_pose_error", st.tcp.error[0] ? json_string(st.tcp.error)
+                                                           : json_null());
   fg_robot_cmd_view v;
   json_object_set_new(o, "last_command",
                       st.last_command && fg_robot_command_get(req->app->robot, st.last_command,

@@ -62,7 +62,7 @@ enum {
 enum {
   K_LIMIT_MIN = K_DONE_TIMEOUT_MS + 1, K_LIMIT_MAX, K_LIMIT_MARGIN, K_APPROACH_CONE_DEG,
   K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M,
-  K_AUDIT_MAX_MB, K_AUDIT_KEEP, K_LOCK_DIR
+  K_AUDIT_MAX_MB, K_AUDIT_KEEP, K_LOCK_DIR, K_TCP_POSE_BASE
 };
 enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
 
@@ -87,7 +87,8 @@ static const char *const robot_keys[] = {"transport", "host",     "port",       
                                          "limit_min", "limit_max", "limit_margin",
                                          "approach_cone_deg", "max_force_n", "max_speed_mps",
                                          "speed_mps", "approach_m", "retreat_m",
-                                         "audit_max_mb", "audit_keep", "lock_dir", NULL};
+                                         "audit_max_mb", "audit_keep", "lock_dir",
+                                         "tcp_pose_base", NULL};
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};
@@ -487,6 +488,13 @@ static int conf_handler(void *user, const char *section, const char *name, const
     c->gripper_model = (fg_gripper_model)x;
     return 1;
   case SEC_ROBOT:
+    if (k == K_TCP_POSE_BASE) {
+      if (strcmp(v, "none") == 0) {
+        c->robot.tcp_pose_base = -1;
+        return 1;
+      }
+      return conf_parse_int(st, name, v, 0, 65535 - 6, &c->robot.tcp_pose_base);
+    }
     if (k >= K_AUDIT_MAX_MB) return set_robot_audit(st, c, k, name, v);
     if (k >= K_LIMIT_MIN) return set_motion(st, &c->motion, k, name, v);
     return set_modbus(st, &c->robot, k, name, v);
@@ -513,6 +521,19 @@ static void check_modbus(conf_parse *st, conf_section sec, const fg_conf_modbus 
   if (m->transport == FG_TRANSPORT_RTU && (!m->device || !m->device[0]))
     conf_fail_at(st, lines[K_DEVICE] ? lines[K_DEVICE] : where, name, "device",
                  "transport rtu needs a serial device; set device = /dev/ttyUSB0 or similar");
+}
+
+/* The TCP pose registers must not overlap the command block (its whole float32 or int16
+ * span: ack, status and stop too). */
+static void check_tcp_pose(conf_parse *st, const fg_conf_modbus *m) {
+  const int t = m->tcp_pose_base, end = m->base + (m->encoding == FG_ENCODING_FLOAT32 ? 26 : 16);
+  if (t >= 0 && t < end && m->base < t + 6) {
+    const int *lines = st->key_line[SEC_ROBOT];
+    conf_fail_at(st, lines[K_TCP_POSE_BASE] ? lines[K_TCP_POSE_BASE] : lines[K_BASE], "robot",
+                 "tcp_pose_base", "the TCP pose registers %d..%d overlap the command block "
+                 "%d..%d (base = %d, encoding %s)", t, t + 5, m->base, end - 1, m->base,
+                 m->encoding == FG_ENCODING_FLOAT32 ? "float32" : "int16");
+  }
 }
 
 /* limit_min and limit_max come together and make a box; the default speed is one the limit
@@ -602,6 +623,7 @@ static void check_final(conf_parse *st) {
                    "missing; [clip] needs both weights and vocab (or remove the section)");
   }
   check_modbus(st, SEC_ROBOT, &c->robot);
+  check_tcp_pose(st, &c->robot);
   check_motion(st, &c->motion);
   check_modbus(st, SEC_GRIPPER_MODBUS, &c->gripper_modbus);
   for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);

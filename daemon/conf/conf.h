@@ -39,6 +39,8 @@ typedef struct fg_conf_modbus {
   fg_encoding encoding;
   int ack_timeout_ms; /* 1..600000 */
   int done_timeout_ms; /* extension: for status done / failed, 1..3600000, default 60000 */
+  int tcp_pose_base; /* first of the six TCP pose registers (proto/modbus.md), default 400;
+                      * -1: none (key value "none") */
   /* [gripper.modbus] only */
   int motion_timeout_ms; /* extension: activation and each move, 1..600000, default 10000 */
 } fg_conf_modbus;

@@ -5,6 +5,7 @@
 #include "secret.h"
 
 #include "core/error.h"
+#include "modbus/regs.h"
 
 #include <arpa/inet.h>
 #include <ctype.h>
@@ -224,6 +225,7 @@ static int modbus_defaults(fg_conf_modbus *m, int unit_id) {
   m->encoding = FG_ENCODING_INT16;
   m->ack_timeout_ms = 2000;
   m->done_timeout_ms = 60000;
+  m->tcp_pose_base = FG_TCP_POSE_BASE_DEFAULT;
   m->motion_timeout_ms = 10000;
   return m->host && m->device;
 }

@@ -53,6 +53,7 @@ int robot_idle(fg_mb_link *l, void *arg) {
     svc->latch.stop_written = 0; /* a new connection: the robot may have restarted */
   svc->gen_seen = fg_mb_link_generation(l);
   pthread_mutex_unlock(&svc->lock);
+  robot_tcp_refresh(svc, l);
   return robot_latch_sync(svc, l);
 }
 
@@ -103,6 +104,7 @@ int fg_robot_svc_new(fg_robot_svc **out, const fg_conf *conf) {
       .ack_timeout_ms = conf->robot.ack_timeout_ms,
       .done_timeout_ms = conf->robot.done_timeout_ms,
   };
+  svc->tcp_base = conf->robot.transport != FG_TRANSPORT_NONE ? conf->robot.tcp_pose_base : -1;
   svc->robot_unit = conf->robot.unit_id;
   svc->gripper_unit = conf->gripper_modbus.unit_id;
   svc->model = conf->gripper_model == FG_GRIPPER_ROBOTIQ_2F140 ? &fg_robotiq_2f140
@@ -433,6 +435,7 @@ static int run_robot_step(rec *r, fg_mb_link *l, int i, int robot_moved) {
   pthread_mutex_lock(&svc->lock);
   if (rc == 0) svc->status = r->v.robot_status = status;
   pthread_mutex_unlock(&svc->lock);
+  if (rc == 0) robot_tcp_refresh(svc, l); /* where the motion ended */
   if (rc < 0)
     return unknown(r, l, rc, rc == FG_ETIMEDOUT ? "robot_timeout" : "robot_unknown",
                    "seq %u was acknowledged but its end was not seen: %s", seq,

@@ -196,6 +196,25 @@ typedef struct fg_peer_view {
   unsigned generation;  /* the number of the last connection, 0 before the first */
 } fg_peer_view;
 
+/* The TCP pose the robot reports ([robot] tcp_pose_base, proto/modbus.md). */
+typedef struct fg_robot_tcp {
+  int have;             /* a pose was read (since the start) */
+  double p_m[3];        /* base frame, metres */
+  double q_wxyz[4];
+  int64_t read_ms;      /* CLOCK_REALTIME of that read */
+  unsigned generation;  /* the connection it was read on */
+  char error[256];      /* why the last read failed; "" when it did not */
+} fg_robot_tcp;
+
+/* The last pose read (at the idle poll, every second, and after each motion). */
+void fg_robot_tcp_get(fg_robot_svc *svc, fg_robot_tcp *out);
+
+/* Reads the pose now, for a frame taken at it: 0, or FG_EUNAVAIL (not_configured: no robot
+ * or tcp_pose_base none; robot_disconnected), FG_EBUSY (robot_busy: a command is moving the
+ * robot), FG_EPEER (modbus_exception; tcp_pose_invalid: the words are no pose),
+ * FG_ETIMEDOUT (robot_timeout). The last good pose is kept on failure. */
+int fg_robot_tcp_read(fg_robot_svc *svc, fg_robot_tcp *out);
+
 /* The robot peer's state for GET /v1/robot. */
 typedef struct fg_robot_state {
   fg_peer_view peer;
@@ -205,6 +224,8 @@ typedef struct fg_robot_state {
   int ack, status;       /* last read, -1 before any read */
   int busy;              /* a command is running */
   uint64_t last_command; /* id of the newest command, 0 when none */
+  int tcp_pose_base;     /* -1: none */
+  fg_robot_tcp tcp;
 } fg_robot_state;
 
 void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st);

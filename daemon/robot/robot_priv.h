@@ -27,6 +27,7 @@ typedef struct rec {
 struct fg_robot_svc {
   fg_mb_peer *robot, *gripper; /* NULL when not configured */
   fg_robot_profile rp;
+  int tcp_base;          /* [robot] tcp_pose_base; -1 none (or no robot) */
   int robot_unit, gripper_unit;
   const fg_robotiq_model *model;
   int motion_timeout_ms;
@@ -43,6 +44,7 @@ struct fg_robot_svc {
   uint16_t last_seq;
   unsigned gen_seen;    /* link generation whose ack last_seq was read from */
   int ack, status;
+  fg_robot_tcp tcp;      /* robot_tcp.c */
   /* gripper: written by its worker */
   int g_have;
   fg_robotiq_status g_status;
@@ -69,6 +71,12 @@ struct fg_robot_svc {
 /* The robot's idle job (a job fn of peer.h): reads ack and status, then writes what the
  * latch still owes the robot. */
 int robot_idle(fg_mb_link *l, void *arg);
+
+/* ---- robot_tcp.c */
+
+/* Reads the TCP pose on the robot's worker and keeps it (a failure only as its error), when
+ * [robot] publishes one. */
+void robot_tcp_refresh(fg_robot_svc *svc, fg_mb_link *l);
 
 /* ---- robot_plan.c */
 

@@ -39,6 +39,8 @@ void fg_robot_state_get(fg_robot_svc *svc, fg_robot_state *st) {
   st->status = svc->status;
   st->busy = svc->active != NULL;
   st->last_command = svc->next_id - 1;
+  st->tcp_pose_base = svc->tcp_base;
+  st->tcp = svc->tcp;
   pthread_mutex_unlock(&svc->lock);
 }
 

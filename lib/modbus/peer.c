@@ -141,6 +141,7 @@ typedef struct call {
   pthread_cond_t cond;
   int finished, rc;
   char detail[1024];
+  const char *reason; /* fg_fail_as's, a string literal; NULL when none */
 } call;
 
 static int call_run(fg_mb_link *l, void *arg) {
@@ -153,6 +154,7 @@ static void call_done(void *arg, int rc) {
   pthread_mutex_lock(&c->lock);
   c->rc = rc;
   snprintf(c->detail, sizeof c->detail, "%s", rc < 0 ? fg_error_detail() : "");
+  c->reason = rc < 0 ? fg_error_reason() : NULL;
   c->finished = 1;
   pthread_cond_signal(&c->cond);
   pthread_mutex_unlock(&c->lock);
@@ -168,7 +170,10 @@ int fg_mb_peer_call(fg_mb_peer *p, fg_mb_job_fn fn, void *arg) {
     while (!c.finished) pthread_cond_wait(&c.cond, &c.lock);
     pthread_mutex_unlock(&c.lock);
     rc = c.rc;
-    if (rc < 0) fg_fail(rc, "%s", c.detail);
+    if (rc < 0 && c.reason)
+      fg_fail_as(rc, c.reason, "%s", c.detail);
+    else if (rc < 0)
+      fg_fail(rc, "%s", c.detail);
   }
   pthread_cond_destroy(&c.cond);
   pthread_mutex_destroy(&c.lock);

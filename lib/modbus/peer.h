@@ -26,8 +26,8 @@ int fg_mb_peer_new(fg_mb_peer **out, const fg_mb_link_config *cfg, int idle_ms,
 void fg_mb_peer_free(fg_mb_peer *p);
 
 /* Runs fn(link, arg) on the worker and waits for it; returns its result (FG_EBUSY when the
- * queue is full, FG_ECANCELED when the peer stops first). The detail of a failure is
- * copied to the calling thread. */
+ * queue is full, FG_ECANCELED when the peer stops first). The detail of a failure, and its
+ * reason (fg_fail_as), are copied to the calling thread. */
 int fg_mb_peer_call(fg_mb_peer *p, fg_mb_job_fn fn, void *arg);
 
 /* Queues fn(link, arg) and returns at once; done(arg, rc) runs on the worker afterwards

@@ -156,7 +156,7 @@ int fg_tcp_pose_decode(const uint16_t w[6], double p_m[3], double rotvec_rad[3])
   }
   /* each component is rounded to 0.5 mrad: the length by at most sqrt(3) * 0.5 mrad */
   if (sqrt(n2) > M_PI + 0.9e-3)
-    return fg_fail(FG_EPEER, "the TCP pose registers hold no pose: rotation vector "
+    return fg_fail_as(FG_EPEER, "tcp_pose_invalid", "the TCP pose registers hold no pose: rotation vector "
                    "(%d, %d, %d) mrad is %.4f rad long, a controller's is at most pi",
                    (int16_t)w[3], (int16_t)w[4], (int16_t)w[5], sqrt(n2));
   return 0;

@@ -93,8 +93,8 @@ float fg_float32_from_words(const uint16_t w[2]);
  * finite. For simulators and tests. */
 int fg_tcp_pose_encode(const double p_m[3], const double rotvec_rad[3], uint16_t w[6]);
 
-/* The six words as a pose. FG_EPEER with a detail giving the words when they are not a pose
- * a controller reports: a rotation vector longer than pi by more than the registers'
+/* The six words as a pose. FG_EPEER (reason tcp_pose_invalid) with a detail giving the
+ * words when they are not a pose a controller reports: a rotation vector longer than pi by more than the registers'
  * rounding (a controller's is at most pi). */
 int fg_tcp_pose_decode(const uint16_t w[6], double p_m[3], double rotvec_rad[3]);
 

@@ -71,6 +71,43 @@ static void check_example(const char *encoding, const uint16_t *words, int n) {
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "encoding")), encoding);
   ASSERT_STREQ(json_string_value(json_object_get(
                    json_object_get(r->json, "last_command"), "state")), "done");
+  /* where the robot reports the pick ended (registers 400-405, read after the motion): the
+   * pose lifted by the block's 0.10 m retreat, turned as the pose asked */
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "tcp_pose_base")), 400);
+  ASSERT(json_is_null(json_object_get(r->json, "tcp_pose_error")));
+  json_t *tcp = json_object_get(r->json, "tcp_pose");
+  const double want_p[3] = {0.4523, -0.1207, 0.1350}, want_q[4] = {0, 0.9238795, -0.3826834, 0};
+  double dot = 0;
+  for (int i = 0; i < 3; i++)
+    ASSERT_NEAR(json_real_value(json_array_get(json_object_get(tcp, "position"), i)),
+                want_p[i], 1e-9);
+  for (int i = 0; i < 4; i++)
+    dot += want_q[i] * json_real_value(json_array_get(json_object_get(tcp, "quaternion"), i));
+  ASSERT(fabs(dot) > cos(0.002)); /* within 4 mrad: the registers' rounding */
+  ASSERT(json_is_string(json_object_get(tcp, "read_at")));
+  h_resp_free(r);
+  h_stop();
+  simproc_stop(&sim);
+}
+
+/* A controller that publishes no TCP pose: tcp_pose_base = none, and nothing is read. */
+static void check_tcp_pose_none(void) {
+  simproc sim;
+  const char *args[] = {"--tcp-pose-base", "none", NULL};
+  simproc_start(&sim, 0, args);
+  r_config(sim.port, "tcp_pose_base = none", 0, NULL);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+  h_resp *r = r_post("/v1/robot/commands", R_EXAMPLE_BODY "}", NULL);
+  r_expect(r, 200, NULL);
+  h_resp_free(r);
+  r = h_get("/v1/robot");
+  ASSERT(json_is_null(json_object_get(r->json, "tcp_pose_base")));
+  ASSERT(json_is_null(json_object_get(r->json, "tcp_pose")));
+  ASSERT(json_is_null(json_object_get(r->json, "tcp_pose_error")));
+  /* no read reached the simulator, which would have answered exception 2 */
+  ASSERT_EQ(json_integer_value(json_object_get(json_object_get(r->json, "counters"),
+                                               "exceptions")), 0);
   h_resp_free(r);
   h_stop();
   simproc_stop(&sim);
@@ -380,6 +417,7 @@ int main(int argc, char **argv) {
   simproc_init(argv[2], h_tmpdir());
   check_example("int16", r_example_int16, 13);
   check_example("float32", r_example_float32, 23);
+  check_tcp_pose_none();
   check_gripper();
   check_values();
   check_idempotency();

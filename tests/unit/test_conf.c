@@ -674,6 +674,26 @@ static void test_errors(void) {
   EXPECT_ERROR("[robot]\nspeed_mps = 0.5\n", 2, "[robot] speed_mps:", "above max_speed_mps");
   EXPECT_ERROR("[robot]\napproach_m = 1.5\n", 2, "[robot] approach_m:", "at most 1");
   EXPECT_ERROR("[robot]\ntimeout_ms = 0\n", 2, "[robot] timeout_ms:", NULL);
+  /* the TCP pose registers: a register or none, never over the command block */
+  EXPECT_ERROR("[robot]\ntcp_pose_base = 65530\n", 2, "[robot] tcp_pose_base:", "0 to 65529");
+  EXPECT_ERROR("[robot]\ntcp_pose_base = 140\n", 2, "[robot] tcp_pose_base:",
+               "140..145 overlap the command block 128..143");
+  EXPECT_ERROR("[robot]\nencoding = float32\ntcp_pose_base = 150\n", 3,
+               "[robot] tcp_pose_base:", "128..153");
+  EXPECT_ERROR("[robot]\nbase = 395\n", 2, "[robot] tcp_pose_base:", "400..405 overlap");
+  EXPECT_ERROR("[gripper.modbus]\ntcp_pose_base = 400\n", 2,
+               "[gripper.modbus] tcp_pose_base: unknown key", "[robot] only");
+  {
+    fg_conf *c = load_ok("[robot]\ntcp_pose_base = none\n");
+    ASSERT_EQ(c->robot.tcp_pose_base, -1);
+    fg_conf_free(c);
+    c = load_ok("[robot]\ntcp_pose_base = 122\n");
+    ASSERT_EQ(c->robot.tcp_pose_base, 122);
+    fg_conf_free(c);
+    c = load_ok("[robot]\n");
+    ASSERT_EQ(c->robot.tcp_pose_base, 400);
+    fg_conf_free(c);
+  }
   EXPECT_ERROR("[robot]\nack_timeout_ms = 600001\n", 2, "[robot] ack_timeout_ms:", NULL);
   EXPECT_ERROR("[gripper.modbus]\nbaud = fast\n", 2, "[gripper.modbus] baud:", NULL);
 
