@@ -397,6 +397,51 @@ void sim_cell_tcp(const sim_cell *c, double p[3], double q_wxyz[4]) {
   memcpy(q_wxyz, c->d->xquat + 4 * c->hand, 4 * sizeof *q_wxyz);
 }
 
+/* ---------------------------------------------------------------- views */
+
+struct sim_cell_view {
+  const mjModel *m; /* the cell's: the model never changes */
+  mjData *d;
+  int hand;
+};
+
+sim_cell_view *sim_cell_view_new(const sim_cell *c) {
+  sim_cell_view *v = calloc(1, sizeof *v);
+  if (!v) return NULL;
+  v->m = c->m;
+  v->hand = c->hand;
+  v->d = mj_makeData(c->m);
+  if (!v->d) {
+    free(v);
+    return NULL;
+  }
+  return v;
+}
+
+void sim_cell_view_free(sim_cell_view *v) {
+  if (!v) return;
+  mj_deleteData(v->d);
+  free(v);
+}
+
+void sim_cell_view_take(sim_cell_view *v, const sim_cell *c) { mj_copyData(v->d, c->m, c->d); }
+
+void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]) {
+  memcpy(p, v->d->xpos + 3 * v->hand, 3 * sizeof *p);
+  memcpy(q_wxyz, v->d->xquat + 4 * v->hand, 4 * sizeof *q_wxyz);
+}
+
+double sim_cell_view_ray(const sim_cell_view *v, const double p[3], const double dir[3],
+                         float rgb[3]) {
+  int geom = -1;
+  const double t = mj_ray(v->m, v->d, p, dir, NULL, 1, v->hand, &geom);
+  if (t < 0 || geom < 0) return -1;
+  const int mat = v->m->geom_matid[geom];
+  const float *c = mat >= 0 ? v->m->mat_rgba + 4 * mat : v->m->geom_rgba + 4 * geom;
+  for (int k = 0; k < 3; k++) rgb[k] = c[k];
+  return t;
+}
+
 double sim_cell_time(const sim_cell *c) { return c->d->time; }
 
 static void command_begin(sim_cell *c, int64_t now_ns) {

@@ -86,6 +86,22 @@ void sim_cell_fingers_status(const sim_cell *c, int *position, int *moving, int 
  * (metres) and orientation (w, x, y, z), base frame. */
 void sim_cell_tcp(const sim_cell *c, double p[3], double q_wxyz[4]);
 
+/* A copy of the cell's state to look at from another thread (the camera): taken under the
+ * caller's lock, then rendered from without it. */
+typedef struct sim_cell_view sim_cell_view;
+sim_cell_view *sim_cell_view_new(const sim_cell *c);
+void sim_cell_view_free(sim_cell_view *v);
+void sim_cell_view_take(sim_cell_view *v, const sim_cell *c);
+
+/* The hand's pose in the copy (as sim_cell_tcp). */
+void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]);
+
+/* The nearest surface along the ray from p in the unit direction dir, leaving out the palm
+ * (a camera on the tool sits on it; the fingers stay in view): its distance in metres and
+ * its colour (the geom's material or rgba, 0..1), or -1 when the ray meets nothing. */
+double sim_cell_view_ray(const sim_cell_view *v, const double p[3], const double dir[3],
+                         float rgb[3]);
+
 /* The cell's clock, seconds. */
 double sim_cell_time(const sim_cell *c);
 

@@ -37,12 +37,12 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/signalfd.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
@@ -64,6 +64,8 @@ typedef struct {
   long n_requests;         /* received so far, over all connections */
   FILE *log;
   sim_cell *cell;          /* the physics mode: the cell; NULL in the kinematic mode */
+  sim_camera *camera;      /* --camera-listen: the camera on the tool, or NULL */
+  pthread_mutex_t lock;    /* held while the cell changes (the camera's thread copies it) */
   FILE *report;            /* --report */
 } sim_state;
 
@@ -111,7 +113,16 @@ static void usage(FILE *f) {
           "  --approach-m M         pick and place without an approach come in this far\n"
           "                         (default 0.10)\n"
           "  --lift-m M             pick without a retreat lifts this far (default 0.10)\n"
-          "  --reach-m M            refuse poses farther from the base (default 0.85)\n");
+          "  --reach-m M            refuse poses farther from the base (default 0.85)\n"
+          "  --camera-listen H:P    serve GET /rgb.png and /depth.png (16-bit mm) of the cell\n"
+          "                         as a camera on the tool sees it from the current TCP pose\n"
+          "  --camera-port-file F   write the camera's bound port + newline to F\n"
+          "  --camera-mount \"x y z qw qx qy qz\"  T_tcp_cam, OpenCV convention (default\n"
+          "                         0.05 m behind the TCP, looking along the tool's +z)\n"
+          "  --camera \"fx fy cx cy w h [k1 k2 p1 p2]\"  intrinsics (default 600 600 319.5\n"
+          "                         239.5 640 480)\n"
+          "  --board \"sx sy square_m marker_m DICT x y z yaw_deg\"  a ChArUco board on the\n"
+          "                         table, its frame's origin at x y z\n");
 }
 
 /* ---------------------------------------------------------------- time */
@@ -229,6 +240,11 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"lift-m", required_argument, NULL, 1002},
       {"reach-m", required_argument, NULL, 1003},
       {"tcp-pose-base", required_argument, NULL, 1004},
+      {"camera-listen", required_argument, NULL, 1005},
+      {"camera-port-file", required_argument, NULL, 1006},
+      {"camera-mount", required_argument, NULL, 1007},
+      {"camera", required_argument, NULL, 1008},
+      {"board", required_argument, NULL, 1009},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -243,6 +259,8 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   cfg->object_width_mm = -1;
   cfg->stroke_mm = 85;
   sim_cell_config_default(&cfg->cell);
+  sim_camera_config_default(&cfg->camera);
+  char err[512];
   int have_listen = 0, have_object = 0, rc = 0, c;
   const int max_ms = 3600000;
   opterr = 0;
@@ -312,6 +330,18 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       else
         rc = parse_int("--tcp-pose-base", optarg, 0, 65535 - 6, &cfg->tcp_base);
       break;
+    case 1005:
+      cfg->camera.on = 1;
+      if (snprintf(cfg->camera.listen, sizeof cfg->camera.listen, "%s", optarg) >=
+          (int)sizeof cfg->camera.listen) {
+        fprintf(stderr, "fieldgrip-sim: --camera-listen is too long\n");
+        rc = -1;
+      }
+      break;
+    case 1006: cfg->camera.port_file = optarg; break;
+    case 1007: rc = sim_camera_parse_mount(&cfg->camera, optarg, err, sizeof err); break;
+    case 1008: rc = sim_camera_parse_intrinsics(&cfg->camera, optarg, err, sizeof err); break;
+    case 1009: rc = sim_camera_parse_board(&cfg->camera, optarg, err, sizeof err); break;
     case 'h': usage(stdout); return 1;
     default:
       fprintf(stderr, "fieldgrip-sim: unknown or incomplete option \"%s\"\n",
@@ -319,7 +349,10 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       usage(stderr);
       return -1;
     }
-    if (rc != 0) return -1;
+    if (rc != 0) {
+      if (c >= 1007 && c <= 1009) fprintf(stderr, "fieldgrip-sim: %s\n", err);
+      return -1;
+    }
   }
   if (optind < argc) {
     fprintf(stderr, "fieldgrip-sim: unexpected argument \"%s\"\n", argv[optind]);
@@ -348,6 +381,11 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   if (cfg->cell.scene_path && have_object) {
     fprintf(stderr, "fieldgrip-sim: --object-width-mm is of the kinematic mode; with --scene the "
             "cell's objects are what the fingers meet\n");
+    return -1;
+  }
+  if (!cfg->cell.scene_path && cfg->camera.on) {
+    fprintf(stderr, "fieldgrip-sim: --camera-listen needs --scene (the camera sees the "
+            "physics cell)\n");
     return -1;
   }
   if (!cfg->cell.scene_path && cfg->report_path) {
@@ -611,7 +649,46 @@ static int cell_open(sim_state *s) {
   }
   s->robot.cell = s->cell;
   s->grip.cell = s->cell;
+  if (!s->cfg.camera.on) return 0;
+  int port;
+  s->camera = sim_camera_new(&s->cfg.camera, s->cell, err, sizeof err);
+  if (!s->camera || sim_camera_serve(s->camera, &s->lock, &port, err, sizeof err) != 0) {
+    fprintf(stderr, "fieldgrip-sim: %s\n", err);
+    return -1;
+  }
+  if (s->cfg.camera.port_file && port_file_write(s->cfg.camera.port_file, port) != 0) {
+    fprintf(stderr, "fieldgrip-sim: cannot write port file %s: %s\n", s->cfg.camera.port_file,
+            strerror(errno));
+    return -1;
+  }
   return 0;
+}
+
+/* SIGTERM, SIGINT and SIGUSR1 reach the main loop through a pipe: a handler, unlike a
+ * signalfd, works whichever thread the signal lands on (libraries start threads of their own
+ * before main, which a signal mask set here would not cover). */
+static int g_sig_pipe = -1;
+
+static void on_signal(int sig) {
+  const int saved = errno;
+  const unsigned char b = (unsigned char)sig;
+  if (write(g_sig_pipe, &b, 1) < 0) { /* full: a signal of each kind is already waiting */
+  }
+  errno = saved;
+}
+
+/* The pipe's read end, or -1. */
+static int signals_open(void) {
+  int p[2];
+  if (pipe2(p, O_CLOEXEC | O_NONBLOCK) != 0) return -1;
+  g_sig_pipe = p[1];
+  struct sigaction sa = {.sa_handler = on_signal, .sa_flags = SA_RESTART};
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGTERM, &sa, NULL);
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGUSR1, &sa, NULL);
+  signal(SIGPIPE, SIG_IGN);
+  return p[0];
 }
 
 static int sim_open(sim_state *s) {
@@ -621,16 +698,9 @@ static int sim_open(sim_state *s) {
     fprintf(stderr, "fieldgrip-sim: out of memory\n");
     return -1;
   }
-  sigset_t mask;
-  sigemptyset(&mask);
-  sigaddset(&mask, SIGTERM);
-  sigaddset(&mask, SIGINT);
-  sigaddset(&mask, SIGUSR1);
-  sigprocmask(SIG_BLOCK, &mask, NULL);
-  signal(SIGPIPE, SIG_IGN);
-  s->sig_fd = signalfd(-1, &mask, SFD_CLOEXEC);
+  s->sig_fd = signals_open();
   if (s->sig_fd < 0) {
-    fprintf(stderr, "fieldgrip-sim: signalfd: %s\n", strerror(errno));
+    fprintf(stderr, "fieldgrip-sim: pipe: %s\n", strerror(errno));
     return -1;
   }
   if (log_open(s) != 0 || cell_open(s) != 0) return -1;
@@ -688,6 +758,7 @@ static void sim_close(sim_state *s) {
   modbus_mapping_free(s->grip.map);
   if (s->log) fclose(s->log);
   if (s->robot.log) fclose(s->robot.log);
+  sim_camera_free(s->camera); /* its thread first: it copies the cell */
   sim_cell_close(s->cell);
   if (s->report) fclose(s->report);
 }
@@ -695,6 +766,7 @@ static void sim_close(sim_state *s) {
 /* Serves until SIGTERM or SIGINT; returns 0, or -1 when poll fails. */
 static int sim_run(sim_state *s) {
   struct pollfd fds[3 + SIM_MAX_CLIENTS];
+  pthread_mutex_lock(&s->lock);
   for (;;) {
     int64_t now = now_ns();
     sim_advance(s, now);
@@ -705,19 +777,24 @@ static int sim_run(sim_state *s) {
     for (int i = 0; i < n; i++) fds[2 + i] = (struct pollfd){.fd = s->clients[i], .events = POLLIN};
     const int rtu = s->rtu ? 2 + n : -1;
     if (s->rtu) fds[rtu] = (struct pollfd){.fd = modbus_get_socket(s->rtu), .events = POLLIN};
-    if (poll(fds, (nfds_t)(2 + n + (s->rtu != NULL)), timeout) < 0) {
+    pthread_mutex_unlock(&s->lock); /* the camera may copy the cell meanwhile */
+    const int ready = poll(fds, (nfds_t)(2 + n + (s->rtu != NULL)), timeout);
+    pthread_mutex_lock(&s->lock);
+    if (ready < 0) {
       if (errno == EINTR) continue;
       fprintf(stderr, "fieldgrip-sim: poll: %s\n", strerror(errno));
+      pthread_mutex_unlock(&s->lock);
       return -1;
     }
     if (fds[0].revents & POLLIN) {
-      struct signalfd_siginfo si;
-      if (read(s->sig_fd, &si, sizeof si) == (ssize_t)sizeof si) {
-        if (si.ssi_signo == SIGUSR1) {
-          log_open(s);
-        } else {
+      unsigned char sig[16];
+      const ssize_t n_sig = read(s->sig_fd, sig, sizeof sig);
+      for (ssize_t k = 0; k < n_sig; k++) {
+        if (sig[k] != SIGUSR1) {
+          pthread_mutex_unlock(&s->lock);
           return 0;
         }
+        log_open(s);
       }
     }
     /* Clients from the last to the first, so that closing one (which moves the last into
@@ -733,6 +810,7 @@ static int sim_run(sim_state *s) {
 int main(int argc, char **argv) {
   sim_state s;
   memset(&s, 0, sizeof s);
+  pthread_mutex_init(&s.lock, NULL);
   int rc = parse_args(argc, argv, &s.cfg);
   if (rc != 0) return rc > 0 ? 0 : 2;
   rc = sim_open(&s);

@@ -9,6 +9,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "camera.h"
 #include "cell.h"
 
 #define SIM_NEVER INT64_MAX
@@ -42,6 +43,7 @@ typedef struct {
   const char *rtu_device;  /* also serve the gripper unit on this serial line; NULL: none */
   const char *report_path; /* the physics cell's report; NULL: none */
   sim_cell_config cell;    /* cell.scene_path != NULL: the physics mode */
+  sim_camera_config camera; /* camera.on: the camera on the tool (physics mode only) */
 } sim_config;
 
 /* The robot block, its pending acknowledgement, and the TCP that the robot program moves:
