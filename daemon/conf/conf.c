@@ -38,7 +38,7 @@
 static const char *const section_names[SEC_COUNT] = {
     [SEC_HTTP] = "http",       [SEC_STATE] = "state",  [SEC_CLIP] = "clip",
     [SEC_TRAIN] = "train",     [SEC_GRIPPER] = "gripper", [SEC_ROBOT] = "robot",
-    [SEC_GRIPPER_MODBUS] = "gripper.modbus",
+    [SEC_GRIPPER_MODBUS] = "gripper.modbus", [SEC_CALIBRATION] = "calibration",
 };
 
 enum {
@@ -98,7 +98,8 @@ static const char *const scene_keys[] = {"workspace_min", "workspace_max", "voxe
 static const char *const *const section_keys[SEC_COUNT] = {
     [SEC_HTTP] = http_keys,       [SEC_STATE] = state_keys,   [SEC_CLIP] = clip_keys,
     [SEC_TRAIN] = train_keys,     [SEC_GRIPPER] = gripper_keys, [SEC_ROBOT] = robot_keys,
-    [SEC_GRIPPER_MODBUS] = gripper_modbus_keys, [SEC_SCENE] = scene_keys,
+    [SEC_GRIPPER_MODBUS] = gripper_modbus_keys, [SEC_CALIBRATION] = conf_calibration_keys,
+    [SEC_SCENE] = scene_keys, [SEC_CAMERA] = conf_camera_keys,
 };
 
 static const char *const transport_names[] = {"none", "tcp", "rtu", NULL};
@@ -165,9 +166,13 @@ static int enter_section(conf_parse *st, const char *text, size_t len) {
     return 1;
   }
 
+  if (strncmp(st->sec_text, "camera", 6) == 0 &&
+      (st->sec_text[6] == '\0' || isspace((unsigned char)st->sec_text[6])))
+    return conf_enter_camera(st, skip_space(st->sec_text + 6));
+
   return conf_fail_at(st, st->line, st->sec_text, NULL,
                       "unknown section; expected http, state, clip, train, gripper, robot, "
-                      "gripper.modbus or scene NAME");
+                      "gripper.modbus, calibration, scene NAME or camera NAME");
 }
 
 /* ---------------------------------------------------------------- the line reader */
@@ -400,9 +405,14 @@ static int conf_handler(void *user, const char *section, const char *name, const
                           "unknown key: this one belongs to [robot] only; [gripper.modbus] "
                           "takes %s", list);
     return conf_fail_at(st, st->line, st->sec_text, name, "unknown key; [%s] takes %s",
-                        st->sec == SEC_SCENE ? "scene NAME" : st->sec_text, list);
+                        st->sec == SEC_SCENE    ? "scene NAME"
+                        : st->sec == SEC_CAMERA ? "camera NAME"
+                                                : st->sec_text,
+                        list);
   }
-  int *seen = st->sec == SEC_SCENE ? &st->scene_meta[st->scene].key_line[k] : &st->key_line[st->sec][k];
+  int *seen = st->sec == SEC_SCENE    ? &st->scene_meta[st->scene].key_line[k]
+              : st->sec == SEC_CAMERA ? &st->camera_meta[st->camera].key_line[k]
+                                      : &st->key_line[st->sec][k];
   if (*seen)
     return conf_fail_at(st, st->line, st->sec_text, name,
                         "duplicate key (first set on line %d); keep "
@@ -502,6 +512,8 @@ static int conf_handler(void *user, const char *section, const char *name, const
     return set_modbus(st, &c->gripper_modbus, k > K_TIMEOUT_MS ? K_MOTION_TIMEOUT_MS : k, name,
                       v);
   case SEC_SCENE: return set_scene(st, &c->scenes[st->scene], k, name, v);
+  case SEC_CALIBRATION: return conf_set_calibration(st, k, name, v);
+  case SEC_CAMERA: return conf_set_camera(st, k, name, v);
   case SEC_NONE:
   case SEC_COUNT: break;
   }
@@ -627,6 +639,7 @@ static void check_final(conf_parse *st) {
   check_motion(st, &c->motion);
   check_modbus(st, SEC_GRIPPER_MODBUS, &c->gripper_modbus);
   for (size_t i = 0; i < c->n_scenes; i++) check_scene(st, &c->scenes[i], &st->scene_meta[i]);
+  conf_check_cell(st);
   /* The declared scenes alone would not fit: the file contradicts itself. */
   if (c->max_scenes > 0 && c->n_scenes > (size_t)c->max_scenes)
     conf_fail_at(st, st->key_line[SEC_STATE][K_MAX_SCENES]
@@ -698,6 +711,7 @@ int fg_conf_load(const char *path, fg_conf **out, char *err, size_t errlen) {
   free(st.raw);
   free(st.base_dir);
   free(st.scene_meta);
+  free(st.camera_meta);
   if (st.failed) {
     fg_conf_free(st.conf);
     copy_err(err, errlen, st.err);

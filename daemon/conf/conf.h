@@ -11,6 +11,8 @@
 
 #include <stddef.h>
 
+#include "calib/charuco.h"
+
 #include "field/train.h"   /* the [train] loss weights' defaults and range */
 #include "grasp/gripper.h" /* fg_gripper_model: [gripper] model */
 
@@ -68,6 +70,19 @@ typedef struct fg_conf_scene {
   double background[3];                      /* key "background", RGB in [0,1], default 1 1 1 */
 } fg_conf_scene;
 
+/* [camera NAME] (SPEC.md "The cell around the field"): a source fieldgripd captures from. */
+typedef enum { FG_MOUNT_HAND = 0, FG_MOUNT_FIXED } fg_camera_mount;
+
+#define FG_CAMERA_NAME_MAX 63
+
+typedef struct fg_conf_camera {
+  char name[FG_CAMERA_NAME_MAX + 1]; /* a scene name's characters */
+  char *source;         /* "http://..." (a snapshot URL) or "v4l2:/dev/videoN" */
+  char *depth_source;   /* the same for a depth image (16-bit PNG), or NULL */
+  double depth_scale;   /* metres per depth unit; default 0.001 (millimetres) */
+  fg_camera_mount mount; /* key "mount": hand (default) or fixed */
+} fg_conf_camera;
+
 typedef struct fg_conf {
   char *path;            /* the file read, or NULL for built-in defaults */
   /* [http] */
@@ -123,6 +138,12 @@ typedef struct fg_conf {
   /* [scene NAME] */
   fg_conf_scene *scenes;
   size_t n_scenes;
+  /* [camera NAME] */
+  fg_conf_camera *cameras;
+  size_t n_cameras;
+  /* [calibration]: the ChArUco board; default 7 x 5 squares of 35 mm with 26 mm markers of
+   * DICT_5X5_100 (it prints on A4) */
+  fg_charuco_board board;
 } fg_conf;
 
 /* Allocates a configuration holding every built-in default. NULL on allocation failure. */
@@ -170,6 +191,9 @@ int fg_scene_name_validate(const char *name);
 /* Sets a [scene NAME] section's built-in values (SPEC.md's tabletop workspace at 1 cm voxels,
  * white background); the name is left empty. */
 void fg_conf_scene_defaults(fg_conf_scene *s);
+
+/* Finds a [camera NAME] by name; NULL if absent. */
+const fg_conf_camera *fg_conf_find_camera(const fg_conf *conf, const char *name);
 
 /* Finds a [scene NAME] by name; NULL if absent. */
 const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name);

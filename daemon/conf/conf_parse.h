@@ -18,7 +18,9 @@ typedef enum {
   SEC_GRIPPER,
   SEC_ROBOT,
   SEC_GRIPPER_MODBUS,
-  SEC_SCENE,
+  SEC_CALIBRATION,
+  SEC_SCENE,  /* the named sections: [scene NAME], [camera NAME] */
+  SEC_CAMERA,
   SEC_COUNT
 } conf_section;
 
@@ -29,6 +31,12 @@ typedef struct scene_meta {
   int header_line;
   int key_line[4]; /* line of each scene key, 0 when not set */
 } scene_meta;
+
+/* Per-camera parse bookkeeping, parallel to fg_conf.cameras. */
+typedef struct camera_meta {
+  int header_line;
+  int key_line[4];
+} camera_meta;
 
 typedef enum { LINE_BLANK, LINE_COMMENT, LINE_HEADER, LINE_KEY, LINE_CONTINUATION } line_kind;
 
@@ -51,12 +59,29 @@ typedef struct conf_parse {
   int sec_line[SEC_COUNT];
   int key_line[SEC_COUNT][MAX_KEYS];
   scene_meta *scene_meta;
+  size_t camera;     /* index into conf->cameras when sec == SEC_CAMERA */
+  camera_meta *camera_meta;
 
   int failed;    /* an error has been recorded */
   int err_line;  /* its line, to keep the earliest of the end-of-file checks */
   int err_code;
   char err[768];
 } conf_parse;
+
+/* ---- conf_cell.c: [calibration] and [camera NAME] ---- */
+
+extern const char *const conf_calibration_keys[];
+extern const char *const conf_camera_keys[];
+
+/* Opens a [camera NAME] section (the text after "camera"). 1, or 0 after an error. */
+int conf_enter_camera(conf_parse *st, const char *name);
+
+/* One key of the section; k indexes its key list. 1, or 0 after an error. */
+int conf_set_calibration(conf_parse *st, int k, const char *name, const char *v);
+int conf_set_camera(conf_parse *st, int k, const char *name, const char *v);
+
+/* The checks once the file is read: the board OpenCV can make, each camera's source. */
+void conf_check_cell(conf_parse *st);
 
 /* ---- errors: each records its error and returns 0 (inih's "failed" value) ---- */
 

@@ -244,6 +244,7 @@ fg_conf *fg_conf_defaults(void) {
   c->three_js = strdup(FG_CONF_DEFAULT_THREE_JS);
   c->state_dir = strdup(FG_CONF_DEFAULT_STATE_DIR);
   c->max_scenes = 64;
+  c->board = (fg_charuco_board){7, 5, 0.035, 0.026, 5 /* DICT_5X5_100 */};
   c->max_loaded_fields = 4;
   c->train_steps = 2000;
   c->depth_weight = FG_TRAIN_DEPTH_WEIGHT;
@@ -268,6 +269,12 @@ fg_conf *fg_conf_defaults(void) {
     return NULL;
   }
   return c;
+}
+
+const fg_conf_camera *fg_conf_find_camera(const fg_conf *conf, const char *name) {
+  for (size_t i = 0; i < conf->n_cameras; i++)
+    if (strcmp(conf->cameras[i].name, name) == 0) return &conf->cameras[i];
+  return NULL;
 }
 
 const fg_conf_scene *fg_conf_find_scene(const fg_conf *conf, const char *name) {
@@ -307,5 +314,10 @@ void fg_conf_free(fg_conf *conf) {
   modbus_free(&conf->gripper_modbus);
   free(conf->lock_dir);
   free(conf->scenes);
+  for (size_t i = 0; i < conf->n_cameras; i++) {
+    free(conf->cameras[i].source);
+    free(conf->cameras[i].depth_source);
+  }
+  free(conf->cameras);
   free(conf);
 }

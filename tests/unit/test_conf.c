@@ -674,6 +674,54 @@ static void test_errors(void) {
   EXPECT_ERROR("[robot]\nspeed_mps = 0.5\n", 2, "[robot] speed_mps:", "above max_speed_mps");
   EXPECT_ERROR("[robot]\napproach_m = 1.5\n", 2, "[robot] approach_m:", "at most 1");
   EXPECT_ERROR("[robot]\ntimeout_ms = 0\n", 2, "[robot] timeout_ms:", NULL);
+  /* [calibration]: the board, checked as OpenCV would make it */
+  {
+    fg_conf *c = load_ok("[robot]\n");
+    ASSERT_EQ(c->board.squares_x, 7);
+    ASSERT_EQ(c->board.squares_y, 5);
+    ASSERT_NEAR(c->board.square_m, 0.035, 1e-12);
+    ASSERT_STREQ(fg_charuco_dictionary_name(c->board.dictionary), "DICT_5X5_100");
+    fg_conf_free(c);
+    c = load_ok("[calibration]\nsquares_x = 9\nsquares_y = 6\nsquare_m = 0.03\n"
+                "marker_m = 0.022\ndictionary = DICT_4X4_50\n");
+    ASSERT_EQ(c->board.squares_x, 9);
+    ASSERT_STREQ(fg_charuco_dictionary_name(c->board.dictionary), "DICT_4X4_50");
+    fg_conf_free(c);
+  }
+  EXPECT_ERROR("[calibration]\ndictionary = DICT_9X9\n", 2, "[calibration] dictionary:",
+               "DICT_7X7_1000");
+  EXPECT_ERROR("[calibration]\nsquares_x = 2\n", 2, "[calibration] squares_x:", "3 to 64");
+  EXPECT_ERROR("[calibration]\nmarker_m = 0.04\n", 1, "[calibration]:", "below square_m");
+  EXPECT_ERROR("[calibration]\nsquares_x = 12\nsquares_y = 12\ndictionary = DICT_4X4_50\n", 1,
+               "[calibration]:", "needs 72 markers");
+  /* [camera NAME] */
+  {
+    fg_conf *c = load_ok("[camera wrist]\nsource = http://127.0.0.1:8081/rgb.png\n"
+                         "depth_source = http://127.0.0.1:8081/depth.png\n"
+                         "[camera over]\nsource = v4l2:/dev/video0\nmount = fixed\n"
+                         "depth_scale = 0.0001\n");
+    ASSERT_EQ(c->n_cameras, 2);
+    const fg_conf_camera *w = fg_conf_find_camera(c, "wrist"), *o = fg_conf_find_camera(c, "over");
+    ASSERT(w && o && !fg_conf_find_camera(c, "none"));
+    ASSERT_STREQ(w->source, "http://127.0.0.1:8081/rgb.png");
+    ASSERT_STREQ(w->depth_source, "http://127.0.0.1:8081/depth.png");
+    ASSERT_EQ(w->mount, FG_MOUNT_HAND);
+    ASSERT_NEAR(w->depth_scale, 0.001, 1e-15);
+    ASSERT_EQ(o->mount, FG_MOUNT_FIXED);
+    ASSERT(o->depth_source == NULL);
+    ASSERT_NEAR(o->depth_scale, 0.0001, 1e-15);
+    fg_conf_free(c);
+  }
+  EXPECT_ERROR("[camera]\nsource = v4l2:/dev/video0\n", 1, "[camera]:", "needs a name");
+  EXPECT_ERROR("[camera a b]\n", 1, "[camera a b]:", "a camera's name");
+  EXPECT_ERROR("[camera w]\nmount = hand\n", 1, "[camera w] source:", "missing");
+  EXPECT_ERROR("[camera w]\nsource = ftp://x/y\n", 2, "[camera w] source:", "snapshot URL");
+  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\nmount = wrist\n", 3,
+               "[camera w] mount:", "hand or fixed");
+  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\n[camera w]\n", 3, "[camera w]:",
+               "duplicate camera section");
+  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\nlens = wide\n", 3, "[camera w] lens:",
+               "[camera NAME] takes");
   /* the TCP pose registers: a register or none, never over the command block */
   EXPECT_ERROR("[robot]\ntcp_pose_base = 65530\n", 2, "[robot] tcp_pose_base:", "0 to 65529");
   EXPECT_ERROR("[robot]\ntcp_pose_base = 140\n", 2, "[robot] tcp_pose_base:",
