@@ -61,6 +61,8 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/robot/stop", "/v1/robot/stop", fg_api_audit_robot_stop, FG_ROUTE_OFFLOAD},
   {"POST", "/v1/robot/reset", "/v1/robot/reset", fg_api_audit_robot_reset, FG_ROUTE_OFFLOAD},
   {"GET", "/v1/gripper", "/v1/gripper", fg_api_gripper_get, 0},
+  {"GET", "/v1/calibration/board.png", "/v1/calibration/board.png", fg_api_calibration_board,
+   FG_ROUTE_OFFLOAD},
   {"POST", "/v1/gripper/{}", "/v1/gripper/{action}", fg_api_audit_gripper_action,
    FG_ROUTE_OFFLOAD},
   {"GET", "/v1/tasks", "/v1/tasks", fg_api_tasks_list, 0},

@@ -52,6 +52,7 @@ int fg_api_task_delete(fg_req *req, fg_resp *resp);
 int fg_api_task_demo_add(fg_req *req, fg_resp *resp);
 int fg_api_task_demo_delete(fg_req *req, fg_resp *resp);
 int fg_api_scene_grasps(fg_req *req, fg_resp *resp);
+int fg_api_calibration_board(fg_req *req, fg_resp *resp);
 int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
 /* api_audit.c: the three routes that may move something, each its handler above under the
  * audit log; and the log read back. */
