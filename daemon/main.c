@@ -10,6 +10,7 @@
 #include "http/http.h"
 #include "state/idem.h"
 #include "robot/cmd_ids.h"
+#include "cell/cameras.h"
 #include "state/job_train.h"
 #include "state/jobs.h"
 #include "metrics/metrics.h"
@@ -285,6 +286,7 @@ static int audit_open(fg_app *app, const fg_conf *conf) {
  * parts not set up yet are NULL. A running training stops after its step and keeps its
  * field. */
 static void app_teardown(fg_app *app) {
+  fg_cameras_free(app->cameras);
   fg_grasp_log_free(app->grasps);
   fg_tasks_free(app->tasks);
   fg_robot_svc_free(app->robot);
@@ -416,6 +418,12 @@ int main(int argc, char **argv) {
   /* The demonstration library; a task that does not load is logged and left out. */
   if (fg_tasks_open(&app.tasks, conf->state_dir) != 0 || fg_grasp_log_new(&app.grasps) != 0) {
     fg_error("cannot set up the task library: %s", fg_error_detail());
+    app_teardown(&app);
+    return 1;
+  }
+  /* The cameras' calibrations; one that does not load is logged and left out. */
+  if (fg_cameras_new(&app.cameras, conf->state_dir) != 0) {
+    fg_error("cannot set up the cameras: %s", fg_error_detail());
     app_teardown(&app);
     return 1;
   }

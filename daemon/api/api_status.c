@@ -20,19 +20,19 @@ static const code_status table[] = {
   {"invalid_query_points", 400}, {"demo_in_free_space", 400},  {"pose_outside_workspace", 400},
   {"invalid_transforms", 400},   {"forbidden_path", 403},       {"not_found", 404},           {"scene_not_found", 404},
   {"task_not_found", 404},       {"demo_not_found", 404},      {"frame_not_found", 404},
-  {"grasp_not_found", 404},      {"job_not_found", 404},       {"path_not_found", 404},
+  {"grasp_not_found", 404},      {"camera_not_found", 404},      {"job_not_found", 404},       {"path_not_found", 404},
   {"not_configured", 409},       {"not_trained", 409},         {"no_features", 409},
   {"feature_dim_mismatch", 409}, {"task_empty", 409},          {"task_unreadable", 409},
   {"no_matching_task", 409},     {"query_points_mismatch", 409}, {"kind_mismatch", 409},
   {"too_many_demos", 409},     {"grasp_stale", 409},         {"scene_exists", 409},
   {"training_in_progress", 409}, {"no_frames", 409},           {"job_finished", 409},           {"robot_busy", 409},
-  {"robot_stopped", 409},        {"gripper_holding", 409},     {"gripper_not_activated", 409},
+  {"robot_stopped", 409},        {"robot_moved", 409},        {"gripper_holding", 409},     {"gripper_not_activated", 409},
   {"unsupported_media_type", 415}, {"motion_limit", 422},         {"internal_error", 500},      {"robot_unknown", 502},
   {"robot_failed", 502},         {"modbus_exception", 502},    {"gripper_fault", 502},
-  {"gripper_error", 502},        {"memory_limit", 503},        {"robot_disconnected", 503},
+  {"gripper_error", 502},        {"camera_unavailable", 502},  {"tcp_pose_invalid", 502},        {"memory_limit", 503},        {"robot_disconnected", 503},
   {"gripper_disconnected", 503}, {"shutting_down", 503},       {"busy", 503},
   {"state_unavailable", 503},    {"robot_timeout", 504},       {"ack_timeout", 504},
-  {"gripper_timeout", 504},      {"insufficient_storage", 507}, {"scene_limit", 507},
+  {"gripper_timeout", 504},      {"camera_timeout", 504},      {"insufficient_storage", 507}, {"scene_limit", 507},
 };
 
 /* The code of a failure that named none. */

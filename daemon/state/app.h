@@ -31,6 +31,7 @@ typedef struct fg_app {
   struct fg_peer_claim *claim; /* this daemon's claim on its Modbus peers (claim.h) */
   struct fg_tasks *tasks;     /* the demonstration library (tasks.h) */
   struct fg_grasp_log *grasps; /* recent grasps, for execute (grasp_log.h) */
+  struct fg_cameras *cameras; /* the cameras' calibrations and captures (cell/cameras.h) */
 } fg_app;
 
 /* Installs conf as the current configuration; the app takes ownership of conf. Requests and

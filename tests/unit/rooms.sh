@@ -10,7 +10,7 @@
 # argv: the source root.
 set -uo pipefail
 root=$1
-rooms=(conf decoder metrics state robot http api)
+rooms=(conf decoder metrics state robot cell http api)
 bad=0
 offence() { echo "FAIL: $*"; bad=1; }
 

@@ -1,0 +1,128 @@
+/* GET /v1/cameras, GET /v1/cameras/{c}, POST /v1/cameras/{c}/capture: the cameras of
+ * [camera NAME], what their calibration says, and a capture. */
+#include "api.h"
+
+#include "cell/cameras.h"
+#include "state/json.h"
+
+#include <nettle/base64.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The intrinsics as frames take them (SPEC.md "Frames and units"), with the calibration's
+ * residual; null when not calibrated. */
+static json_t *intrinsics_json(const fg_camera_calib *c) {
+  if (!c->has_intrinsics) return json_null();
+  const fg_intrinsics *in = &c->in;
+  return json_pack("{s:f, s:f, s:f, s:f, s:i, s:i, s:s, s:f, s:f, s:f, s:f}", "fl_x", in->fx,
+                   "fl_y", in->fy, "cx", in->cx, "cy", in->cy, "w", in->w, "h", in->h,
+                   "camera_model", "OPENCV", "k1", in->k[0], "k2", in->k[1], "p1", in->k[2],
+                   "p2", in->k[3]);
+}
+
+static json_t *calibration_json(const fg_camera_calib *c) {
+  json_t *o = json_object();
+  json_object_set_new(o, "intrinsics",
+                      c->has_intrinsics
+                          ? json_pack("{s:f, s:i, s:o}", "rms_px", c->intrinsics_rms_px, "views",
+                                      c->intrinsics_views, "at",
+                                      fg_json_time_ms(c->intrinsics_ms))
+                          : json_null());
+  json_object_set_new(o, "mount",
+                      c->has_mount
+                          ? json_pack("{s:s, s:f, s:f, s:f, s:i, s:o}", "method", c->method,
+                                      "spread_mm", c->spread_mm, "spread_deg", c->spread_deg,
+                                      "rms_px", c->mount_rms_px, "views", c->mount_views, "at",
+                                      fg_json_time_ms(c->mount_ms))
+                          : json_null());
+  return o;
+}
+
+static json_t *camera_json(const fg_conf_camera *cam, const fg_camera_calib *c) {
+  json_t *o = json_pack("{s:s, s:s, s:o, s:f, s:s, s:b}", "name", cam->name, "source",
+                        cam->source, "depth_source",
+                        cam->depth_source ? json_string(cam->depth_source) : json_null(),
+                        "depth_scale", cam->depth_scale, "mount",
+                        cam->mount == FG_MOUNT_HAND ? "hand" : "fixed", "calibrated",
+                        c->has_intrinsics && c->has_mount);
+  json_object_set_new(o, "intrinsics", intrinsics_json(c));
+  json_object_set_new(o, cam->mount == FG_MOUNT_HAND ? "T_tcp_cam" : "T_base_cam",
+                      c->has_mount ? fg_json_pose(c->T_mount) : json_null());
+  json_object_set_new(o, "calibration", calibration_json(c));
+  return o;
+}
+
+/* The camera of the path, or NULL after a 404. */
+static const fg_conf_camera *camera_param(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = fg_conf_find_camera(req->conf, req->params[0]);
+  if (!cam)
+    fg_resp_error(resp, 404, "camera_not_found", "no camera \"%s\"; [camera NAME] sections "
+                  "declare them (GET /v1/cameras lists them)", req->params[0]);
+  return cam;
+}
+
+int fg_api_cameras_list(fg_req *req, fg_resp *resp) {
+  json_t *list = json_array();
+  for (size_t i = 0; i < req->conf->n_cameras; i++) {
+    fg_camera_calib c;
+    fg_cameras_calib_get(req->app->cameras, req->conf->cameras[i].name, &c);
+    json_array_append_new(list, camera_json(&req->conf->cameras[i], &c));
+  }
+  fg_resp_json(resp, 200, json_pack("{s:o}", "cameras", list));
+  return 0;
+}
+
+int fg_api_camera_get(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = camera_param(req, resp);
+  if (!cam) return 0;
+  fg_camera_calib c;
+  fg_cameras_calib_get(req->app->cameras, cam->name, &c);
+  fg_resp_json(resp, 200, camera_json(cam, &c));
+  return 0;
+}
+
+static json_t *base64_json(const uint8_t *data, size_t len) {
+  if (!data) return json_null();
+  char *text = malloc(BASE64_ENCODE_RAW_LENGTH(len) + 1);
+  if (!text) return NULL;
+  base64_encode_raw(text, len, data);
+  text[BASE64_ENCODE_RAW_LENGTH(len)] = '\0';
+  json_t *s = json_string(text);
+  free(text);
+  return s;
+}
+
+/* The capture's view: the images (base64), the robot's pose, the camera's pose (OpenCV
+ * convention) and intrinsics when calibrated. */
+static json_t *capture_json(const fg_conf_camera *cam, const fg_capture *cap) {
+  json_t *o = json_pack("{s:s, s:s}", "camera", cam->name, "image_type",
+                        fg_image_sniff(cap->image, cap->image_len));
+  json_object_set_new(o, "image", base64_json(cap->image, cap->image_len));
+  json_object_set_new(o, "depth", base64_json(cap->depth, cap->depth_len));
+  json_object_set_new(o, "depth_scale", cap->depth ? json_real(cam->depth_scale) : json_null());
+  json_object_set_new(o, "robot_pose",
+                      cap->has_robot_pose ? fg_json_pose(cap->T_base_tcp) : json_null());
+  json_object_set_new(o, "camera_pose",
+                      cap->has_camera_pose ? fg_json_pose(cap->T_base_cam) : json_null());
+  json_object_set_new(o, "convention", json_string("opencv"));
+  json_object_set_new(o, "intrinsics", intrinsics_json(&cap->calib));
+  return o;
+}
+
+int fg_api_camera_capture(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = camera_param(req, resp);
+  if (!cam) return 0;
+  if (req->body_len) {
+    json_t *body = fg_api_body_object(req, resp);
+    if (!body) return 0;
+    const size_t n = json_object_size(body);
+    json_decref(body);
+    if (n) return fg_resp_error(resp, 400, "invalid_request", "capture takes no keys");
+  }
+  fg_capture cap;
+  const int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, &cap);
+  if (rc < 0) return fg_api_fail(resp, rc);
+  fg_resp_json(resp, 200, capture_json(cam, &cap));
+  fg_capture_release(&cap);
+  return 0;
+}

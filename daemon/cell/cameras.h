@@ -1,0 +1,74 @@
+/* The cameras of [camera NAME] (SPEC.md "The cell around the field"): each one's calibration,
+ * kept in <state>/cameras/NAME.json (atomic rewrite; a calibration that is refused leaves the
+ * previous one), and captures: an image (and a depth image) fetched from the camera's source
+ * with the robot's TCP pose read before and after it, and the camera's pose in the base frame
+ * when the camera is calibrated. */
+#ifndef FG_DAEMON_CELL_CAMERAS_H
+#define FG_DAEMON_CELL_CAMERAS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "calib/calibrate.h"
+#include "conf/conf.h"
+#include "robot/robot.h"
+
+typedef struct fg_cameras fg_cameras;
+
+/* What is known of one camera. Poses are OpenCV's camera frame (+z optical axis). */
+typedef struct fg_camera_calib {
+  int has_intrinsics;
+  fg_intrinsics in;
+  double intrinsics_rms_px;  /* reprojection error of the calibration */
+  int intrinsics_views;
+  int64_t intrinsics_ms;     /* when (CLOCK_REALTIME); 0: never */
+  int has_mount;
+  double T_mount[16];        /* T_tcp_cam (a hand camera) or T_base_cam (a fixed one) */
+  char method[16];           /* the hand-eye method it came from */
+  double spread_mm, spread_deg; /* the board's pose over the views, after refinement */
+  double mount_rms_px;
+  int mount_views;
+  int64_t mount_ms;
+} fg_camera_calib;
+
+/* Loads the calibrations kept under state_dir/cameras. 0, FG_ENOMEM, or FG_EIO when the
+ * folder cannot be made; a file that does not parse is reported and left out. */
+int fg_cameras_new(fg_cameras **out, const char *state_dir);
+void fg_cameras_free(fg_cameras *c);
+
+/* The calibration of camera name (all zeros when it has none). */
+void fg_cameras_calib_get(fg_cameras *c, const char *name, fg_camera_calib *out);
+
+/* Keeps a new calibration of name, written to its file before it is used. 0, or the write's
+ * FG_EIO / FG_ENOSPC (the previous one stays). */
+int fg_cameras_calib_set(fg_cameras *c, const char *name, const fg_camera_calib *calib);
+
+/* A capture. The images are as the source served them (PNG or JPEG; depth a 16-bit PNG). */
+typedef struct fg_capture {
+  uint8_t *image;
+  size_t image_len;
+  uint8_t *depth;          /* NULL without a depth source */
+  size_t depth_len;
+  int has_robot_pose;      /* a hand camera with a robot that reports its TCP */
+  double T_base_tcp[16];
+  int has_camera_pose;     /* calibrated (and, on the hand, with the robot's pose) */
+  double T_base_cam[16];   /* OpenCV camera frame */
+  fg_camera_calib calib;
+} fg_capture;
+
+/* Captures from cam: reads the TCP pose (a hand camera with a robot), fetches the image and
+ * the depth image, reads the pose again and refuses (robot_moved) when it changed by more than
+ * 0.5 mm or 0.1 degree. Failures: the robot's (fg_robot_tcp_read), camera_unavailable (the
+ * source did not answer, answered an error, or sent no image: 502 / 504), robot_moved. */
+int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *cam,
+                      fg_capture *out);
+void fg_capture_release(fg_capture *cap);
+
+/* ---- snapshot.c */
+
+/* Fetches one image from source (http(s):// URL or v4l2:/dev/videoN) within timeout_ms, at
+ * most max_bytes. FG_ETIMEDOUT or FG_EUNAVAIL (camera_unavailable) with what went wrong. */
+int fg_snapshot_fetch(const char *source, int timeout_ms, size_t max_bytes, uint8_t **out,
+                      size_t *len);
+
+#endif

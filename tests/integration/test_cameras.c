@@ -1,0 +1,135 @@
+/* The cameras over HTTP against the simulator's camera on the tool (physics mode): GET
+ * /v1/cameras and /v1/cameras/{c} before any calibration, a capture (the image and the depth
+ * image as the camera served them, the robot's TCP pose read around it), and what fails:
+ * an unknown camera, a camera that does not answer, a capture with keys.
+ * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "robot_util.h"
+#include "simproc.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+/* Standard base64 (padding allowed) into a malloc'd buffer; its length in *len. */
+static uint8_t *unbase64(const char *s, size_t *len) {
+  static const char *const abc =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  const size_t n = strlen(s);
+  uint8_t *out = malloc(n / 4 * 3 + 3);
+  ASSERT(out);
+  uint32_t acc = 0;
+  int bits = 0;
+  *len = 0;
+  for (size_t i = 0; i < n && s[i] != '='; i++) {
+    const char *p = strchr(abc, s[i]);
+    ASSERT(p && s[i]);
+    acc = acc << 6 | (uint32_t)(p - abc);
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out[(*len)++] = (uint8_t)(acc >> bits);
+    }
+  }
+  return out;
+}
+
+/* A PNG's size from its header. */
+static void png_size(const uint8_t *p, size_t len, int *w, int *h, int *depth) {
+  ASSERT(len > 26 && memcmp(p, "\x89PNG\r\n\x1a\n", 8) == 0);
+  *w = p[16] << 24 | p[17] << 16 | p[18] << 8 | p[19];
+  *h = p[20] << 24 | p[21] << 16 | p[22] << 8 | p[23];
+  *depth = p[24];
+}
+
+static int read_port(const char *path) {
+  FILE *f = fopen(path, "r");
+  ASSERT(f);
+  int port = 0;
+  ASSERT_EQ(fscanf(f, "%d", &port), 1);
+  fclose(f);
+  return port;
+}
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+  ASSERT(argc >= 3);
+  simproc_init(argv[2], h_tmpdir());
+  const char *src = getenv("FG_SOURCE_DIR");
+  ASSERT(src);
+  char scene[PATH_MAX], cam_port_file[PATH_MAX];
+  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
+  snprintf(cam_port_file, sizeof cam_port_file, "%s/camera.port", h_tmpdir());
+  simproc sim;
+  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
+                        "--camera-port-file", cam_port_file, "--camera",
+                        "600 600 319.5 239.5 320 240", NULL};
+  simproc_start(&sim, 0, args);
+  const int cam_port = read_port(cam_port_file);
+  char conf[1024];
+  snprintf(conf, sizeof conf,
+           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n"
+           "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n"
+           "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
+           "depth_source = http://127.0.0.1:%d/depth.png\n"
+           "[camera dead]\nsource = http://127.0.0.1:1/rgb.png\nmount = fixed\n",
+           sim.port, cam_port, cam_port);
+  h_write_config(conf);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+
+  /* before any calibration */
+  h_resp *r = h_get("/v1/cameras");
+  ASSERT_STATUS(r, 200);
+  json_t *list = json_object_get(r->json, "cameras");
+  ASSERT_EQ(json_array_size(list), 2);
+  json_t *w = json_array_get(list, 0);
+  ASSERT_STREQ(json_string_value(json_object_get(w, "name")), "wrist");
+  ASSERT_STREQ(json_string_value(json_object_get(w, "mount")), "hand");
+  ASSERT(json_is_false(json_object_get(w, "calibrated")));
+  ASSERT(json_is_null(json_object_get(w, "intrinsics")));
+  ASSERT(json_is_null(json_object_get(w, "T_tcp_cam")));
+  ASSERT(json_is_null(json_object_get(json_array_get(list, 1), "T_base_cam")));
+  h_resp_free(r);
+  r = h_get("/v1/cameras/dead");
+  ASSERT_STATUS(r, 200);
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "mount")), "fixed");
+  h_resp_free(r);
+
+  /* a capture: the images as served, the TCP where the simulated robot stands (home) */
+  r = h_post_json("/v1/cameras/wrist/capture", "");
+  ASSERT_STATUS(r, 200);
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "image_type")), "PNG");
+  size_t len;
+  int pw, ph, depth;
+  uint8_t *png = unbase64(json_string_value(json_object_get(r->json, "image")), &len);
+  png_size(png, len, &pw, &ph, &depth);
+  ASSERT(pw == 320 && ph == 240 && depth == 8);
+  free(png);
+  png = unbase64(json_string_value(json_object_get(r->json, "depth")), &len);
+  png_size(png, len, &pw, &ph, &depth);
+  ASSERT(pw == 320 && ph == 240 && depth == 16);
+  free(png);
+  ASSERT_NEAR(json_real_value(json_object_get(r->json, "depth_scale")), 0.001, 1e-12);
+  json_t *pos = json_object_get(json_object_get(r->json, "robot_pose"), "position");
+  ASSERT_NEAR(json_real_value(json_array_get(pos, 0)), 0.30, 0.002);
+  ASSERT_NEAR(json_real_value(json_array_get(pos, 2)), 0.40, 0.002);
+  ASSERT(json_is_null(json_object_get(r->json, "camera_pose"))); /* not calibrated */
+  h_resp_free(r);
+
+  /* what fails */
+  r = h_post_json("/v1/cameras/nothing/capture", "");
+  ASSERT_HTTP_ERROR(r, 404, "camera_not_found");
+  h_resp_free(r);
+  r = h_post_json("/v1/cameras/dead/capture", "");
+  ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
+  h_resp_free(r);
+  r = h_post_json("/v1/cameras/wrist/capture", "{\"exposure\": 3}");
+  ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+  h_resp_free(r);
+  h_stop();
+  simproc_stop(&sim);
+  h_done();
+  printf("ok\n");
+  return 0;
+}
