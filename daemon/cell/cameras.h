@@ -66,8 +66,7 @@ void fg_capture_release(fg_capture *cap);
 
 /* ---- snapshot.c */
 
-/* Fetches one image from source (http(s):// URL or v4l2:/dev/videoN) within timeout_ms, at
- * most max_bytes. FG_ETIMEDOUT or FG_EUNAVAIL (camera_unavailable) with what went wrong. */
+/* Fetches one image from source (an http(s):// URL) within timeout_ms, at most max_bytes. FG_ETIMEDOUT or FG_EUNAVAIL (camera_unavailable) with what went wrong. */
 int fg_snapshot_fetch(const char *source, int timeout_ms, size_t max_bytes, uint8_t **out,
                       size_t *len);
 

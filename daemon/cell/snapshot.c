@@ -1,5 +1,5 @@
 /* One image from a camera's source (cameras.h: fg_snapshot_fetch): an HTTP snapshot with
- * libcurl, or a V4L2 device through lib/io. */
+ * libcurl. */
 #include "cameras.h"
 
 #include <curl/curl.h>
@@ -7,7 +7,6 @@
 #include <string.h>
 
 #include "core/error.h"
-#include "io/video.h"
 
 typedef struct sink {
   uint8_t *buf;
@@ -73,9 +72,5 @@ int fg_snapshot_fetch(const char *source, int timeout_ms, size_t max_bytes, uint
                       size_t *len) {
   *out = NULL;
   *len = 0;
-  if (strncmp(source, "v4l2:", 5) == 0) {
-    const int rc = fg_v4l2_grab_png(source + 5, out, len);
-    return rc < 0 ? fg_fail_as(rc, "camera_unavailable", "%s", fg_error_detail()) : 0;
-  }
   return fetch_http(source, timeout_ms, max_bytes, out, len);
 }

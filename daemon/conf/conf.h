@@ -77,7 +77,7 @@ typedef enum { FG_MOUNT_HAND = 0, FG_MOUNT_FIXED } fg_camera_mount;
 
 typedef struct fg_conf_camera {
   char name[FG_CAMERA_NAME_MAX + 1]; /* a scene name's characters */
-  char *source;         /* "http://..." (a snapshot URL) or "v4l2:/dev/videoN" */
+  char *source;         /* "http://..." (a snapshot URL; V4L2 devices are not supported yet) */
   char *depth_source;   /* the same for a depth image (16-bit PNG), or NULL */
   double depth_scale;   /* metres per depth unit; default 0.001 (millimetres) */
   fg_camera_mount mount; /* key "mount": hand (default) or fixed */

@@ -71,14 +71,12 @@ int conf_set_calibration(conf_parse *st, int k, const char *name, const char *v)
   return 1;
 }
 
-/* A source: an http:// URL without spaces, or v4l2: and an absolute device path. */
+/* A source: an http(s):// URL without spaces. */
 static int source_ok(const char *v) {
-  if (strncmp(v, "http://", 7) == 0 || strncmp(v, "https://", 8) == 0) {
-    for (const char *p = v; *p; p++)
-      if (isspace((unsigned char)*p) || !isprint((unsigned char)*p)) return 0;
-    return strlen(v) > 8;
-  }
-  return strncmp(v, "v4l2:/", 6) == 0 && v[6] != '\0';
+  if (strncmp(v, "http://", 7) != 0 && strncmp(v, "https://", 8) != 0) return 0;
+  for (const char *p = v; *p; p++)
+    if (isspace((unsigned char)*p) || !isprint((unsigned char)*p)) return 0;
+  return strlen(v) > 8;
 }
 
 int conf_set_camera(conf_parse *st, int k, const char *name, const char *v) {
@@ -86,10 +84,13 @@ int conf_set_camera(conf_parse *st, int k, const char *name, const char *v) {
   switch (k) {
   case K_SOURCE:
   case K_DEPTH_SOURCE:
+    if (strncmp(v, "v4l2:", 5) == 0)
+      return conf_fail_at(st, st->line, st->sec_text, name,
+                          "V4L2 devices are not supported yet; serve the camera's frames as "
+                          "HTTP snapshots (http://HOST:PORT/PATH)");
     if (!source_ok(v))
       return conf_fail_at(st, st->line, st->sec_text, name,
-                          "expected a snapshot URL (http://HOST:PORT/PATH) or v4l2:/dev/videoN, "
-                          "got '%s'", v);
+                          "expected a snapshot URL (http://HOST:PORT/PATH), got '%s'", v);
     return conf_set_string(st, k == K_SOURCE ? &cam->source : &cam->depth_source, v);
   case K_DEPTH_SCALE: {
     double x;
@@ -121,6 +122,6 @@ void conf_check_cell(conf_parse *st) {
       char sec[96];
       snprintf(sec, sizeof sec, "camera %s", c->cameras[i].name);
       conf_fail_at(st, st->camera_meta[i].header_line, sec, "source",
-                   "missing; a camera needs source = http://HOST:PORT/PATH or v4l2:/dev/videoN");
+                   "missing; a camera needs source = http://HOST:PORT/PATH");
     }
 }

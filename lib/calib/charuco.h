@@ -50,10 +50,11 @@ int fg_charuco_face_z(const fg_charuco_board *b);
 int fg_charuco_texture(const fg_charuco_board *b, double px_per_m, uint8_t **gray, int *w,
                        int *h);
 
-/* A printable PNG of the board: px_per_square pixels a square, a white margin of margin_px
- * around it, 8-bit grey, the face as seen from the front. *png is malloc'd. */
-int fg_charuco_png(const fg_charuco_board *b, int px_per_square, int margin_px, uint8_t **png,
-                   size_t *len);
+/* The board to print: px_per_square pixels a square, a white margin of margin_px around it,
+ * the face as seen from the front; 8-bit grey, *gray malloc'd, w x h bytes. (No codec here:
+ * the daemon encodes it in its decoder's child process.) */
+int fg_charuco_print(const fg_charuco_board *b, int px_per_square, int margin_px,
+                     uint8_t **gray, int *w, int *h);
 
 /* The board's inner corners found in an 8-bit grey image (w x h, rows of w bytes): markers
  * detected, corners interpolated between them and refined to subpixel. ids[k] and

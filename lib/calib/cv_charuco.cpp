@@ -15,7 +15,6 @@
 
 extern "C" {
 #include "core/error.h"
-#include "io/image.h"
 }
 
 namespace {
@@ -173,9 +172,9 @@ extern "C" int fg_charuco_texture(const fg_charuco_board *b, double px_per_m, ui
   }
 }
 
-extern "C" int fg_charuco_png(const fg_charuco_board *b, int px_per_square, int margin_px,
-                              uint8_t **png, size_t *len) {
-  *png = NULL;
+extern "C" int fg_charuco_print(const fg_charuco_board *b, int px_per_square, int margin_px,
+                                uint8_t **gray, int *w, int *h) {
+  *gray = NULL;
   if (px_per_square < 8 || px_per_square > 1000 || margin_px < 0 || margin_px > 10000)
     return fg_fail(FG_ERANGE, "a board image of %d px a square (8 .. 1000) and a margin of %d px "
                    "(0 .. 10000)", px_per_square, margin_px);
@@ -196,9 +195,10 @@ extern "C" int fg_charuco_png(const fg_charuco_board *b, int px_per_square, int 
     std::memcpy(img + (size_t)(margin_px + j) * W + margin_px,
                 tex + (size_t)(flip ? th - 1 - j : j) * tw, (size_t)tw);
   std::free(tex);
-  const int rc = fg_image_encode_png(img, W, H, 1, 8, png, len);
-  std::free(img);
-  return rc;
+  *gray = img;
+  *w = W;
+  *h = H;
+  return 0;
 }
 
 extern "C" int fg_charuco_detect(const fg_charuco_board *b, const uint8_t *gray, int w, int h,

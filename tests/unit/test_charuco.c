@@ -45,14 +45,17 @@ static void test_refusals(void) {
   ASSERT_NEAR(c[1], 0.08, 1e-12);
 }
 
-/* The PNG decoded and searched: every inner corner found, at the pixel the board frame and
+/* The print, as a PNG decoded and searched: every inner corner found, at the pixel the board frame and
  * the print's scale put it (a texel's centre is its pixel's integer coordinate). */
 static void check_print(int sx, int sy, const char *dict) {
   fg_charuco_board b = board(sx, sy, 0.05, 0.037, dict);
   const int pps = 80, margin = 40;
-  uint8_t *png;
+  uint8_t *png, *print;
   size_t len;
-  ASSERT_EQ(fg_charuco_png(&b, pps, margin, &png, &len), 0);
+  int pw, ph;
+  ASSERT_EQ(fg_charuco_print(&b, pps, margin, &print, &pw, &ph), 0);
+  ASSERT_EQ(fg_image_encode_png(print, pw, ph, 1, 8, &png, &len), 0); /* as the daemon does */
+  free(print);
   const float bg[3] = {1, 1, 1};
   fg_image img;
   ASSERT_EQ(fg_image_decode(png, len, bg, &img), 0);

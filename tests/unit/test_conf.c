@@ -698,7 +698,7 @@ static void test_errors(void) {
   {
     fg_conf *c = load_ok("[camera wrist]\nsource = http://127.0.0.1:8081/rgb.png\n"
                          "depth_source = http://127.0.0.1:8081/depth.png\n"
-                         "[camera over]\nsource = v4l2:/dev/video0\nmount = fixed\n"
+                         "[camera over]\nsource = http://10.0.0.5/snap.jpg\nmount = fixed\n"
                          "depth_scale = 0.0001\n");
     ASSERT_EQ(c->n_cameras, 2);
     const fg_conf_camera *w = fg_conf_find_camera(c, "wrist"), *o = fg_conf_find_camera(c, "over");
@@ -712,15 +712,17 @@ static void test_errors(void) {
     ASSERT_NEAR(o->depth_scale, 0.0001, 1e-15);
     fg_conf_free(c);
   }
-  EXPECT_ERROR("[camera]\nsource = v4l2:/dev/video0\n", 1, "[camera]:", "needs a name");
+  EXPECT_ERROR("[camera]\nsource = http://10.0.0.5/snap.jpg\n", 1, "[camera]:", "needs a name");
   EXPECT_ERROR("[camera a b]\n", 1, "[camera a b]:", "a camera's name");
   EXPECT_ERROR("[camera w]\nmount = hand\n", 1, "[camera w] source:", "missing");
   EXPECT_ERROR("[camera w]\nsource = ftp://x/y\n", 2, "[camera w] source:", "snapshot URL");
-  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\nmount = wrist\n", 3,
+  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\n", 2, "[camera w] source:",
+               "not supported yet");
+  EXPECT_ERROR("[camera w]\nsource = http://10.0.0.5/snap.jpg\nmount = wrist\n", 3,
                "[camera w] mount:", "hand or fixed");
-  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\n[camera w]\n", 3, "[camera w]:",
+  EXPECT_ERROR("[camera w]\nsource = http://10.0.0.5/snap.jpg\n[camera w]\n", 3, "[camera w]:",
                "duplicate camera section");
-  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\nlens = wide\n", 3, "[camera w] lens:",
+  EXPECT_ERROR("[camera w]\nsource = http://10.0.0.5/snap.jpg\nlens = wide\n", 3, "[camera w] lens:",
                "[camera NAME] takes");
   /* the TCP pose registers: a register or none, never over the command block */
   EXPECT_ERROR("[robot]\ntcp_pose_base = 65530\n", 2, "[robot] tcp_pose_base:", "0 to 65529");
