@@ -38,7 +38,7 @@ static json_t *calibration_json(const fg_camera_calib *c) {
   return o;
 }
 
-static json_t *camera_json(const fg_conf_camera *cam, const fg_camera_calib *c) {
+static json_t *camera_json(const fg_conf_camera *cam, const fg_camera_calib *c, int views) {
   json_t *o = json_pack("{s:s, s:s, s:o, s:f, s:s, s:b}", "name", cam->name, "source",
                         cam->source, "depth_source",
                         cam->depth_source ? json_string(cam->depth_source) : json_null(),
@@ -49,6 +49,7 @@ static json_t *camera_json(const fg_conf_camera *cam, const fg_camera_calib *c) 
   json_object_set_new(o, cam->mount == FG_MOUNT_HAND ? "T_tcp_cam" : "T_base_cam",
                       c->has_mount ? fg_json_pose(c->T_mount) : json_null());
   json_object_set_new(o, "calibration", calibration_json(c));
+  json_object_set_new(o, "views_kept", json_integer(views));
   return o;
 }
 
@@ -66,7 +67,9 @@ int fg_api_cameras_list(fg_req *req, fg_resp *resp) {
   for (size_t i = 0; i < req->conf->n_cameras; i++) {
     fg_camera_calib c;
     fg_cameras_calib_get(req->app->cameras, req->conf->cameras[i].name, &c);
-    json_array_append_new(list, camera_json(&req->conf->cameras[i], &c));
+    json_array_append_new(list, camera_json(&req->conf->cameras[i], &c,
+                                            fg_cameras_views_count(req->app->cameras,
+                                                                   req->conf->cameras[i].name)));
   }
   fg_resp_json(resp, 200, json_pack("{s:o}", "cameras", list));
   return 0;
@@ -77,7 +80,8 @@ int fg_api_camera_get(fg_req *req, fg_resp *resp) {
   if (!cam) return 0;
   fg_camera_calib c;
   fg_cameras_calib_get(req->app->cameras, cam->name, &c);
-  fg_resp_json(resp, 200, camera_json(cam, &c));
+  fg_resp_json(resp, 200,
+               camera_json(cam, &c, fg_cameras_views_count(req->app->cameras, cam->name)));
   return 0;
 }
 
@@ -109,20 +113,104 @@ static json_t *capture_json(const fg_conf_camera *cam, const fg_capture *cap) {
   return o;
 }
 
+/* The body of a capture: empty, or {"calibration_view": bool}. 1 when decoded, 0 after a
+ * 400. */
+static int parse_capture(fg_req *req, fg_resp *resp, int *keep) {
+  *keep = 0;
+  if (!req->body_len) return 1;
+  json_t *body = fg_api_body_object(req, resp);
+  if (!body) return 0;
+  static const char *const keys[] = {"calibration_view", NULL};
+  json_t *k = json_object_get(body, "calibration_view");
+  const char *unknown = fg_json_unknown_key(body, keys);
+  int ok = !unknown && (!k || json_is_boolean(k));
+  if (ok) *keep = json_is_true(k);
+  json_decref(body);
+  if (!ok)
+    fg_resp_error(resp, 400, "invalid_request", "a capture takes only \"calibration_view\": "
+                  "true or false");
+  return ok;
+}
+
 int fg_api_camera_capture(fg_req *req, fg_resp *resp) {
   const fg_conf_camera *cam = camera_param(req, resp);
-  if (!cam) return 0;
-  if (req->body_len) {
-    json_t *body = fg_api_body_object(req, resp);
-    if (!body) return 0;
-    const size_t n = json_object_size(body);
-    json_decref(body);
-    if (n) return fg_resp_error(resp, 400, "invalid_request", "capture takes no keys");
-  }
+  int keep;
+  if (!cam || !parse_capture(req, resp, &keep)) return 0;
   fg_capture cap;
-  const int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, &cap);
-  if (rc < 0) return fg_api_fail(resp, rc);
-  fg_resp_json(resp, 200, capture_json(cam, &cap));
+  int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, &cap);
+  int corners = 0, kept = 0;
+  if (rc == 0 && keep)
+    rc = fg_cameras_view_add(req->app->cameras, req->app->decoder, &req->conf->board, cam, &cap,
+                             &corners, &kept);
+  if (rc < 0) {
+    fg_capture_release(&cap);
+    return fg_api_fail(resp, rc);
+  }
+  json_t *o = capture_json(cam, &cap);
+  if (keep) {
+    json_object_set_new(o, "board_corners", json_integer(corners));
+    json_object_set_new(o, "views_kept", json_integer(fg_cameras_views_count(req->app->cameras,
+                                                                             cam->name)));
+    json_object_set_new(o, "view_kept", json_boolean(kept > 0));
+  }
+  fg_resp_json(resp, 200, o);
   fg_capture_release(&cap);
+  return 0;
+}
+
+/* DELETE /v1/cameras/{c}/views: forgets the views kept for calibration. */
+int fg_api_camera_views_clear(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = camera_param(req, resp);
+  if (!cam) return 0;
+  fg_cameras_views_clear(req->app->cameras, cam->name);
+  fg_resp_json(resp, 200, json_pack("{s:i}", "views_kept", 0));
+  return 0;
+}
+
+static json_t *report_json(const fg_conf_camera *cam, const fg_calibration_report *r,
+                           const fg_camera_calib *now, int views) {
+  json_t *o = json_pack("{s:i, s:i}", "views", r->views, "views_used", r->views_used);
+  if (r->best >= 0) {
+    json_t *methods = json_array();
+    for (int m = 0; m < FG_HAND_EYE_METHODS; m++) {
+      const fg_hand_eye_result *h = &r->methods[m];
+      json_array_append_new(methods, h->ok ? json_pack("{s:s, s:o, s:f, s:f}", "method",
+                                                       fg_hand_eye_method_name(m), "pose",
+                                                       fg_json_pose(h->T), "spread_mm",
+                                                       h->spread_mm, "spread_deg",
+                                                       h->spread_deg)
+                                           : json_pack("{s:s, s:n}", "method",
+                                                       fg_hand_eye_method_name(m), "pose"));
+    }
+    json_object_set_new(o, "methods", methods);
+    json_object_set_new(o, "refined_from", json_string(fg_hand_eye_method_name(r->best)));
+  }
+  json_object_set_new(o, "camera", camera_json(cam, now, views));
+  return o;
+}
+
+int fg_api_camera_calibrate(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = camera_param(req, resp);
+  if (!cam) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  if (!body) return 0;
+  static const char *const keys[] = {"kind", NULL};
+  const char *kind = json_string_value(json_object_get(body, "kind"));
+  const int ok = !fg_json_unknown_key(body, keys) && kind &&
+                 (strcmp(kind, "intrinsics") == 0 || strcmp(kind, "hand_eye") == 0);
+  const fg_calibrate_kind k = ok && strcmp(kind, "intrinsics") == 0 ? FG_CALIBRATE_INTRINSICS
+                                                                    : FG_CALIBRATE_HAND_EYE;
+  json_decref(body);
+  if (!ok)
+    return fg_resp_error(resp, 400, "invalid_request", "calibrate takes {\"kind\": "
+                         "\"intrinsics\" | \"hand_eye\"}: on the views kept by captures with "
+                         "\"calibration_view\": true");
+  fg_calibration_report r;
+  const int rc = fg_camera_calibrate(req->app->cameras, &req->conf->board, cam, k, &r);
+  if (rc < 0) return fg_api_fail(resp, rc);
+  fg_camera_calib now;
+  fg_cameras_calib_get(req->app->cameras, cam->name, &now);
+  fg_resp_json(resp, 200,
+               report_json(cam, &r, &now, fg_cameras_views_count(req->app->cameras, cam->name)));
   return 0;
 }

@@ -1,5 +1,5 @@
 /* The cameras' calibrations and captures (cameras.h). */
-#include "cameras.h"
+#include "cameras_priv.h"
 
 #include <curl/curl.h>
 #include <dirent.h>
@@ -17,24 +17,11 @@
 #include "core/pose.h"
 #include "io/image.h"
 
-#define MAX_CAMERAS 64
 #define SNAPSHOT_TIMEOUT_MS 5000
 #define SNAPSHOT_MAX_BYTES ((size_t)64 << 20)
 /* The robot moved during a capture when its TCP did by more than this. */
 #define STILL_M 0.0005
 #define STILL_RAD (0.1 * M_PI / 180)
-
-typedef struct entry {
-  char name[FG_CAMERA_NAME_MAX + 1];
-  fg_camera_calib calib;
-} entry;
-
-struct fg_cameras {
-  char *dir; /* <state>/cameras */
-  pthread_mutex_t lock;
-  entry e[MAX_CAMERAS];
-  int n;
-};
 
 /* ---------------------------------------------------------------- files */
 
@@ -162,20 +149,25 @@ int fg_cameras_new(fg_cameras **out, const char *state_dir) {
 
 void fg_cameras_free(fg_cameras *c) {
   if (!c) return;
+  for (int i = 0; i < c->n; i++) cameras_views_free(&c->e[i]);
   pthread_mutex_destroy(&c->lock);
   free(c->dir);
   free(c);
 }
 
-static entry *find_locked(fg_cameras *c, const char *name) {
+entry *cameras_find_locked(fg_cameras *c, const char *name, int add) {
   for (int i = 0; i < c->n; i++)
     if (strcmp(c->e[i].name, name) == 0) return &c->e[i];
-  return NULL;
+  if (!add || c->n == MAX_CAMERAS) return NULL;
+  entry *e = &c->e[c->n++];
+  memset(e, 0, sizeof *e);
+  snprintf(e->name, sizeof e->name, "%s", name);
+  return e;
 }
 
 void fg_cameras_calib_get(fg_cameras *c, const char *name, fg_camera_calib *out) {
   pthread_mutex_lock(&c->lock);
-  const entry *e = find_locked(c, name);
+  const entry *e = cameras_find_locked(c, name, 0);
   if (e)
     *out = e->calib;
   else
@@ -195,11 +187,7 @@ int fg_cameras_calib_set(fg_cameras *c, const char *name, const fg_camera_calib 
   free(path);
   if (rc < 0) return rc;
   pthread_mutex_lock(&c->lock);
-  entry *e = find_locked(c, name);
-  if (!e && c->n < MAX_CAMERAS) {
-    e = &c->e[c->n++];
-    snprintf(e->name, sizeof e->name, "%s", name);
-  }
+  entry *e = cameras_find_locked(c, name, 1);
   if (e) e->calib = *calib;
   pthread_mutex_unlock(&c->lock);
   return 0;

@@ -64,6 +64,49 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
                       fg_capture *out);
 void fg_capture_release(fg_capture *cap);
 
+/* ---- calibration.c: views kept from captures, and calibrating on them */
+
+/* Most views a camera keeps for its next calibration. */
+#define FG_CAMERA_MAX_VIEWS 100
+
+/* Decodes a capture's image (in the decoder's children), finds board b in it and, when it
+ * shows FG_CALIB_MIN_CORNERS corners or more, keeps its corners (with the capture's robot
+ * pose) as the camera's next calibration view. *corners: how many were found; *kept: 0 or
+ * the number of views now kept. FG_ERANGE (too_many_views) past FG_CAMERA_MAX_VIEWS. */
+struct fg_decoder;
+int fg_cameras_view_add(fg_cameras *c, struct fg_decoder *dec, const fg_charuco_board *b,
+                        const fg_conf_camera *cam, const fg_capture *cap, int *corners,
+                        int *kept);
+
+/* Views kept for name; forgets them. */
+int fg_cameras_views_count(fg_cameras *c, const char *name);
+void fg_cameras_views_clear(fg_cameras *c, const char *name);
+
+/* Bounds a calibration must meet to be kept. */
+#define FG_CALIB_MAX_RMS_PX 1.0      /* reprojection error, intrinsics and mount */
+#define FG_CALIB_MAX_SPREAD_MM 2.0   /* the fixed frame's spread over the views */
+#define FG_CALIB_MAX_SPREAD_DEG 0.5
+
+typedef enum { FG_CALIBRATE_INTRINSICS, FG_CALIBRATE_HAND_EYE } fg_calibrate_kind;
+
+/* What a calibration found, kept or not. */
+typedef struct fg_calibration_report {
+  int views, views_used;
+  fg_camera_calib calib;          /* the new calibration (the kind's part) */
+  fg_hand_eye_result methods[FG_HAND_EYE_METHODS]; /* hand_eye: each closed-form method */
+  int best;                       /* hand_eye: the method refined */
+} fg_calibration_report;
+
+/* Calibrates cam's intrinsics or mount on its kept views (consumed when the calibration is
+ * kept) with board b, and keeps the result (the other part of the calibration stays).
+ * hand_eye needs the camera's intrinsics (refined with the mount on the same views) and a
+ * robot pose with every view. Refusals: too few views (FG_EINVAL, not_enough_views), a
+ * degenerate motion (FG_EINVAL, degenerate_motion), residuals past the bounds above
+ * (FG_ERANGE, calibration_rejected, with the numbers; *report holds them too); the previous
+ * calibration then stays. */
+int fg_camera_calibrate(fg_cameras *c, const fg_charuco_board *b, const fg_conf_camera *cam,
+                        fg_calibrate_kind kind, fg_calibration_report *report);
+
 /* ---- snapshot.c */
 
 /* Fetches one image from source (an http(s):// URL) within timeout_ms, at most max_bytes. FG_ETIMEDOUT or FG_EUNAVAIL (camera_unavailable) with what went wrong. */

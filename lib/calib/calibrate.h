@@ -74,6 +74,12 @@ typedef struct fg_hand_eye_result {
 int fg_calibrate_hand_eye(const double *T_base_tcp, const double *T_cam_board, int n, int fixed,
                           fg_hand_eye_result results[FG_HAND_EYE_METHODS], int *best);
 
+/* How well a mount T (as fg_calibrate_hand_eye's) explains n views: the fixed frame computed
+ * from each view, its mean (*T_fixed) and its RMS spread about it (mm, degrees). */
+void fg_hand_eye_spread(const double *T_base_tcp, const double *T_cam_board, int n, int fixed,
+                        const double T[16], double T_fixed[16], double *spread_mm,
+                        double *spread_deg);
+
 /* Refines a hand-eye calibration by what the images say: the mount (*T, as
  * fg_calibrate_hand_eye's T) and the fixed frame (*T_fixed), and with refine_intrinsics the
  * intrinsics *in too, by Levenberg-Marquardt on the reprojection error of every corner of

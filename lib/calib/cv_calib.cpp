@@ -119,6 +119,23 @@ int observable(const double *T_base_tcp, int n) {
 
 }  // namespace
 
+extern "C" void fg_hand_eye_spread(const double *T_base_tcp, const double *T_cam_board, int n,
+                                   int fixed, const double T[16], double T_fixed[16],
+                                   double *spread_mm, double *spread_deg) {
+  // each view's fixed frame: base->board (hand) or tcp->board (fixed)
+  std::vector<std::vector<double>> fixed_T((size_t)n, std::vector<double>(16));
+  for (int i = 0; i < n; i++) {
+    double G[16], GX[16];
+    if (fixed)
+      fg_pose_inverse(T_base_tcp + 16 * i, G);
+    else
+      std::copy(T_base_tcp + 16 * i, T_base_tcp + 16 * i + 16, G);
+    fg_pose_compose(G, T, GX);
+    fg_pose_compose(GX, T_cam_board + 16 * i, fixed_T[(size_t)i].data());
+  }
+  mean_spread(fixed_T, T_fixed, spread_mm, spread_deg);
+}
+
 extern "C" const char *fg_hand_eye_method_name(int method) {
   return method >= 0 && method < FG_HAND_EYE_METHODS ? k_methods[method] : "?";
 }
@@ -241,18 +258,8 @@ extern "C" int fg_calibrate_hand_eye(const double *T_base_tcp, const double *T_c
       for (int k = 0; k < 3; k++) finite &= std::isfinite(td[k] = t.at<double>(k));
       if (!finite) continue;
       fg_pose_from_rotmat(Rd, td, r->T);
-      // each view's fixed frame: base->board (hand) or tcp->board (fixed)
-      std::vector<std::vector<double>> fixed_T((size_t)n, std::vector<double>(16));
-      for (int i = 0; i < n; i++) {
-        double G[16], GX[16];
-        if (fixed)
-          fg_pose_inverse(T_base_tcp + 16 * i, G);
-        else
-          std::copy(T_base_tcp + 16 * i, T_base_tcp + 16 * i + 16, G);
-        fg_pose_compose(G, r->T, GX);
-        fg_pose_compose(GX, T_cam_board + 16 * i, fixed_T[(size_t)i].data());
-      }
-      mean_spread(fixed_T, r->T_fixed, &r->spread_mm, &r->spread_deg);
+      fg_hand_eye_spread(T_base_tcp, T_cam_board, n, fixed, r->T, r->T_fixed, &r->spread_mm,
+                         &r->spread_deg);
       r->ok = 1;
       // 1 mm and 0.2 degrees weigh alike: the accuracy a grasp needs of either
       const double score = r->spread_mm + r->spread_deg / 0.2;

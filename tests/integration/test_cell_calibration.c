@@ -1,0 +1,296 @@
+/* Calibration from a bare cell, over HTTP, against the simulator's camera: a mount, intrinsics
+ * and distortion that fieldgripd is not told, a ChArUco board on the table. The robot is moved
+ * (POST /v1/robot/commands) through views of the board; each capture with
+ * "calibration_view" keeps its corners; the intrinsics come back within 0.5 % (focal) and
+ * 1 px (principal point), the mount within 1 mm and 0.2 degrees; a capture then gives the
+ * camera's pose. Refusals: no views, too few, a degenerate motion (SPEC's bad input).
+ * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "robot_util.h"
+#include "simproc.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+/* The truth, on the simulator's command line only. */
+#define CAMERA "612 607 324.3 236.1 640 480 -0.09 0.03 0.0008 -0.0012"
+static const double K_TRUE[4] = {612, 607, 324.3, 236.1};
+/* 4 cm to the side of the TCP, 7 cm back along the tool, turned 4 degrees about x and 3
+ * about y: (qw qx qy qz) of that turn */
+#define MOUNT "0.04 -0.015 -0.07 0.9989 0.0349 0.0262 0.0009"
+static const double MOUNT_P[3] = {0.04, -0.015, -0.07};
+static const double MOUNT_Q[4] = {0.9989, 0.0349, 0.0262, 0.0009};
+#define BOARD "7 5 0.03 0.022 DICT_5X5_100 0.32 -0.20 0.0 15"
+
+/* ---------------------------------------------------------------- small maths */
+
+static void quat_norm(double q[4]) {
+  const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (int k = 0; k < 4; k++) q[k] /= n;
+}
+
+static void quat_mul(const double a[4], const double b[4], double o[4]) {
+  o[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
+  o[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2];
+  o[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1];
+  o[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0];
+}
+
+static void quat_rotate(const double q[4], const double v[3], double o[3]) {
+  const double p[4] = {0, v[0], v[1], v[2]}, qc[4] = {q[0], -q[1], -q[2], -q[3]};
+  double t[4], r[4];
+  quat_mul(q, p, t);
+  quat_mul(t, qc, r);
+  o[0] = r[1];
+  o[1] = r[2];
+  o[2] = r[3];
+}
+
+/* The rotation whose columns are x, y, z, as a quaternion (w >= 0). */
+static void quat_from_axes(const double x[3], const double y[3], const double z[3],
+                           double q[4]) {
+  const double m[3][3] = {{x[0], y[0], z[0]}, {x[1], y[1], z[1]}, {x[2], y[2], z[2]}};
+  const double tr = m[0][0] + m[1][1] + m[2][2];
+  if (tr > 0) {
+    const double s = sqrt(tr + 1) * 2;
+    q[0] = s / 4;
+    q[1] = (m[2][1] - m[1][2]) / s;
+    q[2] = (m[0][2] - m[2][0]) / s;
+    q[3] = (m[1][0] - m[0][1]) / s;
+  } else if (m[0][0] > m[1][1] && m[0][0] > m[2][2]) {
+    const double s = sqrt(1 + m[0][0] - m[1][1] - m[2][2]) * 2;
+    q[0] = (m[2][1] - m[1][2]) / s;
+    q[1] = s / 4;
+    q[2] = (m[0][1] + m[1][0]) / s;
+    q[3] = (m[0][2] + m[2][0]) / s;
+  } else if (m[1][1] > m[2][2]) {
+    const double s = sqrt(1 + m[1][1] - m[0][0] - m[2][2]) * 2;
+    q[0] = (m[0][2] - m[2][0]) / s;
+    q[1] = (m[0][1] + m[1][0]) / s;
+    q[2] = s / 4;
+    q[3] = (m[1][2] + m[2][1]) / s;
+  } else {
+    const double s = sqrt(1 + m[2][2] - m[0][0] - m[1][1]) * 2;
+    q[0] = (m[1][0] - m[0][1]) / s;
+    q[1] = (m[0][2] + m[2][0]) / s;
+    q[2] = (m[1][2] + m[2][1]) / s;
+    q[3] = s / 4;
+  }
+  if (q[0] < 0)
+    for (int k = 0; k < 4; k++) q[k] = -q[k];
+  quat_norm(q);
+}
+
+/* The TCP pose that puts the camera (true mount) at eye looking at target, rolled. */
+static void tcp_for_view(const double eye[3], const double target[3], double roll_deg,
+                         double p[3], double q[4]) {
+  double z[3], x[3], y[3], up[3] = {0, 0, 1}, n = 0;
+  for (int k = 0; k < 3; k++) n += (z[k] = target[k] - eye[k], z[k] * z[k]);
+  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
+  x[0] = z[1] * up[2] - z[2] * up[1];
+  x[1] = z[2] * up[0] - z[0] * up[2];
+  x[2] = z[0] * up[1] - z[1] * up[0];
+  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+  for (int k = 0; k < 3; k++) x[k] /= n;
+  y[0] = z[1] * x[2] - z[2] * x[1];
+  y[1] = z[2] * x[0] - z[0] * x[2];
+  y[2] = z[0] * x[1] - z[1] * x[0];
+  const double c = cos(roll_deg * M_PI / 180), s = sin(roll_deg * M_PI / 180);
+  double xr[3], yr[3], q_cam[4];
+  for (int k = 0; k < 3; k++) {
+    xr[k] = c * x[k] + s * y[k];
+    yr[k] = -s * x[k] + c * y[k];
+  }
+  quat_from_axes(xr, yr, z, q_cam);
+  /* T_base_tcp = T_base_cam * inverse(T_tcp_cam) */
+  const double mq_inv[4] = {MOUNT_Q[0], -MOUNT_Q[1], -MOUNT_Q[2], -MOUNT_Q[3]};
+  double mq_n[4] = {mq_inv[0], mq_inv[1], mq_inv[2], mq_inv[3]}, t[3], tw[3];
+  quat_norm(mq_n);
+  quat_mul(q_cam, mq_n, q);
+  quat_norm(q);
+  quat_rotate(q, MOUNT_P, tw); /* R_base_tcp * p_tcp_cam */
+  for (int k = 0; k < 3; k++) t[k] = eye[k] - tw[k];
+  memcpy(p, t, sizeof t);
+}
+
+/* ---------------------------------------------------------------- requests */
+
+static void move_to(const double p[3], const double q[4]) {
+  char body[512];
+  snprintf(body, sizeof body, "{\"command\": \"move\", \"pose\": {\"position\": [%.5f, %.5f, "
+           "%.5f], \"quaternion\": [%.7f, %.7f, %.7f, %.7f]}, \"approach\": 0}",
+           p[0], p[1], p[2], q[0], q[1], q[2], q[3]);
+  h_resp *r = r_post("/v1/robot/commands", body, NULL);
+  r_expect(r, 200, NULL);
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "done");
+  h_resp_free(r);
+}
+
+static int capture_view(void) {
+  h_resp *r = h_post_json("/v1/cameras/wrist/capture", "{\"calibration_view\": true}");
+  ASSERT_STATUS(r, 200);
+  const int corners = (int)json_integer_value(json_object_get(r->json, "board_corners"));
+  h_resp_free(r);
+  return corners;
+}
+
+static h_resp *calibrate(const char *kind) {
+  char body[64];
+  snprintf(body, sizeof body, "{\"kind\": \"%s\"}", kind);
+  return h_post_json("/v1/cameras/wrist/calibrate", body);
+}
+
+static double num(json_t *o, const char *k) { return json_number_value(json_object_get(o, k)); }
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+  ASSERT(argc >= 3);
+  simproc_init(argv[2], h_tmpdir());
+  const char *src = getenv("FG_SOURCE_DIR");
+  ASSERT(src);
+  char scene[PATH_MAX], port_file[PATH_MAX];
+  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
+  snprintf(port_file, sizeof port_file, "%s/camera.port", h_tmpdir());
+  simproc sim;
+  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
+                        "--camera-port-file", port_file, "--camera", CAMERA, "--camera-mount",
+                        MOUNT, "--board", BOARD, NULL};
+  simproc_start(&sim, 0, args);
+  FILE *f = fopen(port_file, "r");
+  ASSERT(f);
+  int cam_port = 0;
+  ASSERT_EQ(fscanf(f, "%d", &cam_port), 1);
+  fclose(f);
+  char conf[1024];
+  snprintf(conf, sizeof conf,
+           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
+           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
+           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
+           "dictionary = DICT_5X5_100\n"
+           "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n",
+           sim.port, cam_port);
+  h_write_config(conf);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+
+  /* nothing kept yet */
+  h_resp *r = calibrate("intrinsics");
+  ASSERT_HTTP_ERROR(r, 400, "not_enough_views");
+  h_resp_free(r);
+
+  /* the board's centre: its frame at (0.32, -0.20) turned 15 degrees, 0.21 x 0.15 m */
+  const double yaw = 15 * M_PI / 180, bx = 0.105, by = 0.075;
+  /* the board's y runs one way or the other with OpenCV's convention: aim at the middle of
+   * both candidates' centres, 7.5 cm either side, which keeps the board in view */
+  const double centre[3] = {0.32 + bx * cos(yaw), -0.20 + bx * sin(yaw), 0};
+  (void)by;
+  int kept = 0;
+  for (int i = 0; i < 16; i++) {
+    const double az = 2 * M_PI * i / 16 + 0.3 * (i % 3), el = (55 + 25 * ((i * 7) % 5) / 4.0) * M_PI / 180;
+    const double dist = 0.30 + 0.08 * ((i * 3) % 4) / 3.0, roll = -30 + 60 * ((i * 5) % 7) / 6.0;
+    const double eye[3] = {centre[0] + dist * cos(el) * cos(az), centre[1] + dist * cos(el) * sin(az),
+                           dist * sin(el)};
+    double p[3], q[4];
+    tcp_for_view(eye, centre, roll, p, q);
+    move_to(p, q);
+    kept += capture_view() >= 6;
+  }
+  fprintf(stderr, "%d of 16 views show the board\n", kept);
+  ASSERT(kept >= 12);
+
+  /* hand-eye before the intrinsics: refused, the views stay */
+  r = calibrate("hand_eye");
+  ASSERT_HTTP_ERROR(r, 409, "not_calibrated");
+  h_resp_free(r);
+
+  r = calibrate("intrinsics");
+  ASSERT_STATUS(r, 200);
+  json_t *in = json_object_get(json_object_get(r->json, "camera"), "intrinsics");
+  fprintf(stderr, "intrinsics: fx %.2f fy %.2f cx %.2f cy %.2f (truth %g %g %g %g)\n",
+          num(in, "fl_x"), num(in, "fl_y"), num(in, "cx"), num(in, "cy"), K_TRUE[0], K_TRUE[1],
+          K_TRUE[2], K_TRUE[3]);
+  ASSERT(fabs(num(in, "fl_x") / K_TRUE[0] - 1) < 0.005);
+  ASSERT(fabs(num(in, "fl_y") / K_TRUE[1] - 1) < 0.005);
+  ASSERT(fabs(num(in, "cx") - K_TRUE[2]) < 1 && fabs(num(in, "cy") - K_TRUE[3]) < 1);
+  h_resp_free(r);
+  r = h_get("/v1/cameras/wrist");
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "views_kept")), 0); /* consumed */
+  h_resp_free(r);
+
+  /* the mount: a second round of views */
+  kept = 0;
+  for (int i = 0; i < 14; i++) {
+    const double az = 2 * M_PI * i / 14 + 0.2, el = (50 + 30 * ((i * 3) % 5) / 4.0) * M_PI / 180;
+    const double dist = 0.32 + 0.06 * (i % 3) / 2.0, roll = -35 + 70 * ((i * 4) % 7) / 6.0;
+    const double eye[3] = {centre[0] + dist * cos(el) * cos(az), centre[1] + dist * cos(el) * sin(az),
+                           dist * sin(el)};
+    double p[3], q[4];
+    tcp_for_view(eye, centre, roll, p, q);
+    move_to(p, q);
+    kept += capture_view() >= 6;
+  }
+  ASSERT(kept >= 10);
+  r = calibrate("hand_eye");
+  ASSERT_STATUS(r, 200);
+  json_t *cam = json_object_get(r->json, "camera");
+  ASSERT(json_is_true(json_object_get(cam, "calibrated")));
+  json_t *mount = json_object_get(cam, "T_tcp_cam");
+  json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
+  double dp = 0, dot = 0, qn[4] = {MOUNT_Q[0], MOUNT_Q[1], MOUNT_Q[2], MOUNT_Q[3]};
+  quat_norm(qn);
+  for (int k = 0; k < 3; k++)
+    dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - MOUNT_P[k], 2);
+  for (int k = 0; k < 4; k++) dot += qn[k] * json_real_value(json_array_get(mq, (size_t)k));
+  const double err_mm = sqrt(dp) * 1e3, err_deg = 2 * acos(fmin(1, fabs(dot))) * 180 / M_PI;
+  json_t *cal = json_object_get(json_object_get(cam, "calibration"), "mount");
+  fprintf(stderr, "mount: %.3f mm, %.4f deg from the truth; spread %.3f mm %.4f deg, rms %.3f "
+          "px (%s)\n", err_mm, err_deg, num(cal, "spread_mm"), num(cal, "spread_deg"),
+          num(cal, "rms_px"), json_string_value(json_object_get(r->json, "refined_from")));
+  ASSERT(err_mm < 1);
+  ASSERT(err_deg < 0.2);
+  ASSERT_EQ(json_array_size(json_object_get(r->json, "methods")), 5);
+  h_resp_free(r);
+
+  /* a capture now gives the camera's pose: the TCP's times the mount */
+  r = h_post_json("/v1/cameras/wrist/capture", "");
+  ASSERT_STATUS(r, 200);
+  ASSERT(json_is_object(json_object_get(r->json, "camera_pose")));
+  ASSERT(json_is_object(json_object_get(r->json, "intrinsics")));
+  h_resp_free(r);
+
+  /* bad input: too few views; rotations about one axis only */
+  for (int i = 0; i < 3; i++) {
+    double eye[3] = {centre[0] + 0.05 * i, centre[1] - 0.08, 0.35}, p[3], q[4];
+    tcp_for_view(eye, centre, 0, p, q);
+    move_to(p, q);
+    capture_view();
+  }
+  r = calibrate("hand_eye");
+  ASSERT_HTTP_ERROR(r, 400, "not_enough_views");
+  h_resp_free(r);
+  r = h_delete("/v1/cameras/wrist/views");
+  ASSERT_STATUS(r, 200);
+  h_resp_free(r);
+  for (int i = 0; i < 9; i++) { /* the camera rolled about its own axis, nothing else */
+    const double eye[3] = {centre[0], centre[1] - 0.05, 0.33};
+    double p[3], q[4];
+    tcp_for_view(eye, centre, -40 + 10 * i, p, q);
+    move_to(p, q);
+    capture_view();
+  }
+  r = calibrate("hand_eye");
+  ASSERT_HTTP_ERROR(r, 400, "degenerate_motion");
+  ASSERT(strstr(json_string_value(json_object_get(json_object_get(r->json, "error"), "message")),
+                "one axis"));
+  h_resp_free(r);
+  r = h_get("/v1/cameras/wrist"); /* the good calibration stays */
+  ASSERT(json_is_true(json_object_get(r->json, "calibrated")));
+  h_resp_free(r);
+
+  h_stop();
+  simproc_stop(&sim);
+  h_done();
+  printf("ok\n");
+  return 0;
+}
