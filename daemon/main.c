@@ -11,6 +11,7 @@
 #include "state/idem.h"
 #include "robot/cmd_ids.h"
 #include "cell/cameras.h"
+#include "cell/scan.h"
 #include "state/job_train.h"
 #include "state/jobs.h"
 #include "metrics/metrics.h"
@@ -388,7 +389,8 @@ int main(int argc, char **argv) {
   /* Jobs: each scene's last job comes back from its last_job.json; one kind per job that
    * the API can start. */
   if (fg_jobs_new(&app.jobs, &app) != 0 ||
-      fg_jobs_register_kind(app.jobs, &fg_job_kind_train) != 0) {
+      fg_jobs_register_kind(app.jobs, &fg_job_kind_train) != 0 ||
+      fg_jobs_register_kind(app.jobs, &fg_job_kind_scan) != 0) {
     fg_error("cannot set up background jobs: %s", fg_error_detail());
     app_teardown(&app);
     return 1;

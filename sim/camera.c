@@ -419,9 +419,17 @@ static void serve_one(sim_camera *cam, int fd) {
     return reply_text(fd, 500, "Internal Server Error", "rendering failed\n");
   /* the truth a test compares calibrations and scans with (fieldgripd never reads it) */
   fg_pose_to_quat(T, p, q);
-  char extra[256];
-  snprintf(extra, sizeof extra, "X-Camera-Pose: %.9f %.9f %.9f %.9f %.9f %.9f %.9f\r\n", p[0],
-           p[1], p[2], q[0], q[1], q[2], q[3]);
+  char pose[200], extra[256];
+  snprintf(pose, sizeof pose, "%.9f %.9f %.9f %.9f %.9f %.9f %.9f", p[0], p[1], p[2], q[0], q[1],
+           q[2], q[3]);
+  snprintf(extra, sizeof extra, "X-Camera-Pose: %s\r\n", pose);
+  if (cam->cfg.log_path) { /* before the answer: whoever has the image finds its line */
+    FILE *f = fopen(cam->cfg.log_path, "a");
+    if (f) {
+      fprintf(f, "%s %s\n", depth ? "depth" : "rgb", pose);
+      fclose(f);
+    }
+  }
   reply(fd, 200, "OK", "image/png", png, len, extra);
   free(png);
 }

@@ -30,6 +30,7 @@ typedef struct sim_camera_config {
   int w, h;
   char listen[300];             /* HOST:PORT, PORT 0: a free one */
   const char *port_file;        /* --camera-port-file: the bound port, once listening */
+  const char *log_path;         /* --camera-log: a line per image served, with its true pose */
   int has_board;
   fg_charuco_board board;       /* --board */
   double board_xyz[3], board_yaw; /* where the board frame's origin lies, its x turned by yaw */

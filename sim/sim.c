@@ -117,6 +117,8 @@ static void usage(FILE *f) {
           "  --camera-listen H:P    serve GET /rgb.png and /depth.png (16-bit mm) of the cell\n"
           "                         as a camera on the tool sees it from the current TCP pose\n"
           "  --camera-port-file F   write the camera's bound port + newline to F\n"
+          "  --camera-log F         append \"rgb|depth x y z qw qx qy qz\" per image served: the\n"
+          "                         camera's true pose (world frame, OpenCV convention)\n"
           "  --camera-mount \"x y z qw qx qy qz\"  T_tcp_cam, OpenCV convention (default\n"
           "                         0.05 m behind the TCP, looking along the tool's +z)\n"
           "  --camera \"fx fy cx cy w h [k1 k2 p1 p2]\"  intrinsics (default 600 600 319.5\n"
@@ -245,6 +247,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"camera-mount", required_argument, NULL, 1007},
       {"camera", required_argument, NULL, 1008},
       {"board", required_argument, NULL, 1009},
+      {"camera-log", required_argument, NULL, 1010},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -339,6 +342,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       }
       break;
     case 1006: cfg->camera.port_file = optarg; break;
+    case 1010: cfg->camera.log_path = optarg; break;
     case 1007: rc = sim_camera_parse_mount(&cfg->camera, optarg, err, sizeof err); break;
     case 1008: rc = sim_camera_parse_intrinsics(&cfg->camera, optarg, err, sizeof err); break;
     case 1009: rc = sim_camera_parse_board(&cfg->camera, optarg, err, sizeof err); break;

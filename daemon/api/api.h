@@ -58,6 +58,7 @@ int fg_api_camera_get(fg_req *req, fg_resp *resp);
 int fg_api_camera_capture(fg_req *req, fg_resp *resp);
 int fg_api_camera_views_clear(fg_req *req, fg_resp *resp);
 int fg_api_camera_calibrate(fg_req *req, fg_resp *resp);
+int fg_api_scene_scan(fg_req *req, fg_resp *resp);
 int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
 /* api_audit.c: the three routes that may move something, each its handler above under the
  * audit log; and the log read back. */

@@ -161,6 +161,7 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   json_object_set_new(o, "distortion_weight", json_real(j->params.distortion_weight));
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
+  if (strcmp(j->kind, "scan") == 0) json_object_set_new(o, "skipped", json_integer(j->skipped));
   json_object_set_new(o, "phase", j->phase[0] ? json_string(j->phase) : json_null());
   json_object_set_new(o, "features",
                       j->features_total

@@ -82,6 +82,7 @@ typedef struct fg_job_info {
   int psnr_full;         /* psnr covers every held-out pixel (1) or a fixed sample (0) */
   int n_frames;          /* frames of the scene the job trains on, held-out ones included */
   int n_heldout;
+  int skipped;           /* a scan's viewpoints the robot refused or could not reach */
   double elapsed_s;      /* wall time since it started running */
   double eta_s;          /* seconds to go; NaN when unknown */
   double samples_per_s;  /* over the last step; NaN before the first step */

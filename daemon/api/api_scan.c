@@ -1,0 +1,94 @@
+/* POST /v1/scenes/{s}/scan: a scan the robot drives (cell/scan.h). */
+#include "api.h"
+
+#include "cell/scan.h"
+#include "state/json.h"
+
+#include "core/error.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* {"camera": NAME, "viewpoints": N | [poses], "radius_m", "elevations_deg": [lo, hi],
+ * "settle_ms"} into *r. 1 when decoded, 0 after a 400. */
+static int parse_scan(json_t *body, fg_scan_request *r, fg_resp *resp) {
+  static const char *const keys[] = {"camera", "viewpoints", "radius_m", "elevations_deg",
+                                     "settle_ms", NULL};
+  memset(r, 0, sizeof *r);
+  r->n = 30;
+  r->el_min_deg = 35;
+  r->el_max_deg = 75;
+  r->settle_ms = 300;
+  const char *unknown = fg_json_unknown_key(body, keys), *cam = NULL;
+  if (unknown)
+    return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a scan takes "
+                         "camera, viewpoints, radius_m, elevations_deg, settle_ms", unknown), 0;
+  if (fg_json_string(body, "camera", &cam) != 1 || strlen(cam) > FG_CAMERA_NAME_MAX)
+    return fg_resp_error(resp, 400, "invalid_request", "\"camera\": the name of a [camera "
+                         "NAME] on the tool is required"), 0;
+  snprintf(r->camera, sizeof r->camera, "%s", cam);
+  json_t *vp = json_object_get(body, "viewpoints");
+  long long n = 30, settle = 300;
+  if (json_is_array(vp)) {
+    n = (long long)json_array_size(vp);
+    if (n < 1 || n > FG_SCAN_MAX_VIEWPOINTS)
+      return fg_resp_error(resp, 400, "invalid_request", "\"viewpoints\": 1 to %d poses",
+                           FG_SCAN_MAX_VIEWPOINTS), 0;
+    r->T_base_tcp = malloc(sizeof *r->T_base_tcp * 16 * (size_t)n);
+    for (long long i = 0; r->T_base_tcp && i < n; i++) {
+      double q[4];
+      char what[48];
+      snprintf(what, sizeof what, "viewpoints[%lld]", i);
+      if (fg_json_pose_parse(json_array_get(vp, (size_t)i), what, r->T_base_tcp + 16 * i, q) != 0) {
+        free(r->T_base_tcp);
+        r->T_base_tcp = NULL;
+        return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), 0;
+      }
+    }
+  } else if (vp && fg_json_int_range(body, "viewpoints", 1, FG_SCAN_MAX_VIEWPOINTS, &n) != 1) {
+    return fg_resp_error(resp, 400, "invalid_request", "\"viewpoints\": a count (1 to %d) or "
+                         "a list of TCP poses", FG_SCAN_MAX_VIEWPOINTS), 0;
+  }
+  r->n = (int)n;
+  json_t *el = json_object_get(body, "elevations_deg");
+  double e[2] = {r->el_min_deg, r->el_max_deg};
+  if ((el && (fg_json_vec(el, e, 2, "elevations_deg") != 0 || !(e[0] >= 0 && e[0] <= e[1] &&
+                                                                 e[1] <= 90))) ||
+      (json_object_get(body, "radius_m") &&
+       (fg_json_number(body, "radius_m", &r->radius_m) != 1 ||
+        !(r->radius_m > 0 && r->radius_m <= 5))) ||
+      (json_object_get(body, "settle_ms") &&
+       fg_json_int_range(body, "settle_ms", 0, 10000, &settle) != 1)) {
+    free(r->T_base_tcp);
+    r->T_base_tcp = NULL;
+    return fg_resp_error(resp, 400, "invalid_request", "elevations_deg: [low, high] from 0 to "
+                         "90 degrees, low <= high; radius_m: above 0 and at most 5; settle_ms: "
+                         "0 to 10000"), 0;
+  }
+  r->el_min_deg = e[0];
+  r->el_max_deg = e[1];
+  r->settle_ms = (int)settle;
+  return 1;
+}
+
+int fg_api_scene_scan(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  json_t *body = fg_api_body_object(req, resp);
+  fg_scan_request r;
+  if (body && parse_scan(body, &r, resp)) {
+    fg_job_info job;
+    const int rc = fg_scan_submit(req->app, req->conf, s, &r, &job);
+    free(r.T_base_tcp); /* NULL once the job took them */
+    if (rc < 0) {
+      fg_api_fail(resp, rc);
+    } else {
+      snprintf(resp->location, sizeof resp->location, "/v1/jobs/%s", job.id);
+      fg_resp_json(resp, 202, json_pack("{s:s, s:s, s:i}", "job", job.id, "state",
+                                        fg_job_state_name(job.state), "viewpoints", r.n));
+    }
+  }
+  json_decref(body);
+  fg_scene_unref(s);
+  return 0;
+}

@@ -1,0 +1,202 @@
+/* Robot-driven scans (scan.h). */
+#include "scan.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "core/error.h"
+#include "core/log.h"
+#include "core/pose.h"
+#include "state/ingest.h"
+
+/* ---------------------------------------------------------------- viewpoints */
+
+/* A camera at eye looking at target (OpenCV: +z forward), its image's +y towards world -z. */
+static void look_at(const double eye[3], const double target[3], double T[16]) {
+  double z[3], x[3], y[3], n = 0;
+  for (int k = 0; k < 3; k++) {
+    z[k] = target[k] - eye[k];
+    n += z[k] * z[k];
+  }
+  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
+  const double up[3] = {0, 0, 1};
+  x[0] = z[1] * up[2] - z[2] * up[1];
+  x[1] = z[2] * up[0] - z[0] * up[2];
+  x[2] = z[0] * up[1] - z[1] * up[0];
+  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+  if (n < 1e-9) { /* straight down: any heading will do */
+    x[0] = 0;
+    x[1] = -1;
+    x[2] = 0;
+    n = 1;
+  }
+  for (int k = 0; k < 3; k++) x[k] /= n;
+  y[0] = z[1] * x[2] - z[2] * x[1];
+  y[1] = z[2] * x[0] - z[0] * x[2];
+  y[2] = z[0] * x[1] - z[1] * x[0];
+  const double R[9] = {x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2]};
+  fg_pose_from_rotmat(R, eye, T);
+}
+
+void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrinsics *in,
+                        const double T_tcp_cam[16], int n, double radius_m, double el_min_deg,
+                        double el_max_deg, double *T_base_tcp) {
+  double c[3], r2 = 0;
+  for (int k = 0; k < 3; k++) {
+    c[k] = (lo[k] + hi[k]) / 2;
+    r2 += (hi[k] - lo[k]) * (hi[k] - lo[k]) / 4;
+  }
+  if (!(radius_m > 0)) {
+    const double half_fov = fmin(atan(in->w / (2 * in->fx)), atan(in->h / (2 * in->fy)));
+    radius_m = sqrt(r2) / sin(0.8 * half_fov);
+  }
+  double T_cam_tcp[16];
+  fg_pose_inverse(T_tcp_cam, T_cam_tcp);
+  const double golden = M_PI * (3 - sqrt(5));
+  for (int i = 0; i < n; i++) {
+    const double el = (el_min_deg + (el_max_deg - el_min_deg) * (i + 0.5) / n) * M_PI / 180;
+    const double az = i * golden;
+    const double eye[3] = {c[0] + radius_m * cos(el) * cos(az),
+                           c[1] + radius_m * cos(el) * sin(az), c[2] + radius_m * sin(el)};
+    double T_base_cam[16];
+    look_at(eye, c, T_base_cam);
+    fg_pose_compose(T_base_cam, T_cam_tcp, T_base_tcp + 16 * i);
+  }
+}
+
+/* ---------------------------------------------------------------- the job */
+
+static void params_free(void *p) {
+  fg_scan_request *r = p;
+  free(r->T_base_tcp);
+  free(r);
+}
+
+/* Moves to viewpoint T through the gate: 1 reached, 0 refused or failed (skipped), -1 the
+ * scan must stop (detail recorded). */
+static int move_to(fg_app *app, const double T[16]) {
+  fg_robot_request req = {.command = FG_ROBOT_MOVE, .has_pose = 1, .has_approach = 1,
+                          .approach_m = 0, .wait = 1};
+  fg_pose_to_quat(T, req.p_world_m, req.q_wxyz);
+  fg_robot_cmd_view v;
+  const int rc = fg_robot_execute(app->robot, &req, &v);
+  if (rc == FG_ELIMIT || rc == FG_ERANGE) return 0;
+  if (rc < 0) return -1;
+  if (v.state == FG_CMD_DONE) return 1;
+  if (v.state == FG_CMD_FAILED) return 0;
+  fg_fail(FG_EPEER, "the robot's motion to a viewpoint ended %s: %s", fg_cmd_state_name(v.state),
+          v.message);
+  return -1;
+}
+
+/* Captures at the viewpoint and stores the frame. 0, or the failure. */
+static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
+                         const fg_conf_camera *cam, const char *job_id, int i, int *stored) {
+  fg_capture cap;
+  FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, &cap));
+  const fg_intrinsics *in = &cap.calib.in;
+  char source[96];
+  snprintf(source, sizeof source, "scan-%s-%03d", job_id, i);
+  fg_ingest_input fi = {.image = cap.image, .image_len = cap.image_len, .depth = cap.depth,
+                        .depth_len = cap.depth_len, .depth_scale = cam->depth_scale,
+                        .source = source};
+  fi.camera.cam = (fg_camera){in->fx, in->fy, in->cx, in->cy, in->w, in->h, FG_CAMERA_OPENCV,
+                              in->k[0], in->k[1], 0, in->k[2], in->k[3]};
+  fi.camera.has_size = 1;
+  memcpy(fi.T_world_cam, cap.T_base_cam, sizeof fi.T_world_cam);
+  fg_pose_flip_yz(fi.T_world_cam); /* frames keep SPEC.md's default, OpenGL's */
+  int index;
+  fg_frame frame;
+  const int rc = fg_ingest_upload(app, conf, s, &fi, &index, &frame);
+  if (rc == 0) {
+    fg_frame_clear(&frame);
+    (*stored)++;
+  }
+  fg_capture_release(&cap);
+  return rc;
+}
+
+static void settle(int ms) {
+  const struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
+  nanosleep(&ts, NULL);
+}
+
+static void scan_run(fg_job *job, fg_app *app, void *params) {
+  fg_scan_request *p = params;
+  const fg_conf *conf = fg_app_conf_acquire(app);
+  const fg_conf_camera *cam = fg_conf_find_camera(conf, p->camera);
+  int stored = 0, skipped = 0, rc = 0;
+  if (!cam) rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
+  fg_job_set_phase(job, "scanning");
+  for (int i = 0; rc == 0 && i < p->n; i++) {
+    if (fg_job_should_stop(job)) break;
+    const int moved = move_to(app, p->T_base_tcp + 16 * i);
+    if (moved < 0) {
+      rc = -1;
+      break;
+    }
+    if (moved == 0) {
+      skipped++;
+      fg_info("scan %s: viewpoint %d skipped: %s", fg_job_id(job), i, fg_error_detail());
+    } else {
+      settle(p->settle_ms);
+      rc = capture_store(app, conf, fg_job_scene(job), cam, fg_job_id(job), i, &stored);
+    }
+    fg_job_info *info = fg_job_update_begin(job);
+    info->step = i + 1;
+    info->n_frames = stored;
+    info->skipped = skipped;
+    fg_job_update_end(job);
+  }
+  if (!fg_job_should_stop(job)) {
+    if (rc < 0)
+      fg_job_fail(job, "viewpoint %d of %d: %s", stored + skipped, p->n, fg_error_detail());
+    else if (stored == 0)
+      fg_job_fail(job, "no viewpoint was reachable: the robot refused or failed all %d", p->n);
+    else if (fg_job_commit_begin(job) == 0)
+      fg_job_finish(job, FG_JOB_DONE);
+  }
+  fg_app_conf_release(app, conf);
+}
+
+const fg_job_kind fg_job_kind_scan = {"scan", scan_run, params_free};
+
+int fg_scan_submit(fg_app *app, const fg_conf *conf, fg_scene *s, fg_scan_request *req,
+                   fg_job_info *out) {
+  const fg_conf_camera *cam = fg_conf_find_camera(conf, req->camera);
+  if (!cam)
+    return fg_fail_as(FG_ENOENT, "camera_not_found", "no camera \"%s\"", req->camera);
+  if (cam->mount != FG_MOUNT_HAND)
+    return fg_fail_as(FG_EINVAL, "invalid_request", "%s is a fixed camera: a scan moves a "
+                      "camera on the tool", cam->name);
+  if (!fg_robot_svc_has_robot(app->robot))
+    return fg_fail_as(FG_EUNAVAIL, "not_configured", "a scan moves the robot: set [robot]");
+  fg_camera_calib cal;
+  fg_cameras_calib_get(app->cameras, cam->name, &cal);
+  if (!cal.has_intrinsics || !cal.has_mount)
+    return fg_fail_as(FG_EINVAL, "not_calibrated", "%s is not calibrated (intrinsics and "
+                      "mount): POST /v1/cameras/%s/calibrate first", cam->name, cam->name);
+  if (!req->T_base_tcp) {
+    fg_scene_info si;
+    fg_scene_get_info(s, &si);
+    req->T_base_tcp = malloc(sizeof *req->T_base_tcp * 16 * (size_t)req->n);
+    if (!req->T_base_tcp) return fg_fail(FG_ENOMEM, "viewpoints");
+    fg_scan_viewpoints(si.params.workspace_min, si.params.workspace_max, &cal.in, cal.T_mount,
+                       req->n, req->radius_m, req->el_min_deg, req->el_max_deg,
+                       req->T_base_tcp);
+  }
+  const fg_job_params jp = {.steps = req->n};
+  fg_scan_request *own = malloc(sizeof *own);
+  if (!own) return fg_fail(FG_ENOMEM, "a scan");
+  *own = *req;
+  const int rc = fg_jobs_submit(app->jobs, "scan", s, &jp, own, out);
+  if (rc < 0) {
+    free(own);
+    return rc;
+  }
+  req->T_base_tcp = NULL; /* the job's now */
+  return 0;
+}
