@@ -38,7 +38,7 @@ const fg_route fg_api_routes[] = {
   {"POST", "/v1/scenes/{}/import", "/v1/scenes/{s}/import", fg_api_scene_import,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/train", "/v1/scenes/{s}/train", fg_api_train_start, 0},
-  {"POST", "/v1/scenes/{}/scan", "/v1/scenes/{s}/scan", fg_api_scene_scan, 0},
+  {"POST", "/v1/scenes/{}/scan", "/v1/scenes/{s}/scan", fg_api_audit_scene_scan, 0},
   {"POST", "/v1/scenes/{}/render", "/v1/scenes/{s}/render", fg_api_scene_render,
    FG_ROUTE_OFFLOAD},
   {"POST", "/v1/scenes/{}/heatmap", "/v1/scenes/{s}/heatmap", fg_api_scene_heatmap,

@@ -65,6 +65,7 @@ int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
 int fg_api_audit_robot_command(fg_req *req, fg_resp *resp);
 int fg_api_audit_robot_stop(fg_req *req, fg_resp *resp);
 int fg_api_audit_robot_reset(fg_req *req, fg_resp *resp);
+int fg_api_audit_scene_scan(fg_req *req, fg_resp *resp);
 int fg_api_audit_gripper_action(fg_req *req, fg_resp *resp);
 int fg_api_audit_grasp_execute(fg_req *req, fg_resp *resp);
 int fg_api_robot_log(fg_req *req, fg_resp *resp);

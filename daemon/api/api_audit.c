@@ -81,6 +81,8 @@ static json_t *request_entry(const fg_req *req, const fg_resp *resp, json_t *bod
   if (strncmp(req->path, "/v1/gripper/", 12) == 0) command = req->params[0];
   if (strcmp(req->path, "/v1/robot/stop") == 0) command = "stop";
   if (strcmp(req->path, "/v1/robot/reset") == 0) command = "reset";
+  const size_t plen = strlen(req->path);
+  if (plen > 5 && strcmp(req->path + plen - 5, "/scan") == 0) command = "scan";
   if (!command) command = json_string_value(json_object_get(body, "command"));
   if (!command) command = json_string_value(json_object_get(cmd, "command"));
   json_object_set_new(e, "command", command ? json_string(command) : json_null());
@@ -202,6 +204,10 @@ int fg_api_audit_gripper_action(fg_req *req, fg_resp *resp) {
 
 int fg_api_audit_grasp_execute(fg_req *req, fg_resp *resp) {
   return audited(req, resp, fg_api_grasp_execute);
+}
+
+int fg_api_audit_scene_scan(fg_req *req, fg_resp *resp) {
+  return audited(req, resp, fg_api_scene_scan);
 }
 
 void fg_api_audit_finished(fg_app *app, const fg_robot_cmd_view *v) {

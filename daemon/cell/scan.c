@@ -10,7 +10,9 @@
 #include "core/error.h"
 #include "core/log.h"
 #include "core/pose.h"
+#include "robot/audit.h"
 #include "state/ingest.h"
+#include "state/json.h"
 
 /* ---------------------------------------------------------------- viewpoints */
 
@@ -75,14 +77,39 @@ static void params_free(void *p) {
   free(r);
 }
 
-/* Moves to viewpoint T through the gate: 1 reached, 0 refused or failed (skipped), -1 the
- * scan must stop (detail recorded). */
-static int move_to(fg_app *app, const double T[16]) {
+/* The audit log's line for one motion of the scan (robot/audit.h): as a request's, the
+ * scan's job as its client. */
+static void audit_motion(fg_app *app, fg_job *job, const fg_robot_request *req, int rc,
+                         const fg_robot_cmd_view *v) {
+  char route[128];
+  snprintf(route, sizeof route, "/v1/scenes/%s/scan", fg_scene_name(fg_job_scene(job)));
+  const char *outcome = rc < 0 ? "refused" : fg_cmd_state_name(v->state);
+  json_t *e = json_pack("{s:s, s:s, s:s, s:o, s:o, s:s, s:s, s:s}", "kind", "request", "route",
+                        route, "command", "move", "command_id",
+                        rc < 0 ? json_null() : json_integer((json_int_t)v->id), "pose",
+                        fg_json_pose_quat(req->p_world_m, req->q_wxyz), "outcome", outcome,
+                        "client", "scan job", "request_id", fg_job_id(job));
+  if (e && rc < 0)
+    json_object_set_new(e, "error", json_pack("{s:s, s:s}", "code",
+                                              fg_error_reason() ? fg_error_reason() : "refused",
+                                              "message", fg_error_detail()));
+  if (e && rc == 0 && v->seq) json_object_set_new(e, "robot_seq", json_integer(v->seq));
+  if (e) fg_audit_append(app->audit, e);
+  json_decref(e);
+}
+
+/* Moves to viewpoint T through the gate, recorded in the audit log: 1 reached, 0 refused or
+ * failed (skipped), -1 the scan must stop (detail recorded). */
+static int move_to(fg_app *app, fg_job *job, const double T[16]) {
   fg_robot_request req = {.command = FG_ROBOT_MOVE, .has_pose = 1, .has_approach = 1,
                           .approach_m = 0, .wait = 1};
   fg_pose_to_quat(T, req.p_world_m, req.q_wxyz);
+  if (fg_audit_ready(app->audit) < 0) /* nothing moves unrecorded */
+    return fg_fail(FG_EIO, "the robot's audit log cannot be written: %s", fg_error_detail()),
+           -1;
   fg_robot_cmd_view v;
   const int rc = fg_robot_execute(app->robot, &req, &v);
+  audit_motion(app, job, &req, rc, &v);
   if (rc == FG_ELIMIT || rc == FG_ERANGE) return 0;
   if (rc < 0) return -1;
   if (v.state == FG_CMD_DONE) return 1;
@@ -133,7 +160,7 @@ static void scan_run(fg_job *job, fg_app *app, void *params) {
   fg_job_set_phase(job, "scanning");
   for (int i = 0; rc == 0 && i < p->n; i++) {
     if (fg_job_should_stop(job)) break;
-    const int moved = move_to(app, p->T_base_tcp + 16 * i);
+    const int moved = move_to(app, job, p->T_base_tcp + 16 * i);
     if (moved < 0) {
       rc = -1;
       break;

@@ -161,6 +161,28 @@ int main(int argc, char **argv) {
   ASSERT(worst_deg < 0.3);
   h_resp_free(r);
 
+  /* every motion of the scan is in the robot's audit log, as is the request that started it */
+  r = h_get("/v1/robot/log?limit=100");
+  ASSERT_STATUS(r, 200);
+  int moves = 0, requests = 0;
+  json_t *entries = json_object_get(r->json, "entries");
+  for (size_t i = 0; i < json_array_size(entries); i++) {
+    json_t *e = json_array_get(entries, i);
+    if (!json_is_string(json_object_get(e, "route")) ||
+        strcmp(json_string_value(json_object_get(e, "route")), "/v1/scenes/table/scan") != 0)
+      continue;
+    const char *cmd = json_string_value(json_object_get(e, "command"));
+    if (cmd && strcmp(cmd, "move") == 0) {
+      moves++;
+      ASSERT_STREQ(json_string_value(json_object_get(e, "outcome")), "done");
+      ASSERT_STREQ(json_string_value(json_object_get(e, "request_id")), id);
+    }
+    requests += cmd && strcmp(cmd, "scan") == 0;
+  }
+  ASSERT_EQ(moves, 12);
+  ASSERT_EQ(requests, 5); /* four refused, one queued */
+  h_resp_free(r);
+
   /* a viewpoint outside the motion limits is skipped and counted */
   r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, \"viewpoints\": ["
            "{\"position\": [0.45, -0.05, 0.40], \"quaternion\": [0, 1, 0, 0]}, "
