@@ -3,6 +3,7 @@
 #include "api_decode.h"
 #include "decoder/decoder.h"
 #include "api_views.h"
+#include "cell/frames.h"
 #include "state/ingest.h"
 #include "state/json.h"
 
@@ -106,7 +107,9 @@ static int parse_upload(const fg_req *req, json_t **meta, fg_npy *feats, fg_inge
   *in = (fg_ingest_input){.image = image->data, .image_len = image->len,
                           .depth_scale = FG_DEPTH_DEFAULT_SCALE,
                           .source = image->filename ? image->filename : "upload"};
-  if (fg_api_parse_meta(*meta, in->T_world_cam, &in->camera, resp) != 0) return -1;
+  if (!json_is_string(json_object_get(*meta, "camera")) &&
+      fg_api_parse_meta(*meta, in->T_world_cam, &in->camera, resp) != 0)
+    return -1;
   if (feat_part) {
     if (fg_npy_parse(feat_part->data, feat_part->len, feats) != 0)
       return fg_resp_error(resp, 400, "invalid_features", "the 'features' part is not a usable "
@@ -125,16 +128,48 @@ static int parse_upload(const fg_req *req, json_t **meta, fg_npy *feats, fg_inge
   return 0;
 }
 
+/* A frame from the robot: meta's "camera" names a calibrated camera, "robot_pose" is the TCP
+ * pose (a pose, or "current": read now; none for a fixed camera) and no pose or intrinsics
+ * are given. *cam and *has_pose, T: what it says; 0, or -1 after a 4xx. */
+static int parse_robot_frame(const fg_req *req, json_t *meta, const fg_conf_camera **cam,
+                             int *has_pose, double T[16], fg_resp *resp) {
+  const char *name = json_string_value(json_object_get(meta, "camera"));
+  *cam = fg_conf_find_camera(req->conf, name);
+  if (!*cam)
+    return fg_resp_error(resp, 404, "camera_not_found", "meta names camera \"%s\", which no "
+                         "[camera NAME] declares", name), -1;
+  static const char *const stray[] = {"transform_matrix", "pose", "convention", "fl_x", "fl_y",
+                                      "camera_angle_x", NULL};
+  for (int i = 0; stray[i]; i++)
+    if (json_object_get(meta, stray[i]))
+      return fg_resp_error(resp, 400, "invalid_request", "meta names a camera, whose "
+                           "calibration and the robot's pose give the frame's pose and "
+                           "intrinsics: drop \"%s\"", stray[i]), -1;
+  json_t *rp = json_object_get(meta, "robot_pose");
+  *has_pose = rp && !(json_is_string(rp) && strcmp(json_string_value(rp), "current") == 0);
+  if (*has_pose && fg_json_pose_parse(rp, "robot_pose", T, NULL) != 0)
+    return fg_resp_error(resp, 400, "invalid_pose", "%s (or \"current\": the pose read now)",
+                         fg_error_detail()), -1;
+  return 0;
+}
+
 int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
   json_t *meta = NULL;
   fg_npy feats;
   fg_ingest_input in;
-  if (parse_upload(req, &meta, &feats, &in, resp) == 0) {
+  const fg_conf_camera *cam = NULL;
+  int has_pose = 0;
+  double T_base_tcp[16];
+  if (parse_upload(req, &meta, &feats, &in, resp) == 0 &&
+      (!json_is_string(json_object_get(meta, "camera")) ||
+       parse_robot_frame(req, meta, &cam, &has_pose, T_base_tcp, resp) == 0)) {
     fg_frame frame;
     int index;
-    const int rc = fg_ingest_upload(req->app, req->conf, s, &in, &index, &frame);
+    const int rc = cam ? fg_cell_frame_upload(req->app, req->conf, s, &in, cam,
+                                              has_pose ? T_base_tcp : NULL, &index, &frame)
+                       : fg_ingest_upload(req->app, req->conf, s, &in, &index, &frame);
     if (rc != 0) {
       fg_api_fail(resp, rc);
     } else {

@@ -11,6 +11,7 @@
 #include "core/log.h"
 #include "core/pose.h"
 #include "robot/audit.h"
+#include "frames.h"
 #include "state/ingest.h"
 #include "state/json.h"
 
@@ -124,17 +125,12 @@ static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
                          const fg_conf_camera *cam, const char *job_id, int i, int *stored) {
   fg_capture cap;
   FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, &cap));
-  const fg_intrinsics *in = &cap.calib.in;
   char source[96];
   snprintf(source, sizeof source, "scan-%s-%03d", job_id, i);
   fg_ingest_input fi = {.image = cap.image, .image_len = cap.image_len, .depth = cap.depth,
                         .depth_len = cap.depth_len, .depth_scale = cam->depth_scale,
                         .source = source};
-  fi.camera.cam = (fg_camera){in->fx, in->fy, in->cx, in->cy, in->w, in->h, FG_CAMERA_OPENCV,
-                              in->k[0], in->k[1], 0, in->k[2], in->k[3]};
-  fi.camera.has_size = 1;
-  memcpy(fi.T_world_cam, cap.T_base_cam, sizeof fi.T_world_cam);
-  fg_pose_flip_yz(fi.T_world_cam); /* frames keep SPEC.md's default, OpenGL's */
+  fg_cell_frame_camera(&cap.calib, cap.T_base_cam, &fi);
   int index;
   fg_frame frame;
   const int rc = fg_ingest_upload(app, conf, s, &fi, &index, &frame);

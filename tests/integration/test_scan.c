@@ -183,6 +183,46 @@ int main(int argc, char **argv) {
   ASSERT_EQ(requests, 5); /* four refused, one queued */
   h_resp_free(r);
 
+  /* a frame uploaded from the robot: meta names the camera, the pose is the TCP's now */
+  uint8_t *png;
+  size_t png_len;
+  h_png(480, 360, 3, 8, 7, 0, &png, &png_len);
+  const char *meta = "{\"camera\": \"wrist\", \"robot_pose\": \"current\"}";
+  r = h_upload("/v1/scenes/table/frames", png, png_len, meta, NULL, 0);
+  ASSERT_STATUS(r, 201);
+  h_resp_free(r);
+  h_resp *rf = h_get("/v1/scenes/table/frames");
+  json_t *last = json_array_get(json_object_get(rf->json, "frames"), 12);
+  ASSERT(last);
+  json_t *m = json_object_get(last, "transform_matrix");
+  h_resp *rr = h_get("/v1/robot");
+  json_t *tcp = json_object_get(json_object_get(rr->json, "tcp_pose"), "position");
+  /* the camera sits at the TCP plus the mount's offset turned by the tool: within 10 cm */
+  double d2 = 0;
+  for (int k = 0; k < 3; k++)
+    d2 += pow(json_number_value(json_array_get(json_array_get(m, (size_t)k), 3)) -
+                  json_number_value(json_array_get(tcp, (size_t)k)), 2);
+  ASSERT(sqrt(d2) > 0.05 && sqrt(d2) < 0.08); /* |(0.035, 0.01, -0.06)| = 0.070 m */
+  /* the calibration's intrinsics and distortion: undistorted on ingest */
+  ASSERT(json_is_true(json_object_get(last, "undistorted")));
+  ASSERT_EQ(json_integer_value(json_array_get(json_object_get(last, "source_size"), 0)), 480);
+  h_resp_free(rr);
+  h_resp_free(rf);
+  /* refused: an unknown camera, an uncalibrated one, a pose beside a camera name */
+  r = h_upload("/v1/scenes/table/frames", png, png_len, "{\"camera\": \"nothing\"}", NULL, 0);
+  ASSERT_HTTP_ERROR(r, 404, "camera_not_found");
+  h_resp_free(r);
+  r = h_upload("/v1/scenes/table/frames", png, png_len,
+               "{\"camera\": \"other\", \"robot_pose\": \"current\"}", NULL, 0);
+  ASSERT_HTTP_ERROR(r, 409, "not_calibrated");
+  h_resp_free(r);
+  r = h_upload("/v1/scenes/table/frames", png, png_len,
+               "{\"camera\": \"wrist\", \"transform_matrix\": [[1,0,0,0],[0,1,0,0],"
+               "[0,0,1,0],[0,0,0,1]]}", NULL, 0);
+  ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+  h_resp_free(r);
+  free(png);
+
   /* a viewpoint outside the motion limits is skipped and counted */
   r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, \"viewpoints\": ["
            "{\"position\": [0.45, -0.05, 0.40], \"quaternion\": [0, 1, 0, 0]}, "
@@ -194,6 +234,9 @@ int main(int argc, char **argv) {
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "done");
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "skipped")), 1);
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "frames")), 1);
+  h_resp_free(r);
+  r = h_get("/v1/scenes/table/frames");
+  ASSERT_EQ(json_array_size(json_object_get(r->json, "frames")), 14);
   h_resp_free(r);
 
   h_stop();

@@ -1,0 +1,47 @@
+/* Frames whose pose comes from the robot (frames.h). */
+#include "frames.h"
+
+#include <string.h>
+
+#include "core/error.h"
+#include "core/pose.h"
+
+void fg_cell_frame_camera(const fg_camera_calib *calib, const double T_base_cam[16],
+                          fg_ingest_input *in) {
+  const fg_intrinsics *k = &calib->in;
+  memset(&in->camera, 0, sizeof in->camera);
+  in->camera.file_path = "robot";
+  in->camera.cam = (fg_camera){k->fx, k->fy, k->cx, k->cy, k->w, k->h, FG_CAMERA_OPENCV,
+                               k->k[0], k->k[1], 0, k->k[2], k->k[3]};
+  in->camera.has_size = 1;
+  memcpy(in->T_world_cam, T_base_cam, sizeof in->T_world_cam);
+  fg_pose_flip_yz(in->T_world_cam); /* frames keep SPEC.md's default, OpenGL's */
+}
+
+int fg_cell_frame_upload(fg_app *app, const fg_conf *conf, fg_scene *s, fg_ingest_input *in,
+                         const fg_conf_camera *cam, const double *T_base_tcp, int *index,
+                         fg_frame *out) {
+  fg_camera_calib cal;
+  fg_cameras_calib_get(app->cameras, cam->name, &cal);
+  if (!cal.has_intrinsics || !cal.has_mount)
+    return fg_fail_as(FG_EINVAL, "not_calibrated", "%s is not calibrated (intrinsics and "
+                      "mount): POST /v1/cameras/%s/calibrate first", cam->name, cam->name);
+  double T_base_cam[16];
+  if (cam->mount == FG_MOUNT_FIXED) {
+    if (T_base_tcp)
+      return fg_fail_as(FG_EINVAL, "invalid_request", "%s is a fixed camera: its frames need "
+                        "no robot_pose", cam->name);
+    memcpy(T_base_cam, cal.T_mount, sizeof T_base_cam);
+  } else {
+    double T_now[16];
+    if (!T_base_tcp) {
+      fg_robot_tcp t;
+      FG_TRY(fg_robot_tcp_read(app->robot, &t));
+      FG_TRY(fg_pose_from_quat(t.p_m, t.q_wxyz, T_now));
+      T_base_tcp = T_now;
+    }
+    fg_pose_compose(T_base_tcp, cal.T_mount, T_base_cam);
+  }
+  fg_cell_frame_camera(&cal, T_base_cam, in);
+  return fg_ingest_upload(app, conf, s, in, index, out);
+}
