@@ -191,7 +191,7 @@ static int calibrate_mount(const fg_charuco_board *b, const fg_conf_camera *cam,
     memcpy(k->T_mount, r->methods[r->best].T, sizeof k->T_mount);
     double T_fixed[16];
     memcpy(T_fixed, r->methods[r->best].T_fixed, sizeof T_fixed);
-    rc = fg_calibrate_hand_eye_refine(b, views, T_tcp, m, fixed, 1, &k->in, k->T_mount, T_fixed,
+    rc = fg_calibrate_hand_eye_refine(b, views, T_tcp, m, fixed, 0, &k->in, k->T_mount, T_fixed,
                                       &rms);
   }
   if (rc == 0) {
@@ -207,7 +207,7 @@ static int calibrate_mount(const fg_charuco_board *b, const fg_conf_camera *cam,
     k->has_mount = 1;
     k->mount_rms_px = rms;
     snprintf(k->method, sizeof k->method, "%s", fg_hand_eye_method_name(r->best));
-    k->mount_ms = k->intrinsics_ms = fg_real_ms();
+    k->mount_ms = fg_real_ms();
     if (rms > FG_CALIB_MAX_RMS_PX || k->spread_mm > FG_CALIB_MAX_SPREAD_MM ||
         k->spread_deg > FG_CALIB_MAX_SPREAD_DEG)
       rc = fg_fail_as(FG_ERANGE, "calibration_rejected", "the mount explains the %d views to "

@@ -99,8 +99,9 @@ typedef struct fg_calibration_report {
 
 /* Calibrates cam's intrinsics or mount on its kept views (consumed when the calibration is
  * kept) with board b, and keeps the result (the other part of the calibration stays).
- * hand_eye needs the camera's intrinsics (refined with the mount on the same views) and a
- * robot pose with every view. Refusals: too few views (FG_EINVAL, not_enough_views), a
+ * hand_eye needs the camera's intrinsics (kept as calibrated: refining them with the mount
+ * would absorb the robot's pose errors, tests/bench/bench_calibration) and a robot pose with
+ * every view. Refusals: too few views (FG_EINVAL, not_enough_views), a
  * degenerate motion (FG_EINVAL, degenerate_motion), residuals past the bounds above
  * (FG_ERANGE, calibration_rejected, with the numbers; *report holds them too); the previous
  * calibration then stays. */

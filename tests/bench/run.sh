@@ -4,7 +4,7 @@
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [grasp_physics]
 #                           [geometry] [depth_throughput] [fox] [http_idle] [load] [soak]
-#                           [viewer]
+#                           [viewer] [calibration]
 #   (no names: all of them but fox and grasp_physics; train takes about 6 minutes, throughput
 #   about 3; grasp several, most of them in the PyTorch peer; grasp_physics about 30)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -114,6 +114,12 @@
 #           cache disabled and as many with it on (median, max); then the frame rate while
 #           the view turns with 200,000 points of a 5 mm scene. Targets: cold heatmap
 #           median <= 2000 ms, >= 30 fps (headless Chromium paces frames at 60 Hz)
+#   calibration  camera and hand-eye calibration on synthetic views (bench_calibration):
+#           errors of the intrinsics and the mount against the truth for 8, 12 and 20 views
+#           and for robot pose noise of 0.5 mm / 0.05 deg to 2 mm / 0.2 deg at 20 views,
+#           median and worst of BENCH_CALIBRATION_TRIALS (default 10) draws, and the time of a
+#           calibration (targets at 20 views: focal <= 0.5 %, principal point <= 1 px, mount
+#           <= 1 mm and 0.2 deg)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -134,7 +140,7 @@ fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer calibration)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -641,6 +647,10 @@ run_self_checked() {
   [ "$(field pass "$line")" = yes ] || failed=1
 }
 
+bench_calibration() {
+  run_self_checked calibration calibration_case calibration "${BENCH_CALIBRATION_TRIALS:-10}"
+}
+
 bench_grasp_physics() {
   run_self_checked grasp_physics 'grasp_physics_layout|grasp_physics_grasp|grasp_physics_depth' \
     grasp_physics --scenegen "$build/tests/scenegen/fieldgrip-scenegen" \
@@ -701,7 +711,8 @@ for b in "${benches[@]}"; do
     load) bench_load ;;
     soak) bench_soak ;;
     viewer) bench_viewer ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer)" >&2; exit 2 ;;
+    calibration) bench_calibration ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
