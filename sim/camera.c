@@ -128,6 +128,34 @@ int sim_camera_parse_board(sim_camera_config *c, const char *s, char *err, size_
   return 0;
 }
 
+int sim_camera_parse_fixed(sim_camera_config *c, const char *s, char *err, size_t errsz) {
+  double v[7];
+  if (numbers(s, v, 7) != 7 || fg_pose_from_quat(v, v + 3, c->T_base_cam) != 0)
+    return errf(err, errsz, "--camera-fixed wants \"x y z qw qx qy qz\" (a unit quaternion), "
+                "got \"%s\"", s);
+  c->fixed = 1;
+  return 0;
+}
+
+int sim_camera_parse_board_on_tool(sim_camera_config *c, const char *s, char *err,
+                                   size_t errsz) {
+  char dict[64];
+  int sx, sy, used = 0;
+  double sq, mk, v[7];
+  if (sscanf(s, "%d %d %lf %lf %63s %lf %lf %lf %lf %lf %lf %lf %n", &sx, &sy, &sq, &mk, dict,
+             &v[0], &v[1], &v[2], &v[3], &v[4], &v[5], &v[6], &used) != 12 || s[used] != '\0' ||
+      fg_pose_from_quat(v, v + 3, c->T_tcp_board) != 0)
+    return errf(err, errsz, "--board-on-tool wants \"squares_x squares_y square_m marker_m DICT "
+                "x y z qw qx qy qz\", got \"%s\"", s);
+  fg_charuco_board b = {sx, sy, sq, mk, 0};
+  if (fg_charuco_dictionary_parse(dict, &b.dictionary) != 0 || fg_charuco_board_check(&b) != 0)
+    return errf(err, errsz, "--board-on-tool: %s", fg_error_detail());
+  c->has_board = 1;
+  c->board_on_tool = 1;
+  c->board = b;
+  return 0;
+}
+
 /* ---------------------------------------------------------------- set-up */
 
 /* The normalised, undistorted coordinates whose distortion (OpenCV's k1 k2 p1 p2) is the
@@ -201,7 +229,7 @@ sim_camera *sim_camera_new(const sim_camera_config *cfg, sim_cell *cell, char *e
       sim_camera_free(cam);
       return NULL;
     }
-    board_pose(cam);
+    if (!cfg->board_on_tool) board_pose(cam);
   }
   return cam;
 }
@@ -221,9 +249,8 @@ static double board_at(const sim_camera *cam, double bx, double by) {
 
 /* Where the ray from the camera at o along world d meets the board's plane: distance t and
  * the point in the board frame; 0 when it does not (parallel, or behind). */
-static int board_hit(const sim_camera *cam, const double o[3], const double d[3], double *t,
+static int board_hit(const double B[16], const double o[3], const double d[3], double *t,
                      double *bx, double *by) {
-  const double *B = cam->T_board_world;
   double ob[3], db[3];
   for (int r = 0; r < 3; r++) {
     ob[r] = B[4 * r] * o[0] + B[4 * r + 1] * o[1] + B[4 * r + 2] * o[2] + B[4 * r + 3];
@@ -245,8 +272,8 @@ static void world_dir(const double T_wc[16], double x, double y, double d[3]) {
 }
 
 /* The board's mean brightness over pixel (u, v)'s footprint, -1 when a sample is off it. */
-static double board_pixel(const sim_camera *cam, const double T_wc[16], const double o[3],
-                          int u, int v) {
+static double board_pixel(const sim_camera *cam, const double T_bw[16], const double T_wc[16],
+                          const double o[3], int u, int v) {
   const int W1 = cam->cfg.w + 1;
   const double *c00 = cam->corner + 2 * ((size_t)v * W1 + u), *c10 = c00 + 2;
   const double *c01 = c00 + 2 * W1, *c11 = c01 + 2;
@@ -258,7 +285,7 @@ static double board_pixel(const sim_camera *cam, const double T_wc[16], const do
       for (int k = 0; k < 2; k++)
         xy[k] = (1 - t) * ((1 - s) * c00[k] + s * c10[k]) + t * ((1 - s) * c01[k] + s * c11[k]);
       world_dir(T_wc, xy[0], xy[1], d);
-      if (!board_hit(cam, o, d, &dist, &bx, &by)) return -1;
+      if (!board_hit(T_bw, o, d, &dist, &bx, &by)) return -1;
       const double g = board_at(cam, bx, by);
       if (g < 0) return -1;
       sum += g;
@@ -272,7 +299,18 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
   double p[3], q[4], T_wt[16];
   sim_cell_view_tcp(view, p, q);
   fg_pose_from_quat(p, q, T_wt);
-  fg_pose_compose(T_wt, c->T_tcp_cam, T_wc);
+  if (c->fixed)
+    memcpy(T_wc, c->T_base_cam, 16 * sizeof *T_wc);
+  else
+    fg_pose_compose(T_wt, c->T_tcp_cam, T_wc);
+  double T_bw[16]; /* the board's frame from the world's: it stands still, or the tool holds it */
+  if (c->board_on_tool) {
+    double T_wb[16];
+    fg_pose_compose(T_wt, c->T_tcp_board, T_wb);
+    fg_pose_inverse(T_wb, T_bw);
+  } else {
+    memcpy(T_bw, cam->T_board_world, sizeof T_bw);
+  }
   const double o[3] = {T_wc[3], T_wc[7], T_wc[11]};
   float *lum = malloc(sizeof *lum * 3 * (size_t)c->w * c->h); /* colour before shading */
   float *zc = malloc(sizeof *zc * (size_t)c->w * c->h);     /* camera z, metres; 0: none */
@@ -292,9 +330,9 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
       world_dir(T_wc, r[0], r[1], d);
       const double tg = sim_cell_view_ray(view, o, d, col);
       double t = tg;
-      if (c->has_board && board_hit(cam, o, d, &tb, &bx, &by) && board_at(cam, bx, by) >= 0 &&
+      if (c->has_board && board_hit(T_bw, o, d, &tb, &bx, &by) && board_at(cam, bx, by) >= 0 &&
           (tg < 0 || tb <= tg + 2e-4)) {
-        const double g = board_pixel(cam, T_wc, o, u, v);
+        const double g = board_pixel(cam, T_bw, T_wc, o, u, v);
         if (g >= 0) {
           col[0] = col[1] = col[2] = (float)g;
           t = tb;

@@ -32,8 +32,13 @@ typedef struct sim_camera_config {
   const char *port_file;        /* --camera-port-file: the bound port, once listening */
   const char *log_path;         /* --camera-log: a line per image served, with its true pose */
   int has_board;
-  fg_charuco_board board;       /* --board */
-  double board_xyz[3], board_yaw; /* where the board frame's origin lies, its x turned by yaw */
+  fg_charuco_board board;       /* --board or --board-on-tool */
+  double board_xyz[3], board_yaw; /* --board: where the board frame's origin lies, its x
+                                   * turned by yaw */
+  int board_on_tool;            /* --board-on-tool: the tool holds the board ... */
+  double T_tcp_board[16];       /* ... there (the board frame in the TCP's) */
+  int fixed;                    /* --camera-fixed: the camera stands still ... */
+  double T_base_cam[16];        /* ... there (OpenCV convention), not on the tool */
 } sim_camera_config;
 
 /* Defaults: mounted 0.05 m behind the TCP along the tool's -z, looking along +z; 640 x 480,
@@ -46,6 +51,11 @@ void sim_camera_config_default(sim_camera_config *c);
 int sim_camera_parse_mount(sim_camera_config *c, const char *s, char *err, size_t errsz);
 int sim_camera_parse_intrinsics(sim_camera_config *c, const char *s, char *err, size_t errsz);
 int sim_camera_parse_board(sim_camera_config *c, const char *s, char *err, size_t errsz);
+/* "x y z qw qx qy qz" of a fixed camera; "squares_x squares_y square_m marker_m DICT x y z qw
+ * qx qy qz" of a board the tool holds (its frame in the TCP's). */
+int sim_camera_parse_fixed(sim_camera_config *c, const char *s, char *err, size_t errsz);
+int sim_camera_parse_board_on_tool(sim_camera_config *c, const char *s, char *err,
+                                   size_t errsz);
 
 typedef struct sim_camera sim_camera;
 

@@ -124,7 +124,11 @@ static void usage(FILE *f) {
           "  --camera \"fx fy cx cy w h [k1 k2 p1 p2]\"  intrinsics (default 600 600 319.5\n"
           "                         239.5 640 480)\n"
           "  --board \"sx sy square_m marker_m DICT x y z yaw_deg\"  a ChArUco board on the\n"
-          "                         table, its frame's origin at x y z\n");
+          "                         table, its frame's origin at x y z\n"
+          "  --camera-fixed \"x y z qw qx qy qz\"  the camera stands there (T_base_cam) instead\n"
+          "                         of riding on the tool\n"
+          "  --board-on-tool \"sx sy square_m marker_m DICT x y z qw qx qy qz\"  the tool holds\n"
+          "                         the board (T_tcp_board) instead of the table\n");
 }
 
 /* ---------------------------------------------------------------- time */
@@ -248,6 +252,8 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"camera", required_argument, NULL, 1008},
       {"board", required_argument, NULL, 1009},
       {"camera-log", required_argument, NULL, 1010},
+      {"camera-fixed", required_argument, NULL, 1011},
+      {"board-on-tool", required_argument, NULL, 1012},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -343,6 +349,8 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       break;
     case 1006: cfg->camera.port_file = optarg; break;
     case 1010: cfg->camera.log_path = optarg; break;
+    case 1011: rc = sim_camera_parse_fixed(&cfg->camera, optarg, err, sizeof err); break;
+    case 1012: rc = sim_camera_parse_board_on_tool(&cfg->camera, optarg, err, sizeof err); break;
     case 1007: rc = sim_camera_parse_mount(&cfg->camera, optarg, err, sizeof err); break;
     case 1008: rc = sim_camera_parse_intrinsics(&cfg->camera, optarg, err, sizeof err); break;
     case 1009: rc = sim_camera_parse_board(&cfg->camera, optarg, err, sizeof err); break;
@@ -354,7 +362,8 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       return -1;
     }
     if (rc != 0) {
-      if (c >= 1007 && c <= 1009) fprintf(stderr, "fieldgrip-sim: %s\n", err);
+      if ((c >= 1007 && c <= 1009) || c == 1011 || c == 1012)
+        fprintf(stderr, "fieldgrip-sim: %s\n", err);
       return -1;
     }
   }

@@ -205,9 +205,15 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
                       fg_capture *out) {
   memset(out, 0, sizeof *out);
   fg_cameras_calib_get(c, cam->name, &out->calib);
+  /* a hand camera's pose needs the robot's; a fixed camera's capture carries it when it can
+   * be read (the tool holding a calibration board), and does without */
   const int on_hand = cam->mount == FG_MOUNT_HAND && fg_robot_svc_has_robot(robot);
+  int posed = on_hand;
   double T_after[16];
-  if (on_hand) FG_TRY(robot_pose(robot, out->T_base_tcp));
+  if (on_hand)
+    FG_TRY(robot_pose(robot, out->T_base_tcp));
+  else if (fg_robot_svc_has_robot(robot))
+    posed = robot_pose(robot, out->T_base_tcp) == 0;
   int rc = fg_snapshot_fetch(cam->source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES, &out->image,
                              &out->image_len);
   if (rc == 0 && !fg_image_sniff(out->image, out->image_len))
@@ -220,7 +226,7 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no image",
                       cam->depth_source);
   }
-  if (rc == 0 && on_hand) {
+  if (rc == 0 && posed) {
     rc = robot_pose(robot, T_after);
     if (rc == 0 && (sqrt(pow(T_after[3] - out->T_base_tcp[3], 2) +
                          pow(T_after[7] - out->T_base_tcp[7], 2) +
@@ -233,7 +239,7 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
     fg_capture_release(out);
     return rc;
   }
-  out->has_robot_pose = on_hand;
+  out->has_robot_pose = posed;
   if (out->calib.has_mount && (on_hand || cam->mount == FG_MOUNT_FIXED)) {
     out->has_camera_pose = 1;
     if (on_hand)

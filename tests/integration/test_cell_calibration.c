@@ -3,7 +3,9 @@
  * (POST /v1/robot/commands) through views of the board; each capture with
  * "calibration_view" keeps its corners; the intrinsics come back within 0.5 % (focal) and
  * 1 px (principal point), the mount within 1 mm and 0.2 degrees; a capture then gives the
- * camera's pose. Refusals: no views, too few, a degenerate motion (SPEC's bad input).
+ * camera's pose. Refusals: no views, too few, a degenerate motion (SPEC's bad input). Then the
+ * eye-to-hand case: a fixed camera, the board held by the tool, T_base_cam within the same
+ * bounds.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "robot_util.h"
 #include "simproc.h"
@@ -127,8 +129,12 @@ static void move_to(const double p[3], const double q[4]) {
   h_resp_free(r);
 }
 
+static const char *g_cam = "wrist"; /* the camera the helpers below use */
+
 static int capture_view(void) {
-  h_resp *r = h_post_json("/v1/cameras/wrist/capture", "{\"calibration_view\": true}");
+  char path[128];
+  snprintf(path, sizeof path, "/v1/cameras/%s/capture", g_cam);
+  h_resp *r = h_post_json(path, "{\"calibration_view\": true}");
   ASSERT_STATUS(r, 200);
   const int corners = (int)json_integer_value(json_object_get(r->json, "board_corners"));
   h_resp_free(r);
@@ -136,17 +142,18 @@ static int capture_view(void) {
 }
 
 static h_resp *calibrate(const char *kind) {
-  char body[64];
+  char body[64], path[128];
   snprintf(body, sizeof body, "{\"kind\": \"%s\"}", kind);
-  return h_post_json("/v1/cameras/wrist/calibrate", body);
+  snprintf(path, sizeof path, "/v1/cameras/%s/calibrate", g_cam);
+  return h_post_json(path, body);
 }
 
 static double num(json_t *o, const char *k) { return json_number_value(json_object_get(o, k)); }
 
-int main(int argc, char **argv) {
-  h_init(argc, argv);
-  ASSERT(argc >= 3);
-  simproc_init(argv[2], h_tmpdir());
+static void fixed_camera(void);
+
+/* A camera on the hand, the board on the table. */
+static void hand_camera(void) {
   const char *src = getenv("FG_SOURCE_DIR");
   ASSERT(src);
   char scene[PATH_MAX], port_file[PATH_MAX];
@@ -290,7 +297,146 @@ int main(int argc, char **argv) {
 
   h_stop();
   simproc_stop(&sim);
+}
+
+int main(int argc, char **argv) {
+  h_init(argc, argv);
+  ASSERT(argc >= 3);
+  simproc_init(argv[2], h_tmpdir());
+  hand_camera();
+  fixed_camera();
   h_done();
   printf("ok\n");
   return 0;
+}
+
+/* ---------------------------------------------------------------- eye to hand */
+
+/* A camera standing still, looking at where the robot shows it the board the tool holds. */
+#define FIXED_EYE 0.80, 0.25, 0.48
+#define FIXED_AT 0.45, 0.0, 0.25
+/* the board 2 cm beyond the TCP, its printed face (its -z: OpenCV 4.6) along the tool's +z,
+ * its centre on the tool's axis: half a turn about x */
+#define BOARD_ON_TOOL "7 5 0.03 0.022 DICT_5X5_100 -0.105 0.075 0.02 0 1 0 0"
+
+/* A TCP pose at p with the tool's +z towards the camera, tilted by tilt degrees about an axis
+ * at angle phi across it, rolled by roll degrees. */
+static void show_board(const double p[3], double tilt, double phi, double roll, double q[4]) {
+  const double eye[3] = {FIXED_EYE};
+  double z[3], x[3], y[3], n = 0, up[3] = {0, 0, 1};
+  for (int k = 0; k < 3; k++) {
+    z[k] = eye[k] - p[k];
+    n += z[k] * z[k];
+  }
+  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
+  x[0] = z[1] * up[2] - z[2] * up[1];
+  x[1] = z[2] * up[0] - z[0] * up[2];
+  x[2] = z[0] * up[1] - z[1] * up[0];
+  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+  for (int k = 0; k < 3; k++) x[k] /= n;
+  y[0] = z[1] * x[2] - z[2] * x[1];
+  y[1] = z[2] * x[0] - z[0] * x[2];
+  y[2] = z[0] * x[1] - z[1] * x[0];
+  double q0[4], qt[4], qr[4], t[4];
+  quat_from_axes(x, y, z, q0);
+  /* tilt about (cos phi, sin phi, 0) and roll about z, both in the tool's frame */
+  const double a = tilt * M_PI / 360, b = roll * M_PI / 360;
+  const double tq[4] = {cos(a), sin(a) * cos(phi), sin(a) * sin(phi), 0};
+  const double rq[4] = {cos(b), 0, 0, sin(b)};
+  memcpy(qt, tq, sizeof qt);
+  memcpy(qr, rq, sizeof qr);
+  quat_mul(q0, qt, t);
+  quat_mul(t, qr, q);
+  quat_norm(q);
+}
+
+static void fixed_camera(void) {
+  const char *src = getenv("FG_SOURCE_DIR");
+  char scene[PATH_MAX], port_file[PATH_MAX], cam_pose[128];
+  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
+  snprintf(port_file, sizeof port_file, "%s/camera2.port", h_tmpdir());
+  /* the camera's pose: looking from FIXED_EYE at FIXED_AT, as show_board aims the tool */
+  const double eye[3] = {FIXED_EYE}, at[3] = {FIXED_AT};
+  double z[3], x[3], y[3], n = 0, up[3] = {0, 0, 1}, qc[4];
+  for (int k = 0; k < 3; k++) {
+    z[k] = at[k] - eye[k];
+    n += z[k] * z[k];
+  }
+  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
+  x[0] = z[1] * up[2] - z[2] * up[1];
+  x[1] = z[2] * up[0] - z[0] * up[2];
+  x[2] = z[0] * up[1] - z[1] * up[0];
+  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+  for (int k = 0; k < 3; k++) x[k] /= n;
+  y[0] = z[1] * x[2] - z[2] * x[1];
+  y[1] = z[2] * x[0] - z[0] * x[2];
+  y[2] = z[0] * x[1] - z[1] * x[0];
+  quat_from_axes(x, y, z, qc);
+  const double dist = sqrt(pow(at[0] - eye[0], 2) + pow(at[1] - eye[1], 2) + pow(at[2] - eye[2], 2));
+  snprintf(cam_pose, sizeof cam_pose, "%.6f %.6f %.6f %.9f %.9f %.9f %.9f", eye[0], eye[1],
+           eye[2], qc[0], qc[1], qc[2], qc[3]);
+  simproc sim;
+  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
+                        "--camera-port-file", port_file, "--camera", CAMERA, "--camera-fixed",
+                        cam_pose, "--board-on-tool", BOARD_ON_TOOL, NULL};
+  simproc_start(&sim, 0, args);
+  FILE *f = fopen(port_file, "r");
+  ASSERT(f);
+  int cam_port = 0;
+  ASSERT_EQ(fscanf(f, "%d", &cam_port), 1);
+  fclose(f);
+  char conf[1024];
+  snprintf(conf, sizeof conf,
+           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
+           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
+           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
+           "dictionary = DICT_5X5_100\n"
+           "[camera over]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
+           sim.port, cam_port);
+  h_write_config(conf);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+  g_cam = "over";
+  int kept = 0;
+  for (int round = 0; round < 2; round++) {
+    for (int i = 0; i < 16; i++) {
+      /* from 0.28 to 0.55 m in front of the camera, up to 8 cm off its axis */
+      const double d = 0.28 + 0.27 * ((i * 5 + round) % 8) / 7.0;
+      double p[3];
+      for (int k = 0; k < 3; k++) p[k] = eye[k] + d * (at[k] - eye[k]) / dist;
+      p[0] += 0.06 * cos(i * 2.4);
+      p[1] += 0.06 * sin(i * 2.4);
+      p[2] += 0.04 * sin(i * 1.3 + round);
+      double q[4];
+      show_board(p, 15 + 30 * ((i * 7 + round) % 5) / 4.0, i * 2.1 + round,
+                 -40 + 80 * ((i * 3) % 7) / 6.0, q);
+      move_to(p, q);
+      kept += capture_view() >= 6;
+    }
+    h_resp *r = calibrate(round == 0 ? "intrinsics" : "hand_eye");
+    if (r->status != 200) FG_TEST_FAIL("round %d: %ld %s", round, r->status, r->body);
+    if (round == 0) {
+      json_t *in = json_object_get(json_object_get(r->json, "camera"), "intrinsics");
+      fprintf(stderr, "fixed camera: intrinsics fx %.2f fy %.2f cx %.2f cy %.2f\n",
+              num(in, "fl_x"), num(in, "fl_y"), num(in, "cx"), num(in, "cy"));
+    }
+    if (round == 1) {
+      json_t *cam = json_object_get(r->json, "camera");
+      json_t *mount = json_object_get(cam, "T_base_cam");
+      json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
+      double dp = 0, dot = 0;
+      for (int k = 0; k < 3; k++)
+        dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - eye[k], 2);
+      for (int k = 0; k < 4; k++) dot += qc[k] * json_real_value(json_array_get(mq, (size_t)k));
+      const double err_mm = sqrt(dp) * 1e3, err_deg = 2 * acos(fmin(1, fabs(dot))) * 180 / M_PI;
+      fprintf(stderr, "fixed camera: %d views kept; T_base_cam %.3f mm, %.4f deg from the "
+              "truth\n", kept, err_mm, err_deg);
+      ASSERT(err_mm < 1);
+      ASSERT(err_deg < 0.2);
+    }
+    h_resp_free(r);
+  }
+  ASSERT(kept >= 24);
+  h_stop();
+  simproc_stop(&sim);
 }
