@@ -113,11 +113,12 @@ static kept_view *views_take(fg_cameras *c, const char *name, int *n) {
 
 /* Puts views back in front of any kept meanwhile (a refused calibration keeps its views). */
 static void views_put_back(fg_cameras *c, const char *name, kept_view *v, int n) {
+  if (n == 0) return;
   pthread_mutex_lock(&c->lock);
   entry *e = cameras_find_locked(c, name, 1);
   kept_view *all = e ? realloc(v, sizeof *v * (size_t)(n + e->n_views)) : NULL;
   if (all) {
-    memcpy(all + n, e->views, sizeof *all * (size_t)e->n_views);
+    if (e->n_views) memcpy(all + n, e->views, sizeof *all * (size_t)e->n_views);
     free(e->views);
     e->views = all;
     e->n_views += n;

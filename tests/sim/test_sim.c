@@ -6,6 +6,7 @@
 #include <limits.h>
 #include <modbus.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include "simproc.h"
 #include "test.h"
@@ -627,6 +628,13 @@ static void test_log(void) {
   snprintf(rotated, sizeof rotated, "%s.1", p.log);
   ASSERT_EQ(rename(p.log, rotated), 0);
   ASSERT_EQ(kill(p.pid, SIGUSR1), 0);
+  /* the signal reaches the main loop through a handler on whichever thread takes it: wait
+   * until the new file is there, then write */
+  const double deadline = simproc_now_ms() + 10000;
+  while (access(p.log, F_OK) != 0) {
+    if (simproc_now_ms() > deadline) FG_TEST_FAIL("no new log %s after SIGUSR1", p.log);
+    usleep(1000);
+  }
   ASSERT_EQ(modbus_set_slave(c, ROBOT), 0);
   ASSERT_EQ(modbus_write_register(c, BASE, 8), 1);
 
