@@ -3,8 +3,8 @@
  * image as the camera served them, the robot's TCP pose read around it), and what fails:
  * an unknown camera, a camera that does not answer, a capture with keys.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "cell_util.h"
 #include "robot_util.h"
-#include "simproc.h"
 
 #include <limits.h>
 #include <math.h>
@@ -42,30 +42,13 @@ static void png_size(const uint8_t *p, size_t len, int *w, int *h, int *depth) {
   *depth = p[24];
 }
 
-static int read_port(const char *path) {
-  FILE *f = fopen(path, "r");
-  ASSERT(f);
-  int port = 0;
-  ASSERT_EQ(fscanf(f, "%d", &port), 1);
-  fclose(f);
-  return port;
-}
-
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
   simproc_init(argv[2], h_tmpdir());
-  const char *src = getenv("FG_SOURCE_DIR");
-  ASSERT(src);
-  char scene[PATH_MAX], cam_port_file[PATH_MAX];
-  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
-  snprintf(cam_port_file, sizeof cam_port_file, "%s/camera.port", h_tmpdir());
   simproc sim;
-  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
-                        "--camera-port-file", cam_port_file, "--camera",
-                        "600 600 319.5 239.5 320 240", NULL};
-  simproc_start(&sim, 0, args);
-  const int cam_port = read_port(cam_port_file);
+  const char *args[] = {"--camera", "600 600 319.5 239.5 320 240", NULL};
+  const int cam_port = cu_sim_start(&sim, args);
   char conf[1024];
   snprintf(conf, sizeof conf,
            "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n"

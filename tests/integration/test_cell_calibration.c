@@ -7,8 +7,10 @@
  * eye-to-hand case: a fixed camera, the board held by the tool, T_base_cam within the same
  * bounds.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "cell_util.h"
 #include "robot_util.h"
-#include "simproc.h"
+
+#include "core/pose.h"
 
 #include <limits.h>
 #include <math.h>
@@ -25,95 +27,18 @@ static const double MOUNT_P[3] = {0.04, -0.015, -0.07};
 static const double MOUNT_Q[4] = {0.9989, 0.0349, 0.0262, 0.0009};
 #define BOARD "7 5 0.03 0.022 DICT_5X5_100 0.32 -0.20 0.0 15"
 
-/* ---------------------------------------------------------------- small maths */
-
-static void quat_norm(double q[4]) {
-  const double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (int k = 0; k < 4; k++) q[k] /= n;
-}
-
-static void quat_mul(const double a[4], const double b[4], double o[4]) {
-  o[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
-  o[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2];
-  o[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1];
-  o[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0];
-}
-
-static void quat_rotate(const double q[4], const double v[3], double o[3]) {
-  const double p[4] = {0, v[0], v[1], v[2]}, qc[4] = {q[0], -q[1], -q[2], -q[3]};
-  double t[4], r[4];
-  quat_mul(q, p, t);
-  quat_mul(t, qc, r);
-  o[0] = r[1];
-  o[1] = r[2];
-  o[2] = r[3];
-}
-
-/* The rotation whose columns are x, y, z, as a quaternion (w >= 0). */
-static void quat_from_axes(const double x[3], const double y[3], const double z[3],
-                           double q[4]) {
-  const double m[3][3] = {{x[0], y[0], z[0]}, {x[1], y[1], z[1]}, {x[2], y[2], z[2]}};
-  const double tr = m[0][0] + m[1][1] + m[2][2];
-  if (tr > 0) {
-    const double s = sqrt(tr + 1) * 2;
-    q[0] = s / 4;
-    q[1] = (m[2][1] - m[1][2]) / s;
-    q[2] = (m[0][2] - m[2][0]) / s;
-    q[3] = (m[1][0] - m[0][1]) / s;
-  } else if (m[0][0] > m[1][1] && m[0][0] > m[2][2]) {
-    const double s = sqrt(1 + m[0][0] - m[1][1] - m[2][2]) * 2;
-    q[0] = (m[2][1] - m[1][2]) / s;
-    q[1] = s / 4;
-    q[2] = (m[0][1] + m[1][0]) / s;
-    q[3] = (m[0][2] + m[2][0]) / s;
-  } else if (m[1][1] > m[2][2]) {
-    const double s = sqrt(1 + m[1][1] - m[0][0] - m[2][2]) * 2;
-    q[0] = (m[0][2] - m[2][0]) / s;
-    q[1] = (m[0][1] + m[1][0]) / s;
-    q[2] = s / 4;
-    q[3] = (m[1][2] + m[2][1]) / s;
-  } else {
-    const double s = sqrt(1 + m[2][2] - m[0][0] - m[1][1]) * 2;
-    q[0] = (m[1][0] - m[0][1]) / s;
-    q[1] = (m[0][2] + m[2][0]) / s;
-    q[2] = (m[1][2] + m[2][1]) / s;
-    q[3] = s / 4;
-  }
-  if (q[0] < 0)
-    for (int k = 0; k < 4; k++) q[k] = -q[k];
-  quat_norm(q);
-}
+/* ---------------------------------------------------------------- aiming */
 
 /* The TCP pose that puts the camera (true mount) at eye looking at target, rolled. */
 static void tcp_for_view(const double eye[3], const double target[3], double roll_deg,
                          double p[3], double q[4]) {
-  double z[3], x[3], y[3], up[3] = {0, 0, 1}, n = 0;
-  for (int k = 0; k < 3; k++) n += (z[k] = target[k] - eye[k], z[k] * z[k]);
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  x[0] = z[1] * up[2] - z[2] * up[1];
-  x[1] = z[2] * up[0] - z[0] * up[2];
-  x[2] = z[0] * up[1] - z[1] * up[0];
-  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  for (int k = 0; k < 3; k++) x[k] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  const double c = cos(roll_deg * M_PI / 180), s = sin(roll_deg * M_PI / 180);
-  double xr[3], yr[3], q_cam[4];
-  for (int k = 0; k < 3; k++) {
-    xr[k] = c * x[k] + s * y[k];
-    yr[k] = -s * x[k] + c * y[k];
-  }
-  quat_from_axes(xr, yr, z, q_cam);
-  /* T_base_tcp = T_base_cam * inverse(T_tcp_cam) */
-  const double mq_inv[4] = {MOUNT_Q[0], -MOUNT_Q[1], -MOUNT_Q[2], -MOUNT_Q[3]};
-  double mq_n[4] = {mq_inv[0], mq_inv[1], mq_inv[2], mq_inv[3]}, t[3], tw[3];
-  quat_norm(mq_n);
-  quat_mul(q_cam, mq_n, q);
-  quat_norm(q);
-  quat_rotate(q, MOUNT_P, tw); /* R_base_tcp * p_tcp_cam */
-  for (int k = 0; k < 3; k++) t[k] = eye[k] - tw[k];
-  memcpy(p, t, sizeof t);
+  double q_cam[4], T_bc[16], T_tc[16], T_ct[16], T_bt[16];
+  cu_look_at(eye, target, roll_deg, q_cam);
+  ASSERT_EQ(fg_pose_from_quat(eye, q_cam, T_bc), 0);
+  ASSERT_EQ(fg_pose_from_quat(MOUNT_P, MOUNT_Q, T_tc), 0);
+  fg_pose_inverse(T_tc, T_ct);
+  fg_pose_compose(T_bc, T_ct, T_bt); /* T_base_tcp = T_base_cam * inverse(T_tcp_cam) */
+  fg_pose_to_quat(T_bt, p, q);
 }
 
 /* ---------------------------------------------------------------- requests */
@@ -154,21 +79,9 @@ static void fixed_camera(void);
 
 /* A camera on the hand, the board on the table. */
 static void hand_camera(void) {
-  const char *src = getenv("FG_SOURCE_DIR");
-  ASSERT(src);
-  char scene[PATH_MAX], port_file[PATH_MAX];
-  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
-  snprintf(port_file, sizeof port_file, "%s/camera.port", h_tmpdir());
   simproc sim;
-  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
-                        "--camera-port-file", port_file, "--camera", CAMERA, "--camera-mount",
-                        MOUNT, "--board", BOARD, NULL};
-  simproc_start(&sim, 0, args);
-  FILE *f = fopen(port_file, "r");
-  ASSERT(f);
-  int cam_port = 0;
-  ASSERT_EQ(fscanf(f, "%d", &cam_port), 1);
-  fclose(f);
+  const char *args[] = {"--camera", CAMERA, "--camera-mount", MOUNT, "--board", BOARD, NULL};
+  const int cam_port = cu_sim_start(&sim, args);
   char conf[1024];
   snprintf(conf, sizeof conf,
            "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
@@ -244,12 +157,12 @@ static void hand_camera(void) {
   ASSERT(json_is_true(json_object_get(cam, "calibrated")));
   json_t *mount = json_object_get(cam, "T_tcp_cam");
   json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
-  double dp = 0, dot = 0, qn[4] = {MOUNT_Q[0], MOUNT_Q[1], MOUNT_Q[2], MOUNT_Q[3]};
-  quat_norm(qn);
+  double dp = 0, got_q[4];
   for (int k = 0; k < 3; k++)
     dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - MOUNT_P[k], 2);
-  for (int k = 0; k < 4; k++) dot += qn[k] * json_real_value(json_array_get(mq, (size_t)k));
-  const double err_mm = sqrt(dp) * 1e3, err_deg = 2 * acos(fmin(1, fabs(dot))) * 180 / M_PI;
+  for (int k = 0; k < 4; k++) got_q[k] = json_real_value(json_array_get(mq, (size_t)k));
+  const double err_mm = sqrt(dp) * 1e3;
+  const double err_deg = fg_quat_angle_rad(got_q, MOUNT_Q) * 180 / M_PI;
   json_t *cal = json_object_get(json_object_get(cam, "calibration"), "mount");
   fprintf(stderr, "mount: %.3f mm, %.4f deg from the truth; spread %.3f mm %.4f deg, rms %.3f "
           "px (%s)\n", err_mm, err_deg, num(cal, "spread_mm"), num(cal, "spread_deg"),
@@ -323,68 +236,27 @@ int main(int argc, char **argv) {
  * at angle phi across it, rolled by roll degrees. */
 static void show_board(const double p[3], double tilt, double phi, double roll, double q[4]) {
   const double eye[3] = {FIXED_EYE};
-  double z[3], x[3], y[3], n = 0, up[3] = {0, 0, 1};
-  for (int k = 0; k < 3; k++) {
-    z[k] = eye[k] - p[k];
-    n += z[k] * z[k];
-  }
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  x[0] = z[1] * up[2] - z[2] * up[1];
-  x[1] = z[2] * up[0] - z[0] * up[2];
-  x[2] = z[0] * up[1] - z[1] * up[0];
-  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  for (int k = 0; k < 3; k++) x[k] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  double q0[4], qt[4], qr[4], t[4];
-  quat_from_axes(x, y, z, q0);
-  /* tilt about (cos phi, sin phi, 0) and roll about z, both in the tool's frame */
-  const double a = tilt * M_PI / 360, b = roll * M_PI / 360;
+  double q0[4], t[4];
+  cu_look_at(p, eye, roll, q0);
+  const double a = tilt * M_PI / 360;
   const double tq[4] = {cos(a), sin(a) * cos(phi), sin(a) * sin(phi), 0};
-  const double rq[4] = {cos(b), 0, 0, sin(b)};
-  memcpy(qt, tq, sizeof qt);
-  memcpy(qr, rq, sizeof qr);
-  quat_mul(q0, qt, t);
-  quat_mul(t, qr, q);
-  quat_norm(q);
+  fg_quat_multiply(q0, tq, t);
+  const double n = sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2] + t[3] * t[3]);
+  for (int k = 0; k < 4; k++) q[k] = t[k] / n;
 }
 
 static void fixed_camera(void) {
-  const char *src = getenv("FG_SOURCE_DIR");
-  char scene[PATH_MAX], port_file[PATH_MAX], cam_pose[128];
-  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
-  snprintf(port_file, sizeof port_file, "%s/camera2.port", h_tmpdir());
-  /* the camera's pose: looking from FIXED_EYE at FIXED_AT, as show_board aims the tool */
   const double eye[3] = {FIXED_EYE}, at[3] = {FIXED_AT};
-  double z[3], x[3], y[3], n = 0, up[3] = {0, 0, 1}, qc[4];
-  for (int k = 0; k < 3; k++) {
-    z[k] = at[k] - eye[k];
-    n += z[k] * z[k];
-  }
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  x[0] = z[1] * up[2] - z[2] * up[1];
-  x[1] = z[2] * up[0] - z[0] * up[2];
-  x[2] = z[0] * up[1] - z[1] * up[0];
-  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  for (int k = 0; k < 3; k++) x[k] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  quat_from_axes(x, y, z, qc);
+  double qc[4];
+  cu_look_at(eye, at, 0, qc);
   const double dist = sqrt(pow(at[0] - eye[0], 2) + pow(at[1] - eye[1], 2) + pow(at[2] - eye[2], 2));
+  char cam_pose[128];
   snprintf(cam_pose, sizeof cam_pose, "%.6f %.6f %.6f %.9f %.9f %.9f %.9f", eye[0], eye[1],
            eye[2], qc[0], qc[1], qc[2], qc[3]);
   simproc sim;
-  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
-                        "--camera-port-file", port_file, "--camera", CAMERA, "--camera-fixed",
-                        cam_pose, "--board-on-tool", BOARD_ON_TOOL, NULL};
-  simproc_start(&sim, 0, args);
-  FILE *f = fopen(port_file, "r");
-  ASSERT(f);
-  int cam_port = 0;
-  ASSERT_EQ(fscanf(f, "%d", &cam_port), 1);
-  fclose(f);
+  const char *args[] = {"--camera", CAMERA, "--camera-fixed", cam_pose, "--board-on-tool",
+                        BOARD_ON_TOOL, NULL};
+  const int cam_port = cu_sim_start(&sim, args);
   char conf[1024];
   snprintf(conf, sizeof conf,
            "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
@@ -424,11 +296,12 @@ static void fixed_camera(void) {
       json_t *cam = json_object_get(r->json, "camera");
       json_t *mount = json_object_get(cam, "T_base_cam");
       json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
-      double dp = 0, dot = 0;
+      double dp = 0, got_q[4];
       for (int k = 0; k < 3; k++)
         dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - eye[k], 2);
-      for (int k = 0; k < 4; k++) dot += qc[k] * json_real_value(json_array_get(mq, (size_t)k));
-      const double err_mm = sqrt(dp) * 1e3, err_deg = 2 * acos(fmin(1, fabs(dot))) * 180 / M_PI;
+      for (int k = 0; k < 4; k++) got_q[k] = json_real_value(json_array_get(mq, (size_t)k));
+      const double err_mm = sqrt(dp) * 1e3;
+      const double err_deg = fg_quat_angle_rad(got_q, qc) * 180 / M_PI;
       fprintf(stderr, "fixed camera: %d views kept; T_base_cam %.3f mm, %.4f deg from the "
               "truth\n", kept, err_mm, err_deg);
       ASSERT(err_mm < 1);

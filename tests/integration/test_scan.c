@@ -5,8 +5,8 @@
  * (its --camera-log) within 2 mm and 0.3 degrees. A viewpoint outside the motion limits is
  * skipped and counted; an uncalibrated, a fixed and an unknown camera are refused.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
+#include "cell_util.h"
 #include "robot_util.h"
-#include "simproc.h"
 
 #include <limits.h>
 #include <math.h>
@@ -48,22 +48,12 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
   simproc_init(argv[2], h_tmpdir());
-  const char *src = getenv("FG_SOURCE_DIR");
-  ASSERT(src);
-  char scene[PATH_MAX], port_file[PATH_MAX], cam_log[PATH_MAX];
-  snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
-  snprintf(port_file, sizeof port_file, "%s/camera.port", h_tmpdir());
+  char cam_log[PATH_MAX];
   snprintf(cam_log, sizeof cam_log, "%s/camera.log", h_tmpdir());
   simproc sim;
-  const char *args[] = {"--scene", scene, "--time-scale", "0", "--camera-listen", "127.0.0.1:0",
-                        "--camera-port-file", port_file, "--camera", CAMERA, "--camera-mount",
-                        MOUNT, "--camera-log", cam_log, NULL};
-  simproc_start(&sim, 0, args);
-  FILE *f = fopen(port_file, "r");
-  ASSERT(f);
-  int cam_port = 0;
-  ASSERT_EQ(fscanf(f, "%d", &cam_port), 1);
-  fclose(f);
+  const char *args[] = {"--camera", CAMERA, "--camera-mount", MOUNT, "--camera-log", cam_log,
+                        NULL};
+  const int cam_port = cu_sim_start(&sim, args);
 
   /* the camera's calibration, as a calibration would have left it */
   char dir[PATH_MAX], path[PATH_MAX + 16], text[1024];
@@ -73,7 +63,7 @@ int main(int argc, char **argv) {
   const double a = 3 * M_PI / 180;
   snprintf(text, sizeof text, CALIBRATION, cos(a), -sin(a), sin(a), cos(a));
   snprintf(path, sizeof path, "%s/wrist.json", dir);
-  f = fopen(path, "w");
+  FILE *f = fopen(path, "w");
   ASSERT(f && fputs(text, f) >= 0 && fclose(f) == 0);
 
   char conf[1024];

@@ -1,0 +1,19 @@
+/* Shared by the tests of the cell (cameras, cell_calibration, scan): fieldgrip-sim started in
+ * its physics mode with its camera, and frames aimed at points. Every helper succeeds or fails
+ * the test (tests/test.h). */
+#ifndef FG_IT_CELL_UTIL_H
+#define FG_IT_CELL_UTIL_H
+
+#include "simproc.h"
+
+/* Starts the simulator (simproc_init first) on tests/sim/cells/blocks.xml at time scale 0,
+ * its camera served on a free loopback port, with the options in extra (NULL-terminated;
+ * NULL: none). Returns the camera's port. */
+int cu_sim_start(simproc *sim, const char *const *extra);
+
+/* The orientation (w x y z) of a frame at eye whose +z points at target, its x level (world
+ * z = 0) and its y towards world -z, turned by roll_deg about its z: a camera's looking at
+ * target (OpenCV convention), or a tool's pointing there. */
+void cu_look_at(const double eye[3], const double target[3], double roll_deg, double q[4]);
+
+#endif
