@@ -35,7 +35,10 @@ static int parse_scan(json_t *body, fg_scan_request *r, fg_resp *resp) {
       return fg_resp_error(resp, 400, "invalid_request", "\"viewpoints\": 1 to %d poses",
                            FG_SCAN_MAX_VIEWPOINTS), 0;
     r->T_base_tcp = malloc(sizeof *r->T_base_tcp * 16 * (size_t)n);
-    for (long long i = 0; r->T_base_tcp && i < n; i++) {
+    if (!r->T_base_tcp)
+      return fg_resp_error(resp, 500, "internal_error", "out of memory for %lld viewpoints",
+                           n), 0;
+    for (long long i = 0; i < n; i++) {
       double q[4];
       char what[48];
       snprintf(what, sizeof what, "viewpoints[%lld]", i);
