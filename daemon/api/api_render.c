@@ -11,22 +11,13 @@
 
 #include "core/error.h"
 #include "core/pose.h"
-#include "field/model.h"
-#include "query/colormap.h"
+#include "field/image.h"
+#include "query/heatmap_view.h"
 
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* Rays rendered per call of fg_field_render_rays: bounds the memory of one render. */
-#define RENDER_CHUNK 65536
-/* Rays of a heatmap render per call: its (chunk, D) features stay at 8 MB for D = 512. */
-#define HEATMAP_CHUNK 4096
-/* Pixels less opaque than this show the field's colour without a score. */
-#define HEATMAP_MIN_OPACITY 0.5f
-/* Pixels less opaque than this have no depth (0) and no normal (black). */
-#define SURFACE_MIN_OPACITY 0.5f
 
 static const char *const camera_keys[] = {"fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model",
                                           "k1", "k2", "k3", "p1", "p2", "camera_angle_x",
@@ -152,113 +143,6 @@ int fg_api_parse_render(json_t *body, fg_api_render_req *r, fg_resp *resp) {
   return 0;
 }
 
-/* Rays of pixels start .. start + m - 1 (row-major) of r's camera: origins o (m,3), unit
- * directions d (m,3) in the world frame, and each ray's cosine to the optical axis (m). */
-static void camera_rays(const fg_api_render_req *r, int64_t start, int64_t m, float *o, float *d,
-                        float *cos_axis) {
-  const fg_camera *c = &r->cam;
-  const double *T = r->T_world_cam;
-  for (int64_t i = 0; i < m; i++) {
-    int64_t p = start + i;
-    double u = (double)(p % c->w) + 0.5, v = (double)(p / c->w) + 0.5;
-    /* OpenGL camera: +x right, +y up, looking along -z. */
-    double x = (u - c->cx) / c->fl_x, y = -(v - c->cy) / c->fl_y, z = -1.0;
-    double len = sqrt(x * x + y * y + z * z);
-    x /= len, y /= len, z /= len;
-    for (int k = 0; k < 3; k++) {
-      d[3 * i + k] = (float)(T[4 * k] * x + T[4 * k + 1] * y + T[4 * k + 2] * z);
-      o[3 * i + k] = (float)T[4 * k + 3];
-    }
-    if (cos_axis) cos_axis[i] = (float)(1.0 / len);
-  }
-}
-
-/* Renders the image into out: uint8 RGB [h][w][3], uint16 z-depth in millimetres [h][w] (0
- * where the opacity is below SURFACE_MIN_OPACITY, saturating at 65535), or uint8 RGB
- * normals [h][w][3], round(127.5 (n + 1)) of the unit world-frame normal n
- * (fg_field_render_normals with central differences at +-step_m), black (0, 0, 0) where the
- * opacity is below SURFACE_MIN_OPACITY or the density has no gradient. */
-static int render_image(const fg_field *f, const fg_api_render_req *r, const float bg[3], float step_m,
-                        int n_threads, void *out) {
-  const fg_camera *c = &r->cam;
-  int64_t n = (int64_t)c->w * c->h;
-  int64_t chunk = n < RENDER_CHUNK ? n : RENDER_CHUNK;
-  float *o = malloc((size_t)chunk * 3 * sizeof *o), *d = malloc((size_t)chunk * 3 * sizeof *d);
-  float *rgb = malloc((size_t)chunk * 3 * sizeof *rgb);
-  float *depth = malloc((size_t)chunk * sizeof *depth), *alpha = malloc((size_t)chunk * sizeof *alpha);
-  float *cos_axis = malloc((size_t)chunk * sizeof *cos_axis);
-  int rc = (o && d && rgb && depth && alpha && cos_axis) ? 0 : fg_fail(FG_ENOMEM, "out of memory");
-  for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
-    int64_t m = n - start < chunk ? n - start : chunk;
-    camera_rays(r, start, m, o, d, cos_axis);
-    if (r->normal) /* rgb holds the normals */
-      rc = fg_field_render_normals(f, o, d, m, step_m, rgb, alpha, n_threads);
-    else
-      rc = fg_field_render_rays(f, o, d, m, bg, r->depth ? NULL : rgb, r->depth ? depth : NULL,
-                                r->depth ? alpha : NULL, NULL, n_threads);
-    if (rc != 0) break;
-    for (int64_t i = 0; i < m; i++) {
-      int64_t p = start + i;
-      if (r->normal) {
-        const float *nv = rgb + 3 * i;
-        const int none = !(alpha[i] >= SURFACE_MIN_OPACITY) ||
-                         (nv[0] == 0.0f && nv[1] == 0.0f && nv[2] == 0.0f);
-        for (int k = 0; k < 3; k++) {
-          float x = 127.5f * (nv[k] + 1.0f);
-          x = x > 0 ? (x < 255.0f ? x : 255.0f) : 0; /* NaN goes to 0 */
-          ((uint8_t *)out)[3 * p + k] = none ? 0 : (uint8_t)lroundf(x);
-        }
-      } else if (r->depth) {
-        uint16_t mm = 0;
-        if (alpha[i] >= SURFACE_MIN_OPACITY) {
-          double z_m = (double)depth[i] / (double)alpha[i] * (double)cos_axis[i];
-          double v = z_m * 1000.0;
-          mm = !(v > 0) ? 0 : v >= 65535.0 ? 65535 : (uint16_t)lround(v);
-        }
-        ((uint16_t *)out)[p] = mm;
-      } else {
-        for (int k = 0; k < 3; k++) {
-          float x = rgb[3 * i + k];
-          x = x > 0 ? (x < 1 ? x : 1) : 0; /* NaN goes to 0 */
-          ((uint8_t *)out)[3 * p + k] = (uint8_t)lrintf(x * 255.0f);
-        }
-      }
-    }
-  }
-  free(o), free(d), free(rgb), free(depth), free(alpha), free(cos_axis);
-  return rc;
-}
-
-/* Renders colour and features of r's camera, scores every pixel's feature with query q
- * (pixels of opacity below HEATMAP_MIN_OPACITY show no score) and blends the turbo map of
- * the scores over the colour (fg_heatmap_blend, over the image's own score range) into out,
- * uint8 RGB [h][w][3]. Features are rendered HEATMAP_CHUNK rays at a time, so a render's
- * memory stays near 16 bytes a pixel whatever D. */
-static int render_heatmap(const fg_field *f, const fg_api_render_req *r, const fg_query *q,
-                          const float bg[3], int n_threads, uint8_t *out) {
-  const fg_camera *c = &r->cam;
-  const int D = f->cfg.feature_dim;
-  int64_t n = (int64_t)c->w * c->h;
-  int64_t chunk = n < HEATMAP_CHUNK ? n : HEATMAP_CHUNK;
-  float *o = malloc((size_t)chunk * 3 * sizeof *o), *d = malloc((size_t)chunk * 3 * sizeof *d);
-  float *feat = malloc((size_t)chunk * (size_t)D * sizeof *feat); /* (chunk, D) */
-  float *alpha = malloc((size_t)chunk * sizeof *alpha);
-  float *rgb = malloc((size_t)n * 3 * sizeof *rgb);   /* (n, 3) */
-  float *scores = malloc((size_t)n * sizeof *scores); /* (n) */
-  int rc = (o && d && feat && alpha && rgb && scores) ? 0 : fg_fail(FG_ENOMEM, "out of memory");
-  for (int64_t start = 0; rc == 0 && start < n; start += chunk) {
-    int64_t m = n - start < chunk ? n - start : chunk;
-    camera_rays(r, start, m, o, d, NULL);
-    rc = fg_field_render_rays(f, o, d, m, bg, rgb + 3 * start, NULL, alpha, feat, n_threads);
-    if (rc == 0)
-      rc = fg_query_score_features(q, feat, m, D, alpha, HEATMAP_MIN_OPACITY, scores + start,
-                                   n_threads);
-  }
-  if (rc == 0) fg_heatmap_blend(rgb, scores, n, NAN, NAN, out);
-  free(o), free(d), free(feat), free(alpha), free(rgb), free(scores);
-  return rc;
-}
-
 /* Answers the render's pixels as a PNG, encoded in a decoder child. */
 static void send_png(fg_req *req, fg_resp *resp, const fg_api_render_req *r, const void *pixels) {
   uint8_t *png = NULL;
@@ -308,8 +192,12 @@ int fg_api_scene_render(fg_req *req, fg_resp *resp) {
   /* Normals read the density half a voxel of the scene's grid to either side: the surface the
    * voxels show, not the hash grid's millimetre-scale roughness. */
   const float step_m = (float)(0.5 * info.params.voxel_size);
-  rc = r.heatmap ? render_heatmap(field, &r, &q, bg, threads, pixels)
-                     : render_image(field, &r, bg, step_m, threads, pixels);
+  const fg_field_image_kind kind = r.depth    ? FG_FIELD_IMAGE_DEPTH
+                                   : r.normal ? FG_FIELD_IMAGE_NORMAL
+                                              : FG_FIELD_IMAGE_RGB;
+  rc = r.heatmap ? fg_heatmap_render_view(field, r.T_world_cam, &r.cam, &q, bg, threads, pixels)
+                 : fg_field_render_image(field, r.T_world_cam, &r.cam, kind, bg, step_m, threads,
+                                         pixels);
   if (rc != 0) {
     fg_resp_error(resp, 500, "internal_error", "render failed: %s", fg_error_detail());
     goto out;

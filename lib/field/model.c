@@ -11,7 +11,6 @@
 #include "core/error.h"
 #include "core/threads.h"
 #include "field/render.h"
-#include "io/camera.h"
 #include "field/sh.h"
 
 #define HUGE_ALIGN ((size_t)2 << 20)
@@ -450,42 +449,6 @@ out:
   free(live);
   free(st);
   free(b.mem);
-  return rc;
-}
-
-int fg_field_render_camera(const fg_field *f, const double T_world_cam[16],
-                           const struct fg_camera *cam, const float bg[3], float *rgb,
-                           float *depth, float *opacity, float *feat, int n_threads) {
-  if (!f || !T_world_cam || !cam || cam->w < 1 || cam->h < 1 || !(cam->fl_x > 0.0) ||
-      !(cam->fl_y > 0.0))
-    return fg_fail(FG_EINVAL, "render: a camera needs a size and positive focal lengths");
-  const int64_t R = (int64_t)cam->w * cam->h;
-  float *o = malloc((size_t)R * 3 * sizeof(float)), *d = malloc((size_t)R * 3 * sizeof(float));
-  if (!o || !d) {
-    free(o);
-    free(d);
-    return fg_fail(FG_ENOMEM, "cannot allocate %lld rays", (long long)R);
-  }
-  const double *T = T_world_cam;
-  for (int v = 0; v < cam->h; v++)
-    for (int u = 0; u < cam->w; u++) {
-      const int64_t r = (int64_t)v * cam->w + u;
-      const double dc[3] = {(u + 0.5 - cam->cx) / cam->fl_x, -(v + 0.5 - cam->cy) / cam->fl_y,
-                            -1.0};
-      double dw[3], n2 = 0.0;
-      for (int k = 0; k < 3; k++) {
-        dw[k] = T[4 * k] * dc[0] + T[4 * k + 1] * dc[1] + T[4 * k + 2] * dc[2];
-        n2 += dw[k] * dw[k];
-      }
-      const double inv = 1.0 / sqrt(n2);
-      for (int k = 0; k < 3; k++) {
-        o[3 * r + k] = (float)T[4 * k + 3];
-        d[3 * r + k] = (float)(dw[k] * inv);
-      }
-    }
-  const int rc = fg_field_render_rays(f, o, d, R, bg, rgb, depth, opacity, feat, n_threads);
-  free(d);
-  free(o);
   return rc;
 }
 

@@ -162,12 +162,4 @@ int fg_field_render_normals(const fg_field *f, const float *rays_o, const float 
                             int64_t R, float step_m, float *normals, float *opacity,
                             int n_threads);
 
-/* Renders a whole image of a pinhole camera (cam->w x cam->h, OpenGL convention, pose
- * T_world_cam camera-to-world in metres) through fg_field_render_rays, ray (u, v) through the
- * pixel centre (u + 0.5, v + 0.5); outputs as there, in row-major pixel order. */
-struct fg_camera;
-int fg_field_render_camera(const fg_field *f, const double T_world_cam[16],
-                           const struct fg_camera *cam, const float bg[3], float *rgb,
-                           float *depth, float *opacity, float *feat, int n_threads);
-
 #endif

@@ -26,6 +26,7 @@
 
 #include "benchmem.h"
 #include "core/error.h"
+#include "field/image.h"
 #include "field/model.h"
 #include "field/train.h"
 #include "io/dataset.h"

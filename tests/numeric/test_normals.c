@@ -9,13 +9,22 @@
  *   - fg_voxel_alpha and fg_mesh_marching_cubes put the sphere's mesh where alpha = 1 - exp(-
  *     sigma voxel_size) crosses the threshold, closed, with outward normals;
  *   - fg_field_colour and fg_mesh_colour give the colour network's output (zero weights:
- *     sigmoid(0) = 0.5, so 128 in 8 bits). */
+ *     sigmoid(0) = 0.5, so 128 in 8 bits);
+ *   - fg_field_render_image of a camera above the plane, over more than one chunk of rays:
+ *     depth 500 mm along the optical axis at every pixel, normals +z, colour the rounding of
+ *     fg_field_render_camera's; fg_heatmap_render_view of a random field with features is
+ *     byte for byte the blend of fg_field_render_camera's colour and scored features. */
+#include "field/image.h"
 #include "field/model.h"
 
 #include <stdint.h>
 
 #include "core/error.h"
+#include "core/rng.h"
 #include "field/occupancy.h"
+#include "io/camera.h"
+#include "query/colormap.h"
+#include "query/heatmap_view.h"
 #include "query/geometry.h"
 #include "test.h"
 
@@ -38,10 +47,10 @@ static double log_sigma(shape s, const double x[3]) {
 
 /* A field over the unit cube whose density is exp(log_sigma) (clamped to exp(+-15), as the
  * density activation does), up to the trilinear interpolation of level LEVEL. */
-static fg_field *shape_field(shape s) {
+static fg_field *shape_field(shape s, int D) {
   const double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
   fg_field_config cfg;
-  ASSERT_OK(fg_field_config_for_workspace(&cfg, lo, hi, 1.0, 0));
+  ASSERT_OK(fg_field_config_for_workspace(&cfg, lo, hi, 1.0, D));
   fg_field *f;
   ASSERT_OK(fg_field_alloc(&f, &cfg));
   ASSERT_NEAR(f->cfg.box_size, 1.0, 0);
@@ -79,7 +88,7 @@ static double sigma_at(shape s, const double x[3]) {
 }
 
 static void test_gradient(void) {
-  fg_field *f = shape_field(PLANE);
+  fg_field *f = shape_field(PLANE, 0);
   enum { B = 5 };
   const float x[B * 3] = {0.5f, 0.5f, 0.41f, 0.2f, 0.7f, 0.395f, 0.8f, 0.3f, 0.42f,
                           0.31f, 0.33f, 0.38f, 0.6f, 0.6f, 0.44f};
@@ -120,7 +129,7 @@ static void rays_towards(const double eye[3], const double target[3], double spr
 }
 
 static void test_plane_normals(void) {
-  fg_field *f = shape_field(PLANE);
+  fg_field *f = shape_field(PLANE, 0);
   enum { N = 12, RAYS = N * N };
   float o[RAYS * 3], d[RAYS * 3], nrm[RAYS * 3], op[RAYS];
   const double eye[3] = {0.3, 0.2, 0.85}, target[3] = {0.55, 0.6, Z0};
@@ -145,7 +154,7 @@ static void test_plane_normals(void) {
 }
 
 static void test_sphere_normals(void) {
-  fg_field *f = shape_field(SPHERE);
+  fg_field *f = shape_field(SPHERE, 0);
   enum { N = 16, RAYS = N * N };
   float o[RAYS * 3], d[RAYS * 3], nrm[RAYS * 3], op[RAYS], depth[RAYS], op2[RAYS];
   const double eye[3] = {0.45, 0.05, 0.8}, target[3] = {C[0], C[1], C[2]};
@@ -204,7 +213,7 @@ static void test_sphere_normals(void) {
  * density (for a normal along an axis; 3.0 there and 3.6 on a diagonal), so the surface lies
  * at radius R - ln(-ln(1 - threshold) / (vs k)) / a. */
 static void test_sphere_mesh(void) {
-  fg_field *f = shape_field(SPHERE);
+  fg_field *f = shape_field(SPHERE, 0);
   const double lo[3] = {0.2, 0.2, 0.15}, hi[3] = {0.8, 0.8, 0.75}, vs = 0.02;
   fg_voxel_grid g;
   ASSERT_OK(fg_voxel_grid_init(&g, lo, hi, vs));
@@ -257,7 +266,7 @@ static void test_sphere_mesh(void) {
  * between two layers of 10 cm voxels, 5 cm from every centre, occupies both layers (alpha at
  * the centres about 7e-4); and nothing counts where the field's occupancy grid is empty. */
 static void test_shell_alpha(void) {
-  fg_field *f = shape_field(SHELL);
+  fg_field *f = shape_field(SHELL, 0);
   const double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {1.0, 1.0, 1.0}, vs = 0.1;
   fg_voxel_grid g;
   ASSERT_OK(fg_voxel_grid_init(&g, lo, hi, vs));
@@ -292,7 +301,105 @@ static void test_shell_alpha(void) {
   fg_field_free(f);
 }
 
+/* A pinhole camera w x h with its principal point in the middle, looking straight down (-z)
+ * from eye: OpenGL's camera with an identity rotation. */
+static fg_camera down_camera(int w, int h, double fl, const double eye[3], double T[16]) {
+  fg_camera cam = {.model = FG_CAMERA_PINHOLE, .w = w, .h = h, .fl_x = fl, .fl_y = fl,
+                   .cx = 0.5 * w, .cy = 0.5 * h};
+  for (int i = 0; i < 16; i++) T[i] = (i % 5 == 0) ? 1.0 : 0.0;
+  for (int k = 0; k < 3; k++) T[4 * k + 3] = eye[k];
+  return cam;
+}
+
+static void test_plane_images(void) {
+  fg_field *f = shape_field(PLANE, 0);
+  double T[16];
+  const double eye[3] = {0.5, 0.5, Z0 + 0.005}; /* close: short rays, a cheap test */
+  /* 300 x 220 = 66000 rays: two chunks of FG_FIELD_IMAGE_CHUNK */
+  const fg_camera cam = down_camera(300, 220, 500.0, eye, T);
+  const int64_t n = (int64_t)cam.w * cam.h;
+  ASSERT(n > FG_FIELD_IMAGE_CHUNK);
+  const float bg[3] = {0, 0, 0};
+  uint16_t *mm = malloc((size_t)n * sizeof *mm);
+  uint8_t *px = malloc((size_t)n * 3);
+  float *rgb = malloc((size_t)n * 3 * sizeof *rgb), *depth = malloc((size_t)n * sizeof *depth);
+  float *op = malloc((size_t)n * sizeof *op);
+  ASSERT(mm && px && rgb && depth && op);
+  ASSERT_OK(fg_field_render_image(f, T, &cam, FG_FIELD_IMAGE_DEPTH, bg, 0.005f, 2, mm));
+  ASSERT_OK(fg_field_render_camera(f, T, &cam, bg, rgb, depth, op, NULL, 2));
+  int lo = 65535, hi = 0;
+  for (int64_t i = 0; i < n; i++) {
+    lo = mm[i] < lo ? mm[i] : lo, hi = mm[i] > hi ? mm[i] : hi;
+    /* z = distance along the ray times the ray's cosine to the axis */
+    const double u = (double)(i % cam.w) + 0.5 - cam.cx, v = (double)(i / cam.w) + 0.5 - cam.cy;
+    const double cosine = 1.0 / sqrt(1.0 + (u * u + v * v) / (cam.fl_x * cam.fl_x));
+    ASSERT(op[i] >= FG_FIELD_SURFACE_MIN_OPACITY);
+    ASSERT(abs((int)mm[i] - (int)lround(depth[i] / op[i] * cosine * 1000.0)) <= 1);
+  }
+  /* the density's e-folding length is 3.3 mm: rays end about 17 mm into the plane */
+  printf("plane 5 mm below the camera: depth image %d..%d mm\n", lo, hi);
+  ASSERT(lo >= 5 && hi <= 35);
+  ASSERT(hi - lo <= 1); /* z along the axis: one value, where the distance along rays varies */
+  ASSERT_OK(fg_field_render_image(f, T, &cam, FG_FIELD_IMAGE_NORMAL, bg, 0.005f, 2, px));
+  for (int64_t i = 0; i < n; i++) {
+    ASSERT(px[3 * i] == 127 || px[3 * i] == 128);
+    ASSERT(px[3 * i + 1] == 127 || px[3 * i + 1] == 128);
+    ASSERT_EQ(px[3 * i + 2], 255);
+  }
+  ASSERT_OK(fg_field_render_image(f, T, &cam, FG_FIELD_IMAGE_RGB, bg, 0.005f, 2, px));
+  for (int64_t i = 0; i < 3 * n; i++) {
+    const float x = rgb[i] > 0 ? (rgb[i] < 1 ? rgb[i] : 1) : 0;
+    ASSERT_EQ(px[i], (uint8_t)lrintf(x * 255.0f));
+    ASSERT(px[i] == 127 || px[i] == 128); /* sigmoid(0) */
+  }
+  fg_camera bad = cam;
+  bad.fl_x = 0;
+  ASSERT_ERR(fg_field_render_image(f, T, &bad, FG_FIELD_IMAGE_RGB, bg, 0.005f, 2, px), FG_EINVAL,
+             "focal");
+  free(op), free(depth), free(rgb), free(px), free(mm);
+  fg_field_free(f);
+}
+
+static void test_heatmap_view(void) {
+  enum { D = 8 };
+  fg_field *f = shape_field(PLANE, D);
+  /* features from random weights of the feature branch (zero in shape_field) */
+  static const int groups[] = {FG_FIELD_FEAT_GRID, FG_FIELD_FEAT_MLP, FG_FIELD_FEAT_OUT};
+  for (int g = 0; g < 3; g++) {
+    size_t np;
+    float *p = fg_field_group(f, groups[g], &np);
+    for (size_t i = 0; i < np; i++) p[i] = (float)(fg_rng_uniform((uint64_t)g, i) - 0.5);
+  }
+  double T[16];
+  const double eye[3] = {0.5, 0.5, Z0 + 0.03};
+  const fg_camera cam = down_camera(80, 60, 60.0, eye, T); /* 4800 rays: two heatmap chunks */
+  const int64_t n = (int64_t)cam.w * cam.h;
+  ASSERT(n > FG_HEATMAP_VIEW_CHUNK);
+  const float pos[D] = {1, -0.5f, 0.25f, 0, 0.1f, -1, 0.3f, 0.7f}, neg[D] = {0, 1, 0, 0, 0, 0, 0, 0};
+  fg_query q;
+  ASSERT_OK(fg_query_init(&q, D, pos, 1, neg, 1, 0.1f));
+  const float bg[3] = {0.2f, 0.3f, 0.4f};
+  uint8_t *got = malloc((size_t)n * 3), *want = malloc((size_t)n * 3);
+  float *rgb = malloc((size_t)n * 3 * sizeof *rgb), *op = malloc((size_t)n * sizeof *op);
+  float *feat = malloc((size_t)n * D * sizeof *feat), *scores = malloc((size_t)n * sizeof *scores);
+  ASSERT(got && want && rgb && op && feat && scores);
+  ASSERT_OK(fg_heatmap_render_view(f, T, &cam, &q, bg, 2, got));
+  ASSERT_OK(fg_field_render_camera(f, T, &cam, bg, rgb, NULL, op, feat, 2));
+  ASSERT_OK(fg_query_score_features(&q, feat, n, D, op, FG_HEATMAP_VIEW_MIN_OPACITY, scores, 2));
+  int64_t scored = 0;
+  for (int64_t i = 0; i < n; i++) scored += !isnan(scores[i]);
+  printf("heatmap view: %lld of %lld pixels scored\n", (long long)scored, (long long)n);
+  ASSERT(scored > n / 2);
+  fg_heatmap_blend(rgb, scores, n, NAN, NAN, want);
+  ASSERT(memcmp(got, want, (size_t)n * 3) == 0);
+  fg_query_release(&q);
+  free(scores), free(feat), free(op), free(rgb), free(want), free(got);
+  fg_field_free(f);
+}
+
 int main(void) {
+  test_plane_images();
+  test_heatmap_view();
   test_gradient();
   test_shell_alpha();
   test_plane_normals();

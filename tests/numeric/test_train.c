@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "field/checkpoint.h"
+#include "field/image.h"
 #include "field/model.h"
 #include "field/train.h"
 #include "io/frame.h"

@@ -52,6 +52,7 @@
 
 #include "geomeval.h"
 #include "gtvox.h"
+#include "field/image.h"
 #include "io/image.h"
 #include "query/heatmap.h"
 #include "query/colormap.h"

@@ -8,6 +8,7 @@
 #include "core/error.h"
 #include "core/fsutil.h"
 #include "gtvox.h"
+#include "field/image.h"
 #include "io/image.h"
 #include "query/heatmap.h"
 

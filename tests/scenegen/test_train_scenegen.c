@@ -6,6 +6,7 @@
 
 #include "core/fsutil.h"
 #include "core/half.h"
+#include "field/image.h"
 #include "field/model.h"
 #include "field/train.h"
 #include "gt.h"
