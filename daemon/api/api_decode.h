@@ -3,11 +3,8 @@
  * live daemon (tests/fuzz/fuzz_api.c feeds them arbitrary bodies). The handlers in api_*.c
  * call exactly these functions.
  *
- * Two return contracts, kept from the handlers they came from:
- *  - the fg_resp ones answer the 400 themselves (fg_resp_error: status, code, message) and
- *    return -1 when the request is wrong, 0 when it decoded;
- *  - the others return 0 or FG_EINVAL with fg_error_detail() saying what is wrong, and the
- *    handler turns that into its 400.
+ * One return contract: a decoder answers a wrong request itself (fg_resp_error: status,
+ * code, message; a 400 but where it says otherwise) and returns -1; 0 when it decoded.
  * Strings in the decoded structs are borrowed from the JSON body: they live as long as it. */
 #ifndef FG_DAEMON_API_DECODE_H
 #define FG_DAEMON_API_DECODE_H
@@ -30,13 +27,13 @@
 #define FG_API_RENDER_MAX_SIDE 4096
 
 /* POST /v1/scenes: reads the optional workspace, voxel_size and background of body over the
- * SPEC.md tabletop defaults into *p and validates them (fg_scene_params_validate). 0, or
- * FG_EINVAL with a detail. */
-int fg_api_parse_scene_params(json_t *body, fg_scene_params *p);
+ * SPEC.md tabletop defaults into *p and validates them (fg_scene_params_validate; its
+ * reason, such as grid_too_large, decides the status). 0, or -1 after answering. */
+int fg_api_parse_scene_params(json_t *body, fg_scene_params *p, fg_resp *resp);
 
 /* POST /v1/scenes/{s}/train: reads body (an object) over conf's defaults into *p, refusing
- * unknown keys. 0, or FG_EINVAL with a detail. */
-int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p);
+ * unknown keys. 0, or -1 after answering 400. */
+int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p, fg_resp *resp);
 
 typedef enum {
   FG_API_HEATMAP_JSON = 0,

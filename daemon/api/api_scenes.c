@@ -25,8 +25,9 @@ int fg_api_scenes_list(fg_req *req, fg_resp *resp) {
   return 0;
 }
 
-/* Reads the optional fields of a scene creation over the SPEC.md tabletop defaults. */
-int fg_api_parse_scene_params(json_t *body, fg_scene_params *p) {
+/* Reads the optional fields of a scene creation over the SPEC.md tabletop defaults. 0, or
+ * FG_EINVAL with a detail (and, from fg_scene_params_validate, a reason). */
+static int scene_params(json_t *body, fg_scene_params *p) {
   static const fg_scene_params defaults = {
     .workspace_min = {0.10, -0.45, 0.005}, .workspace_max = {0.80, 0.45, 0.35},
     .voxel_size = 0.01, .background = {1, 1, 1}};
@@ -45,6 +46,11 @@ int fg_api_parse_scene_params(json_t *body, fg_scene_params *p) {
   return fg_scene_params_validate(p);
 }
 
+int fg_api_parse_scene_params(json_t *body, fg_scene_params *p, fg_resp *resp) {
+  const int rc = scene_params(body, p);
+  return rc == 0 ? 0 : (fg_api_fail(resp, rc), -1);
+}
+
 int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   json_t *body = fg_api_body_object(req, resp);
   if (!body) return 0;
@@ -53,8 +59,11 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   int rc = fg_json_string(body, "name", &name);
   if (rc == 0) rc = fg_fail(FG_EINVAL, "\"name\" is required: the scene's name, 1 to 64 of "
                             "A-Z a-z 0-9 _ . -");
-  if (rc > 0) rc = fg_api_parse_scene_params(body, &p);
-  if (rc == 0) rc = fg_store_create(req->app->store, name, &p, 0);
+  if (rc > 0 && fg_api_parse_scene_params(body, &p, resp) != 0) {
+    json_decref(body);
+    return 0;
+  }
+  if (rc > 0) rc = fg_store_create(req->app->store, name, &p, 0);
   if (rc != 0) {
     fg_api_fail(resp, rc);
   } else {

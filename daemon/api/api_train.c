@@ -63,7 +63,7 @@ static int json_loss_weight(json_t *obj, const char *key, double *out) {
 }
 
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
-int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
+static int train_params(json_t *body, const fg_conf *conf, fg_job_params *p) {
   static const char *const keys[] = {"steps",        "seed",
                                      "max_seconds",  "holdout_every",
                                      "depth_weight", "distortion_weight", NULL};
@@ -95,6 +95,12 @@ int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p) {
   return 0;
 }
 
+int fg_api_parse_train(json_t *body, const fg_conf *conf, fg_job_params *p, fg_resp *resp) {
+  if (train_params(body, conf, p) == 0) return 0;
+  fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
+  return -1;
+}
+
 int fg_api_train_start(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
@@ -102,10 +108,7 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
   json_t *body = req->body_len == 0 ? json_object() : fg_api_body_object(req, resp);
   if (!body) goto out;
   fg_job_params p;
-  if (fg_api_parse_train(body, req->conf, &p) != 0) {
-    fg_resp_error(resp, 400, "invalid_request", "%s", fg_error_detail());
-    goto out;
-  }
+  if (fg_api_parse_train(body, req->conf, &p, resp) != 0) goto out;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   if (info.n_frames == 0) {

@@ -44,15 +44,11 @@ static void check_resp(fg_resp *resp, int rc) {
   memset(resp, 0, sizeof *resp);
 }
 
-/* A decoder with the fg_fail contract. */
-static void check_rc(int rc) {
-  if (rc != 0 && rc != FG_EINVAL) abort();
-}
-
 static void scene_and_train(json_t *body, fg_scene_params *params) {
+  fg_resp resp = {0};
   fg_scene_params p;
-  int rc = fg_api_parse_scene_params(body, &p);
-  check_rc(rc);
+  int rc = fg_api_parse_scene_params(body, &p, &resp);
+  check_resp(&resp, rc);
   if (rc == 0) {
     finite_or_die(p.workspace_min, 3);
     finite_or_die(p.workspace_max, 3);
@@ -63,8 +59,8 @@ static void scene_and_train(json_t *body, fg_scene_params *params) {
     *params = p; /* the scene the later decoders check against */
   }
   fg_job_params jp;
-  rc = fg_api_parse_train(body, conf(), &jp);
-  check_rc(rc);
+  rc = fg_api_parse_train(body, conf(), &jp, &resp);
+  check_resp(&resp, rc);
   if (rc == 0 && (jp.steps < 1 || jp.steps > FG_TRAIN_MAX_STEPS || jp.holdout_every < 0 ||
                   !(jp.max_seconds >= 0) || !isfinite(jp.depth_weight) ||
                   !isfinite(jp.distortion_weight) || jp.depth_weight < 0 ||
