@@ -24,7 +24,7 @@ void cameras_views_free(entry *e) {
 static int grey(struct fg_decoder *dec, const fg_capture *cap, uint8_t **out, int *w, int *h) {
   const float white[3] = {1, 1, 1};
   fg_image img;
-  FG_TRY(fg_decoder_decode(dec, cap->image, cap->image_len, white, &img));
+  FG_TRY(fg_decoder_decode_sent(dec, cap->image, cap->image_len, white, &img));
   *out = malloc((size_t)img.w * img.h);
   if (!*out) {
     fg_image_release(&img);

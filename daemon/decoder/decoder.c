@@ -626,6 +626,15 @@ int fg_decoder_decode(fg_decoder *d, const void *bytes, size_t len,
   return run_job(d, &io, len, "image");
 }
 
+int fg_decoder_decode_sent(fg_decoder *d, const void *bytes, size_t len,
+                           const float background_rgb[3], fg_image *out) {
+  const int rc = fg_decoder_decode(d, bytes, len, background_rgb, out);
+  if (rc == 0) return 0;
+  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM)
+    return fg_fail_as(rc, "internal_error", "cannot decode the image: %s", fg_error_detail());
+  return fg_fail_as(rc, "invalid_image", "%s", fg_error_detail());
+}
+
 int fg_decoder_decode_depth(fg_decoder *d, const void *bytes, size_t len, double scale,
                             fg_depth_map *out) {
   if (!out) return fg_fail(FG_EINVAL, "fg_decoder_decode_depth: no output depth map");

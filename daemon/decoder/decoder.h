@@ -62,6 +62,12 @@ int fg_decoder_check(fg_decoder *dec);
 int fg_decoder_decode(fg_decoder *dec, const void *bytes, size_t len,
                       const float background_rgb[3], fg_image *out);
 
+/* fg_decoder_decode of an image a client sent: a failure the image caused carries the
+ * reason invalid_image, the server's own (the program missing, a child that cannot be
+ * started or talked to, memory) internal_error, each with the detail. */
+int fg_decoder_decode_sent(fg_decoder *dec, const void *bytes, size_t len,
+                           const float background_rgb[3], fg_image *out);
+
 /* fg_depth_decode (io/depth.h) in a child: a PNG, TIFF or OpenEXR depth image read raw,
  * 16-bit values times scale (metres per unit), float values as metres. Same contract and
  * codes as fg_depth_decode, the child's detail re-raised with fg_fail on the calling thread,

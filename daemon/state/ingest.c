@@ -52,12 +52,8 @@ static int ingest_one(fg_app *app, const fg_ingest_input *in, const fg_scene_par
   float bg[3] = {(float)params->background[0], (float)params->background[1],
                  (float)params->background[2]};
   fg_image img = {0};
-  int rc = fg_decoder_decode(app->decoder, in->image, in->image_len, bg, &img);
-  /* The image's fault (corrupt, too large, or it crashed the decoder) or the server's (the
-   * decoder program is missing or cannot be started). */
-  if (rc == FG_ENOENT || rc == FG_EIO || rc == FG_ENOMEM)
-    return fg_fail_as(rc, "internal_error", "cannot decode the image: %s", fg_error_detail());
-  if (rc != 0) return fg_fail_as(rc, "invalid_image", "%s", fg_error_detail());
+  int rc = fg_decoder_decode_sent(app->decoder, in->image, in->image_len, bg, &img);
+  if (rc != 0) return rc;
   fg_transforms_frame camera = in->camera;
   rc = fg_transforms_complete_camera(&camera, img.w, img.h);
   if (rc != 0) {
