@@ -68,6 +68,8 @@ const fg_route fg_api_routes[] = {
   {"GET", "/v1/cameras/{}", "/v1/cameras/{c}", fg_api_camera_get, 0},
   {"POST", "/v1/cameras/{}/capture", "/v1/cameras/{c}/capture", fg_api_camera_capture,
    FG_ROUTE_OFFLOAD},
+  {"POST", "/v1/cameras/{}/views", "/v1/cameras/{c}/views", fg_api_camera_view_upload,
+   FG_ROUTE_MULTIPART | FG_ROUTE_OFFLOAD | FG_ROUTE_LARGE_BODY},
   {"DELETE", "/v1/cameras/{}/views", "/v1/cameras/{c}/views", fg_api_camera_views_clear, 0},
   {"POST", "/v1/cameras/{}/calibrate", "/v1/cameras/{c}/calibrate", fg_api_camera_calibrate,
    FG_ROUTE_OFFLOAD},

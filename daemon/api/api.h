@@ -56,6 +56,7 @@ int fg_api_calibration_board(fg_req *req, fg_resp *resp);
 int fg_api_cameras_list(fg_req *req, fg_resp *resp);
 int fg_api_camera_get(fg_req *req, fg_resp *resp);
 int fg_api_camera_capture(fg_req *req, fg_resp *resp);
+int fg_api_camera_view_upload(fg_req *req, fg_resp *resp);
 int fg_api_camera_views_clear(fg_req *req, fg_resp *resp);
 int fg_api_camera_calibrate(fg_req *req, fg_resp *resp);
 int fg_api_scene_scan(fg_req *req, fg_resp *resp);

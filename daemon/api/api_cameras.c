@@ -1,6 +1,9 @@
-/* GET /v1/cameras, GET /v1/cameras/{c}, POST /v1/cameras/{c}/capture: the cameras of
- * [camera NAME], what their calibration says, and a capture. */
+/* GET /v1/cameras, GET /v1/cameras/{c}, POST /v1/cameras/{c}/capture, POST and DELETE
+ * /v1/cameras/{c}/views: the cameras of [camera NAME], what their calibration says, a
+ * capture, and the views kept for the next calibration. */
 #include "api.h"
+
+#include "core/error.h"
 
 #include "cell/cameras.h"
 #include "state/json.h"
@@ -155,6 +158,59 @@ int fg_api_camera_capture(fg_req *req, fg_resp *resp) {
   }
   fg_resp_json(resp, 200, o);
   fg_capture_release(&cap);
+  return 0;
+}
+
+/* The parts of a view upload: a non-empty image and a meta object with robot_pose. 0, or
+ * -1 after a 400. */
+static int parse_view_upload(fg_req *req, fg_resp *resp, fg_capture *cap) {
+  memset(cap, 0, sizeof *cap);
+  const fg_part *image = fg_req_part(req, "image"), *meta_part = fg_req_part(req, "meta");
+  for (int i = 0; i < req->n_parts; i++)
+    if (strcmp(req->parts[i].name, "image") != 0 && strcmp(req->parts[i].name, "meta") != 0)
+      return fg_resp_error(resp, 400, "invalid_request", "unexpected part '%s'; a view is an "
+                           "'image' and a 'meta' part", req->parts[i].name), -1;
+  if (!image || image->len == 0 || !meta_part)
+    return fg_resp_error(resp, 400, "missing_part", "a view needs a non-empty 'image' part (the "
+                         "photo of the board) and a 'meta' part ({\"robot_pose\": the TCP pose "
+                         "when it was taken})"), -1;
+  char err[256];
+  json_t *meta = fg_json_parse(meta_part->data, meta_part->len, err, sizeof err);
+  if (!meta)
+    return fg_resp_error(resp, 400, "malformed_json", "the 'meta' part is not valid JSON: %s",
+                         err), -1;
+  static const char *const keys[] = {"robot_pose", NULL};
+  const char *unknown = fg_json_unknown_key(meta, keys);
+  int rc = 0;
+  if (!json_is_object(meta) || unknown)
+    rc = (fg_resp_error(resp, 400, "invalid_request", "the 'meta' part is an object with only "
+                        "\"robot_pose\""), -1);
+  else if (fg_json_pose_parse(json_object_get(meta, "robot_pose"), "robot_pose", cap->T_base_tcp,
+                              NULL) != 0)
+    rc = (fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1);
+  json_decref(meta);
+  cap->image = (uint8_t *)image->data; /* borrowed: the request's */
+  cap->image_len = image->len;
+  cap->has_robot_pose = 1;
+  return rc;
+}
+
+/* POST /v1/cameras/{c}/views: a calibration view from a robot stack that moves the robot
+ * itself: the photo and the TCP pose it was taken at. */
+int fg_api_camera_view_upload(fg_req *req, fg_resp *resp) {
+  const fg_conf_camera *cam = camera_param(req, resp);
+  fg_capture cap;
+  if (!cam || parse_view_upload(req, resp, &cap) != 0) return 0;
+  int corners = 0, kept = 0;
+  int rc = fg_cameras_view_add(req->app->cameras, req->app->decoder, &req->conf->board, cam, &cap,
+                               &corners, &kept);
+  if (rc < 0) return fg_api_fail(resp, rc);
+  if (!kept)
+    return fg_resp_error(resp, 422, "board_not_found", "the view shows %d of the board's corners; "
+                         "a view needs %d or more (the whole board in focus, no glare)", corners,
+                         FG_CALIB_MIN_CORNERS);
+  fg_resp_json(resp, 201, json_pack("{s:s, s:i, s:i}", "camera", cam->name, "board_corners",
+                                    corners, "views_kept", kept));
   return 0;
 }
 

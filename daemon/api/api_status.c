@@ -27,7 +27,7 @@ static const code_status table[] = {
   {"too_many_demos", 409},     {"grasp_stale", 409},         {"scene_exists", 409},
   {"training_in_progress", 409}, {"no_frames", 409},           {"job_finished", 409},           {"robot_busy", 409},
   {"robot_stopped", 409},        {"robot_moved", 409},         {"not_calibrated", 409},
-  {"too_many_views", 409},       {"calibration_rejected", 422},        {"gripper_holding", 409},     {"gripper_not_activated", 409},
+  {"too_many_views", 409},       {"calibration_rejected", 422},  {"board_not_found", 422},        {"gripper_holding", 409},     {"gripper_not_activated", 409},
   {"unsupported_media_type", 415}, {"motion_limit", 422},         {"internal_error", 500},      {"robot_unknown", 502},
   {"robot_failed", 502},         {"modbus_exception", 502},    {"gripper_fault", 502},
   {"gripper_error", 502},        {"camera_unavailable", 502},  {"tcp_pose_invalid", 502},        {"memory_limit", 503},        {"robot_disconnected", 503},

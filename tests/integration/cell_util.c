@@ -67,3 +67,25 @@ void cu_look_at(const double eye[3], const double target[3], double roll_deg, do
   }
   fg_quat_from_rotmat(R, q);
 }
+
+uint8_t *cu_unbase64(const char *s, size_t *len) {
+  static const char *const abc =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  const size_t n = strlen(s);
+  uint8_t *out = malloc(n / 4 * 3 + 3);
+  ASSERT(out);
+  uint32_t acc = 0;
+  int bits = 0;
+  *len = 0;
+  for (size_t i = 0; i < n && s[i] != '='; i++) {
+    const char *p = strchr(abc, s[i]);
+    ASSERT(p && s[i]);
+    acc = acc << 6 | (uint32_t)(p - abc);
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out[(*len)++] = (uint8_t)(acc >> bits);
+    }
+  }
+  return out;
+}

@@ -4,6 +4,9 @@
 #ifndef FG_IT_CELL_UTIL_H
 #define FG_IT_CELL_UTIL_H
 
+#include <stddef.h>
+#include <stdint.h>
+
 #include "simproc.h"
 
 /* Starts the simulator (simproc_init first) on tests/sim/cells/blocks.xml at time scale 0,
@@ -15,5 +18,9 @@ int cu_sim_start(simproc *sim, const char *const *extra);
  * z = 0) and its y towards world -z, turned by roll_deg about its z: a camera's looking at
  * target (OpenCV convention), or a tool's pointing there. */
 void cu_look_at(const double eye[3], const double target[3], double roll_deg, double q[4]);
+
+/* Standard base64 (padding allowed), as captures carry their images, into a malloc'd buffer;
+ * its length in *len. */
+uint8_t *cu_unbase64(const char *s, size_t *len);
 
 #endif

@@ -11,29 +11,6 @@
 #include <stdio.h>
 #include <string.h>
 
-/* Standard base64 (padding allowed) into a malloc'd buffer; its length in *len. */
-static uint8_t *unbase64(const char *s, size_t *len) {
-  static const char *const abc =
-      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  const size_t n = strlen(s);
-  uint8_t *out = malloc(n / 4 * 3 + 3);
-  ASSERT(out);
-  uint32_t acc = 0;
-  int bits = 0;
-  *len = 0;
-  for (size_t i = 0; i < n && s[i] != '='; i++) {
-    const char *p = strchr(abc, s[i]);
-    ASSERT(p && s[i]);
-    acc = acc << 6 | (uint32_t)(p - abc);
-    bits += 6;
-    if (bits >= 8) {
-      bits -= 8;
-      out[(*len)++] = (uint8_t)(acc >> bits);
-    }
-  }
-  return out;
-}
-
 /* A PNG's size from its header. */
 static void png_size(const uint8_t *p, size_t len, int *w, int *h, int *depth) {
   ASSERT(len > 26 && memcmp(p, "\x89PNG\r\n\x1a\n", 8) == 0);
@@ -85,11 +62,11 @@ int main(int argc, char **argv) {
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "image_type")), "PNG");
   size_t len;
   int pw, ph, depth;
-  uint8_t *png = unbase64(json_string_value(json_object_get(r->json, "image")), &len);
+  uint8_t *png = cu_unbase64(json_string_value(json_object_get(r->json, "image")), &len);
   png_size(png, len, &pw, &ph, &depth);
   ASSERT(pw == 320 && ph == 240 && depth == 8);
   free(png);
-  png = unbase64(json_string_value(json_object_get(r->json, "depth")), &len);
+  png = cu_unbase64(json_string_value(json_object_get(r->json, "depth")), &len);
   png_size(png, len, &pw, &ph, &depth);
   ASSERT(pw == 320 && ph == 240 && depth == 16);
   free(png);

@@ -1,7 +1,9 @@
 /* Calibration from a bare cell, over HTTP, against the simulator's camera: a mount, intrinsics
  * and distortion that fieldgripd is not told, a ChArUco board on the table. The robot is moved
  * (POST /v1/robot/commands) through views of the board; each capture with
- * "calibration_view" keeps its corners; the intrinsics come back within 0.5 % (focal) and
+ * "calibration_view" keeps its corners, and so does each view uploaded with its robot pose
+ * (POST /v1/cameras/{c}/views; every other view comes that way, and a view upload's bad
+ * requests are refused with nothing kept); the intrinsics come back within 0.5 % (focal) and
  * 1 px (principal point), the mount within 1 mm and 0.2 degrees; a capture then gives the
  * camera's pose. Refusals: no views, too few, a degenerate motion (SPEC's bad input). Then the
  * eye-to-hand case: a fixed camera, the board held by the tool, T_base_cam within the same
@@ -15,6 +17,7 @@
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* The truth, on the simulator's command line only. */
@@ -56,14 +59,74 @@ static void move_to(const double p[3], const double q[4]) {
 
 static const char *g_cam = "wrist"; /* the camera the helpers below use */
 
+/* Keeps a calibration view and returns the board corners it shows: every other one as
+ * fieldgripd captures it ("calibration_view"), the others as a robot stack that moves the
+ * robot itself would give it: captured plainly, then uploaded to POST /v1/cameras/{c}/views
+ * with the TCP pose read with it. */
 static int capture_view(void) {
+  static int n;
   char path[128];
   snprintf(path, sizeof path, "/v1/cameras/%s/capture", g_cam);
-  h_resp *r = h_post_json(path, "{\"calibration_view\": true}");
+  const int upload = n++ % 2;
+  h_resp *r = h_post_json(path, upload ? "" : "{\"calibration_view\": true}");
   ASSERT_STATUS(r, 200);
-  const int corners = (int)json_integer_value(json_object_get(r->json, "board_corners"));
+  if (!upload) {
+    const int corners = (int)json_integer_value(json_object_get(r->json, "board_corners"));
+    h_resp_free(r);
+    return corners;
+  }
+  size_t len;
+  uint8_t *png = cu_unbase64(json_string_value(json_object_get(r->json, "image")), &len);
+  char *pose = json_dumps(json_object_get(r->json, "robot_pose"), JSON_COMPACT);
+  char *meta = h_fmt("{\"robot_pose\": %s}", pose);
   h_resp_free(r);
+  snprintf(path, sizeof path, "/v1/cameras/%s/views", g_cam);
+  r = h_upload(path, png, len, meta, NULL, 0);
+  int corners = 0;
+  if (r->status == 422) {
+    ASSERT_HTTP_ERROR(r, 422, "board_not_found");
+  } else {
+    ASSERT_STATUS(r, 201);
+    corners = (int)json_integer_value(json_object_get(r->json, "board_corners"));
+  }
+  h_resp_free(r);
+  free(meta), free(pose), free(png);
   return corners;
+}
+
+/* A view upload's bad requests: each refused, nothing kept. */
+static void bad_view_uploads(void) {
+  h_resp *r = h_get("/v1/cameras/wrist");
+  const json_int_t before = json_integer_value(json_object_get(r->json, "views_kept"));
+  h_resp_free(r);
+  static const char pose[] = "{\"robot_pose\": {\"position\": [0.3, 0, 0.4], "
+                             "\"quaternion\": [0, 1, 0, 0]}}";
+  uint8_t *noise;
+  size_t noise_len;
+  h_png(64, 48, 3, 8, 7, 1, &noise, &noise_len);
+  r = h_upload("/v1/cameras/wrist/views", noise, noise_len, NULL, NULL, 0);
+  ASSERT_HTTP_ERROR(r, 400, "missing_part");
+  h_resp_free(r);
+  r = h_upload("/v1/cameras/wrist/views", noise, noise_len, "{\"robot_pose\": [1, 2]}", NULL, 0);
+  ASSERT_HTTP_ERROR(r, 400, "invalid_pose");
+  h_resp_free(r);
+  r = h_upload("/v1/cameras/wrist/views", noise, noise_len, "{\"pose\": 1}", NULL, 0);
+  ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+  h_resp_free(r);
+  r = h_upload("/v1/cameras/wrist/views", "not an image", 12, pose, NULL, 0);
+  ASSERT_HTTP_ERROR(r, 400, "invalid_image");
+  h_resp_free(r);
+  r = h_upload("/v1/cameras/wrist/views", noise, noise_len, pose, NULL, 0);
+  ASSERT_HTTP_ERROR(r, 422, "board_not_found");
+  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "shows 0 of the board's corners");
+  h_resp_free(r);
+  r = h_upload("/v1/cameras/nocam/views", noise, noise_len, pose, NULL, 0);
+  ASSERT_HTTP_ERROR(r, 404, "camera_not_found");
+  h_resp_free(r);
+  r = h_get("/v1/cameras/wrist");
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "views_kept")), before);
+  h_resp_free(r);
+  free(noise);
 }
 
 static h_resp *calibrate(const char *kind) {
@@ -98,6 +161,7 @@ static void hand_camera(void) {
   h_resp *r = calibrate("intrinsics");
   ASSERT_HTTP_ERROR(r, 400, "not_enough_views");
   h_resp_free(r);
+  bad_view_uploads();
 
   /* the board's centre: its frame at (0.32, -0.20) turned 15 degrees, 0.21 x 0.15 m */
   const double yaw = 15 * M_PI / 180, bx = 0.105, by = 0.075;
