@@ -1,5 +1,6 @@
 /* POST /v1/scenes/{s}/scan: a scan the robot drives (cell/scan.h). */
 #include "api.h"
+#include "api_decode.h"
 
 #include "cell/scan.h"
 #include "state/json.h"
@@ -9,11 +10,27 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* "train": true (conf's defaults), false, or a training's body (POST .../train) into *r.
+ * 1 when decoded, 0 after a 400. */
+static int parse_scan_train(json_t *body, const fg_conf *conf, fg_scan_request *r,
+                            fg_resp *resp) {
+  json_t *t = json_object_get(body, "train");
+  if (!t || json_is_false(t)) return 1;
+  if (!json_is_true(t) && !json_is_object(t))
+    return fg_resp_error(resp, 400, "invalid_request", "\"train\": true, false or a "
+                         "training's body ({\"steps\": N, ...})"), 0;
+  json_t *empty = json_is_true(t) ? json_object() : NULL;
+  const int rc = fg_api_parse_train(empty ? empty : t, conf, &r->train_params, resp);
+  json_decref(empty);
+  r->train = rc == 0;
+  return rc == 0;
+}
+
 /* {"camera": NAME, "viewpoints": N | [poses], "radius_m", "elevations_deg": [lo, hi],
- * "settle_ms"} into *r. 1 when decoded, 0 after a 400. */
-static int parse_scan(json_t *body, fg_scan_request *r, fg_resp *resp) {
+ * "settle_ms", "train"} into *r. 1 when decoded, 0 after a 400. */
+static int parse_scan(json_t *body, const fg_conf *conf, fg_scan_request *r, fg_resp *resp) {
   static const char *const keys[] = {"camera", "viewpoints", "radius_m", "elevations_deg",
-                                     "settle_ms", NULL};
+                                     "settle_ms", "train", NULL};
   memset(r, 0, sizeof *r);
   r->n = 30;
   r->el_min_deg = 35;
@@ -22,7 +39,8 @@ static int parse_scan(json_t *body, fg_scan_request *r, fg_resp *resp) {
   const char *unknown = fg_json_unknown_key(body, keys), *cam = NULL;
   if (unknown)
     return fg_resp_error(resp, 400, "invalid_request", "unknown key \"%s\"; a scan takes "
-                         "camera, viewpoints, radius_m, elevations_deg, settle_ms", unknown), 0;
+                         "camera, viewpoints, radius_m, elevations_deg, settle_ms, train",
+                         unknown), 0;
   if (fg_json_string(body, "camera", &cam) != 1 || strlen(cam) > FG_CAMERA_NAME_MAX)
     return fg_resp_error(resp, 400, "invalid_request", "\"camera\": the name of a [camera "
                          "NAME] on the tool is required"), 0;
@@ -71,6 +89,11 @@ static int parse_scan(json_t *body, fg_scan_request *r, fg_resp *resp) {
   r->el_min_deg = e[0];
   r->el_max_deg = e[1];
   r->settle_ms = (int)settle;
+  if (!parse_scan_train(body, conf, r, resp)) {
+    free(r->T_base_tcp);
+    r->T_base_tcp = NULL;
+    return 0;
+  }
   return 1;
 }
 
@@ -79,7 +102,7 @@ int fg_api_scene_scan(fg_req *req, fg_resp *resp) {
   if (!s) return 0;
   json_t *body = fg_api_body_object(req, resp);
   fg_scan_request r;
-  if (body && parse_scan(body, &r, resp)) {
+  if (body && parse_scan(body, req->conf, &r, resp)) {
     fg_job_info job;
     const int rc = fg_scan_submit(req->app, req->conf, s, &r, &job);
     free(r.T_base_tcp); /* NULL once the job took them */

@@ -13,6 +13,7 @@
 #include "robot/audit.h"
 #include "frames.h"
 #include "state/ingest.h"
+#include "state/job_train.h"
 #include "state/json.h"
 
 /* ---------------------------------------------------------------- viewpoints */
@@ -179,10 +180,12 @@ static void scan_run(fg_job *job, fg_app *app, void *params) {
       fg_job_fail(job, "viewpoint %d of %d: %s", stored + skipped, p->n, fg_error_detail());
     else if (stored == 0)
       fg_job_fail(job, "no viewpoint was reachable: the robot refused or failed all %d", p->n);
-    else if (fg_job_commit_begin(job) == 0)
+    else if (!p->train && fg_job_commit_begin(job) == 0)
       fg_job_finish(job, FG_JOB_DONE);
   }
   fg_app_conf_release(app, conf);
+  if (p->train && rc == 0 && stored > 0 && !fg_job_should_stop(job))
+    fg_job_kind_train.run(job, app, NULL); /* it finishes the job */
 }
 
 const fg_job_kind fg_job_kind_scan = {"scan", scan_run, params_free};
@@ -211,7 +214,7 @@ int fg_scan_submit(fg_app *app, const fg_conf *conf, fg_scene *s, fg_scan_reques
                        req->n, req->radius_m, req->el_min_deg, req->el_max_deg,
                        req->T_base_tcp);
   }
-  const fg_job_params jp = {.steps = req->n};
+  const fg_job_params jp = req->train ? req->train_params : (fg_job_params){.steps = req->n};
   fg_scan_request *own = malloc(sizeof *own);
   if (!own) return fg_fail(FG_ENOMEM, "a scan");
   *own = *req;

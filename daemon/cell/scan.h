@@ -3,7 +3,9 @@
  * through the one gate to the robot (fg_robot_execute: limits, latch, audit), lets it settle,
  * captures with the TCP pose read around it, and stores each frame with its pose in the base
  * frame. A viewpoint the robot refuses (outside the limits, or it answers failed: out of
- * reach) is skipped and counted; a scan that reaches none fails. */
+ * reach) is skipped and counted; a scan that reaches none fails. A scan may go on to train the
+ * scene in the same job (the "train" kind's run, job_train.h): the job then shows the
+ * training's params, phases and steps, and ends when the training does. */
 #ifndef FG_DAEMON_CELL_SCAN_H
 #define FG_DAEMON_CELL_SCAN_H
 
@@ -21,6 +23,8 @@ typedef struct fg_scan_request {
   double radius_m;       /* the cap's: camera to the workspace's centre; 0: from the view */
   double el_min_deg, el_max_deg; /* the cap's elevations, default 35 .. 75 */
   int settle_ms;         /* after each motion, default 300 */
+  int train;             /* then train the scene in the same job, with train_params */
+  fg_job_params train_params;
 } fg_scan_request;
 
 extern const fg_job_kind fg_job_kind_scan;

@@ -213,20 +213,34 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   free(png);
 
-  /* a viewpoint outside the motion limits is skipped and counted */
-  r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, \"viewpoints\": ["
-           "{\"position\": [0.45, -0.05, 0.40], \"quaternion\": [0, 1, 0, 0]}, "
+  /* a bad training in a scan: refused before anything moves */
+  r = scan("{\"camera\": \"wrist\", \"train\": {\"steps\": 0}}");
+  ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+  h_resp_free(r);
+  r = scan("{\"camera\": \"wrist\", \"train\": 3}");
+  ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+  h_resp_free(r);
+
+  /* a viewpoint outside the motion limits is skipped and counted; then the same job trains
+   * the scene on its 14 frames */
+  r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, \"train\": {\"steps\": 4}, "
+           "\"viewpoints\": [{\"position\": [0.45, -0.05, 0.40], \"quaternion\": [0, 1, 0, 0]}, "
            "{\"position\": [1.80, 0, 0.40], \"quaternion\": [0, 1, 0, 0]}]}");
   ASSERT_STATUS(r, 202);
   snprintf(id, sizeof id, "%s", json_string_value(json_object_get(r->json, "job")));
   h_resp_free(r);
   r = wait_job(id);
   ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "done");
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "kind")), "scan");
   ASSERT_EQ(json_integer_value(json_object_get(r->json, "skipped")), 1);
-  ASSERT_EQ(json_integer_value(json_object_get(r->json, "frames")), 1);
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "step")), 4); /* the training's */
+  ASSERT_EQ(json_integer_value(json_object_get(r->json, "frames")), 14);
   h_resp_free(r);
   r = h_get("/v1/scenes/table/frames");
   ASSERT_EQ(json_array_size(json_object_get(r->json, "frames")), 14);
+  h_resp_free(r);
+  r = h_get("/v1/scenes/table");
+  ASSERT(json_is_true(json_object_get(r->json, "trained")));
   h_resp_free(r);
 
   h_stop();
