@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "core/pose.h"
@@ -88,4 +89,58 @@ uint8_t *cu_unbase64(const char *s, size_t *len) {
     }
   }
   return out;
+}
+
+/* The truth as the daemon keeps a calibration (cell/cameras.c). */
+static const char *const CALIBRATION =
+    "{\"intrinsics\": {\"w\": 480, \"h\": 360, \"fx\": 600, \"fy\": 598, \"cx\": 318.2, "
+    "\"cy\": 241.4, \"k\": [-0.05, 0.01, 0.0005, -0.0007], \"rms_px\": 0.1, \"views\": 16, "
+    "\"at_ms\": 1}, \"mount\": {\"matrix\": [[1, 0, 0, 0.035], [0, %.9f, %.9f, 0.01], "
+    "[0, %.9f, %.9f, -0.06], [0, 0, 0, 1]], \"method\": \"park\", \"spread_mm\": 0.2, "
+    "\"spread_deg\": 0.05, \"rms_px\": 0.15, \"views\": 14, \"at_ms\": 1}}";
+
+void cu_calibration_truth(const char *name) {
+  char *dir = h_fmt("%s/cameras", h_state_dir()), *path = h_fmt("%s/%s.json", dir, name);
+  h_mkdirs(dir);
+  const double a = 3 * M_PI / 180;
+  char *text = h_fmt(CALIBRATION, cos(a), -sin(a), sin(a), cos(a));
+  h_write_file(path, text, strlen(text));
+  free(text);
+  free(path);
+  free(dir);
+}
+
+void cu_frame_errors(json_t *frames, const char *cam_log, double *worst_mm, double *worst_deg) {
+  FILE *f = fopen(cam_log, "r");
+  ASSERT(f);
+  *worst_mm = *worst_deg = 0;
+  for (size_t i = 0; i < json_array_size(frames); i++) {
+    char kind[8];
+    double t[7];
+    ASSERT_EQ(fscanf(f, "%7s %lf %lf %lf %lf %lf %lf %lf", kind, &t[0], &t[1], &t[2], &t[3],
+                     &t[4], &t[5], &t[6]), 8);
+    json_t *m = json_object_get(json_array_get(frames, i), "transform_matrix");
+    double M[16];
+    for (int row = 0; row < 4; row++)
+      for (int c = 0; c < 4; c++)
+        M[4 * row + c] = json_number_value(json_array_get(json_array_get(m, (size_t)row), (size_t)c));
+    /* OpenGL's camera axes to OpenCV's: y and z negated */
+    for (int row = 0; row < 3; row++) {
+      M[4 * row + 1] = -M[4 * row + 1];
+      M[4 * row + 2] = -M[4 * row + 2];
+    }
+    const double dmm = sqrt(pow(M[3] - t[0], 2) + pow(M[7] - t[1], 2) + pow(M[11] - t[2], 2)) * 1e3;
+    /* the truth's rotation from its quaternion, compared column by column */
+    const double w = t[3], x = t[4], y = t[5], z = t[6];
+    const double R[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)};
+    double tr = 0; /* trace of R_truth^T R_frame */
+    for (int row = 0; row < 3; row++)
+      for (int c = 0; c < 3; c++) tr += R[3 * row + c] * M[4 * row + c];
+    const double deg = acos(fmax(-1, fmin(1, (tr - 1) / 2))) * 180 / M_PI;
+    if (dmm > *worst_mm) *worst_mm = dmm;
+    if (deg > *worst_deg) *worst_deg = deg;
+  }
+  fclose(f);
 }

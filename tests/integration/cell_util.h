@@ -19,6 +19,22 @@ int cu_sim_start(simproc *sim, const char *const *extra);
  * target (OpenCV convention), or a tool's pointing there. */
 void cu_look_at(const double eye[3], const double target[3], double roll_deg, double q[4]);
 
+/* The simulator's camera of the scan tests: its intrinsics and distortion (--camera) and its
+ * mount on the tool (--camera-mount: 3 degrees about x). */
+#define CU_SCAN_CAMERA "600 598 318.2 241.4 480 360 -0.05 0.01 0.0005 -0.0007"
+#define CU_SCAN_MOUNT "0.035 0.01 -0.06 0.99966 0.02618 0 0"
+
+/* Writes that camera's true calibration as camera `name`'s into the state dir, as a
+ * calibration would have left it; before h_start. */
+void cu_calibration_truth(const char *name);
+
+/* Each frame of frames (GET /v1/scenes/{s}/frames' list, OpenGL convention) against the
+ * simulator's true camera pose of the image it served (its --camera-log, line by line from
+ * the first): the worst position error in mm and rotation error in degrees. */
+struct json_t;
+void cu_frame_errors(struct json_t *frames, const char *cam_log, double *worst_mm,
+                     double *worst_deg);
+
 /* Standard base64 (padding allowed), as captures carry their images, into a malloc'd buffer;
  * its length in *len. */
 uint8_t *cu_unbase64(const char *s, size_t *len);
