@@ -4,7 +4,7 @@
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [grasp_physics]
 #                           [geometry] [depth_throughput] [fox] [http_idle] [load] [soak]
-#                           [viewer] [calibration]
+#                           [viewer] [calibration] [scan]
 #   (no names: all of them but fox and grasp_physics; train takes about 6 minutes, throughput
 #   about 3; grasp several, most of them in the PyTorch peer; grasp_physics about 30)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -120,6 +120,11 @@
 #           median and worst of BENCH_CALIBRATION_TRIALS (default 10) draws, and the time of a
 #           calibration (targets at 20 views: focal <= 0.5 %, principal point <= 1 px, mount
 #           <= 1 mm and 0.2 deg)
+#   scan    a scan the robot drives in the simulator (bench_scan): 30 viewpoints on a cap
+#           0.45 m from the workspace's centre with the default settle_ms (300), from the
+#           request to the job's end:
+#           seconds, per viewpoint, frames stored and skipped, and the worst frame pose error
+#           against the simulator's truth (targets: per view <= 1 s, <= 2 mm, <= 0.3 deg)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -140,7 +145,7 @@ fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer calibration)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer calibration scan)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -672,6 +677,11 @@ bench_viewer() {
     "$build/tests/scenegen/fieldgrip-scenegen" --loads "${BENCH_VIEWER_LOADS:-5}"
 }
 
+bench_scan() {
+  FG_SOURCE_DIR=$src run_self_checked scan none scan "$daemon" "$build/sim/fieldgrip-sim" \
+    "${BENCH_SCAN_VIEWPOINTS:-30}"
+}
+
 bench_fox() {
   local fox=${FG_FOX_DIR:-} v out line psnr pass
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
@@ -712,7 +722,8 @@ for b in "${benches[@]}"; do
     soak) bench_soak ;;
     viewer) bench_viewer ;;
     calibration) bench_calibration ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration)" >&2; exit 2 ;;
+    scan) bench_scan ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration, scan)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
