@@ -1,6 +1,8 @@
 /* The cameras' calibrations and captures (cameras.h). */
 #include "cameras_priv.h"
 
+#include "config.h"
+
 #include <curl/curl.h>
 #include <dirent.h>
 #include <jansson.h>
@@ -9,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "core/clock.h"
 #include "core/error.h"
@@ -125,6 +128,24 @@ static void load_all(fg_cameras *c) {
   closedir(d);
 }
 
+/* fieldgrip-grab beside the running program (the build tree, or an install that keeps them
+ * together), else where it is installed. */
+static void find_grabber(fg_cameras *c) {
+  char exe[PATH_MAX];
+  const ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+  if (n > 0) {
+    exe[n] = 0;
+    char *slash = strrchr(exe, '/');
+    static const char name[] = "fieldgrip-grab";
+    if (slash && (size_t)(slash + 1 - exe) + sizeof name <= sizeof c->grabber) {
+      memcpy(c->grabber, exe, (size_t)(slash + 1 - exe));
+      memcpy(c->grabber + (slash + 1 - exe), name, sizeof name);
+      if (access(c->grabber, X_OK) == 0) return;
+    }
+  }
+  snprintf(c->grabber, sizeof c->grabber, "%s", FG_LIBEXECDIR "/fieldgrip/fieldgrip-grab");
+}
+
 int fg_cameras_new(fg_cameras **out, const char *state_dir) {
   *out = NULL;
   curl_global_init(CURL_GLOBAL_DEFAULT);
@@ -142,6 +163,7 @@ int fg_cameras_new(fg_cameras **out, const char *state_dir) {
     return rc;
   }
   pthread_mutex_init(&c->lock, NULL);
+  find_grabber(c);
   load_all(c);
   *out = c;
   return 0;
@@ -214,13 +236,13 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
     FG_TRY(robot_pose(robot, out->T_base_tcp));
   else if (fg_robot_svc_has_robot(robot))
     posed = robot_pose(robot, out->T_base_tcp) == 0;
-  int rc = fg_snapshot_fetch(cam->source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES, &out->image,
+  int rc = fg_snapshot_fetch(c->grabber, cam->source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES, &out->image,
                              &out->image_len);
   if (rc == 0 && !fg_image_sniff(out->image, out->image_len))
     rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent %zu bytes that are no image "
                     "(PNG, JPEG, EXR or TIFF)", cam->source, out->image_len);
   if (rc == 0 && cam->depth_source) {
-    rc = fg_snapshot_fetch(cam->depth_source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES,
+    rc = fg_snapshot_fetch(c->grabber, cam->depth_source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES,
                            &out->depth, &out->depth_len);
     if (rc == 0 && !fg_image_sniff(out->depth, out->depth_len))
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no image",

@@ -110,8 +110,15 @@ int fg_camera_calibrate(fg_cameras *c, const fg_charuco_board *b, const fg_conf_
 
 /* ---- snapshot.c */
 
-/* Fetches one image from source (an http(s):// URL) within timeout_ms, at most max_bytes. FG_ETIMEDOUT or FG_EUNAVAIL (camera_unavailable) with what went wrong. */
-int fg_snapshot_fetch(const char *source, int timeout_ms, size_t max_bytes, uint8_t **out,
+/* A source that names a V4L2 device: v4l2:/dev/videoN. */
+#define FG_SOURCE_V4L2 "v4l2:"
+
+/* Fetches one image from source within timeout_ms, at most max_bytes: an http(s):// URL's
+ * answer, or for v4l2:DEVICE a frame (PNG) the program grabber (fieldgrip-grab) writes, run
+ * as `grabber DEVICE` and killed at the timeout. FG_ETIMEDOUT (camera_timeout) or FG_EUNAVAIL
+ * (camera_unavailable) with what went wrong (for a grabber, the last line it printed). */
+int fg_snapshot_fetch(const char *grabber, const char *source, int timeout_ms, size_t max_bytes,
+                      uint8_t **out,
                       size_t *len);
 
 #endif

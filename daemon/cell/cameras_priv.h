@@ -3,6 +3,7 @@
 #ifndef FG_DAEMON_CELL_CAMERAS_PRIV_H
 #define FG_DAEMON_CELL_CAMERAS_PRIV_H
 
+#include <limits.h>
 #include <pthread.h>
 
 #include "cameras.h"
@@ -28,6 +29,7 @@ typedef struct entry {
 
 struct fg_cameras {
   char *dir; /* <state>/cameras */
+  char grabber[PATH_MAX]; /* fieldgrip-grab: beside the daemon, else the installed one */
   pthread_mutex_t lock; /* guards e and n */
   entry e[MAX_CAMERAS];
   int n;

@@ -79,18 +79,32 @@ static int source_ok(const char *v) {
   return strlen(v) > 8;
 }
 
+/* A device path: /dev/ and a name of printable characters without spaces. */
+static int device_ok(const char *v) {
+  if (strncmp(v, "/dev/", 5) != 0 || strlen(v) < 6 || strstr(v, "/../")) return 0;
+  for (const char *p = v; *p; p++)
+    if (isspace((unsigned char)*p) || !isprint((unsigned char)*p)) return 0;
+  return 1;
+}
+
 int conf_set_camera(conf_parse *st, int k, const char *name, const char *v) {
   fg_conf_camera *cam = &st->conf->cameras[st->camera];
   switch (k) {
   case K_SOURCE:
   case K_DEPTH_SOURCE:
-    if (strncmp(v, "v4l2:", 5) == 0)
+    if (strncmp(v, "v4l2:", 5) == 0) {
+      if (k == K_DEPTH_SOURCE)
+        return conf_fail_at(st, st->line, st->sec_text, name,
+                            "a V4L2 device gives 8-bit frames, not depth; serve the depth "
+                            "images as HTTP snapshots (http://HOST:PORT/PATH)");
+      if (!device_ok(v + 5))
+        return conf_fail_at(st, st->line, st->sec_text, name,
+                            "expected v4l2:/dev/videoN (a V4L2 device's path), got '%s'", v);
+    } else if (!source_ok(v)) {
       return conf_fail_at(st, st->line, st->sec_text, name,
-                          "V4L2 devices are not supported yet; serve the camera's frames as "
-                          "HTTP snapshots (http://HOST:PORT/PATH)");
-    if (!source_ok(v))
-      return conf_fail_at(st, st->line, st->sec_text, name,
-                          "expected a snapshot URL (http://HOST:PORT/PATH), got '%s'", v);
+                          "expected a snapshot URL (http://HOST:PORT/PATH) or v4l2:/dev/videoN, "
+                          "got '%s'", v);
+    }
     return conf_set_string(st, k == K_SOURCE ? &cam->source : &cam->depth_source, v);
   case K_DEPTH_SCALE: {
     double x;
@@ -122,6 +136,7 @@ void conf_check_cell(conf_parse *st) {
       char sec[96];
       snprintf(sec, sizeof sec, "camera %s", c->cameras[i].name);
       conf_fail_at(st, st->camera_meta[i].header_line, sec, "source",
-                   "missing; a camera needs source = http://HOST:PORT/PATH");
+                   "missing; a camera needs source = http://HOST:PORT/PATH or "
+                   "v4l2:/dev/videoN");
     }
 }

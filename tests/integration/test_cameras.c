@@ -1,7 +1,8 @@
 /* The cameras over HTTP against the simulator's camera on the tool (physics mode): GET
  * /v1/cameras and /v1/cameras/{c} before any calibration, a capture (the image and the depth
  * image as the camera served them, the robot's TCP pose read around it), and what fails:
- * an unknown camera, a camera that does not answer, a capture with keys.
+ * an unknown camera, a camera that does not answer, a V4L2 device that is not there (the
+ * grabber child's message), a capture with keys.
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "cell_util.h"
 #include "robot_util.h"
@@ -32,7 +33,8 @@ int main(int argc, char **argv) {
            "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n"
            "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
            "depth_source = http://127.0.0.1:%d/depth.png\n"
-           "[camera dead]\nsource = http://127.0.0.1:1/rgb.png\nmount = fixed\n",
+           "[camera dead]\nsource = http://127.0.0.1:1/rgb.png\nmount = fixed\n"
+           "[camera usb]\nsource = v4l2:/dev/video-none\nmount = fixed\n",
            sim.port, cam_port, cam_port);
   h_write_config(conf);
   h_start();
@@ -42,7 +44,7 @@ int main(int argc, char **argv) {
   h_resp *r = h_get("/v1/cameras");
   ASSERT_STATUS(r, 200);
   json_t *list = json_object_get(r->json, "cameras");
-  ASSERT_EQ(json_array_size(list), 2);
+  ASSERT_EQ(json_array_size(list), 3);
   json_t *w = json_array_get(list, 0);
   ASSERT_STREQ(json_string_value(json_object_get(w, "name")), "wrist");
   ASSERT_STREQ(json_string_value(json_object_get(w, "mount")), "hand");
@@ -83,6 +85,11 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   r = h_post_json("/v1/cameras/dead/capture", "");
   ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
+  h_resp_free(r);
+  /* a V4L2 device that is not there: the grabber's own words */
+  r = h_post_json("/v1/cameras/usb/capture", "");
+  ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
+  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "cannot open /dev/video-none");
   h_resp_free(r);
   r = h_post_json("/v1/cameras/wrist/capture", "{\"exposure\": 3}");
   ASSERT_HTTP_ERROR(r, 400, "invalid_request");

@@ -716,8 +716,15 @@ static void test_errors(void) {
   EXPECT_ERROR("[camera a b]\n", 1, "[camera a b]:", "a camera's name");
   EXPECT_ERROR("[camera w]\nmount = hand\n", 1, "[camera w] source:", "missing");
   EXPECT_ERROR("[camera w]\nsource = ftp://x/y\n", 2, "[camera w] source:", "snapshot URL");
-  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\n", 2, "[camera w] source:",
-               "not supported yet");
+  {
+    fg_conf *c = load_ok("[camera usb]\nsource = v4l2:/dev/video0\n");
+    ASSERT_STREQ(fg_conf_find_camera(c, "usb")->source, "v4l2:/dev/video0");
+    fg_conf_free(c);
+  }
+  EXPECT_ERROR("[camera w]\nsource = v4l2:video0\n", 2, "[camera w] source:",
+               "v4l2:/dev/videoN");
+  EXPECT_ERROR("[camera w]\nsource = v4l2:/dev/video0\ndepth_source = v4l2:/dev/video1\n", 3,
+               "[camera w] depth_source:", "not depth");
   EXPECT_ERROR("[camera w]\nsource = http://10.0.0.5/snap.jpg\nmount = wrist\n", 3,
                "[camera w] mount:", "hand or fixed");
   EXPECT_ERROR("[camera w]\nsource = http://10.0.0.5/snap.jpg\n[camera w]\n", 3, "[camera w]:",
