@@ -18,33 +18,6 @@
 
 /* ---------------------------------------------------------------- viewpoints */
 
-/* A camera at eye looking at target (OpenCV: +z forward), its image's +y towards world -z. */
-static void look_at(const double eye[3], const double target[3], double T[16]) {
-  double z[3], x[3], y[3], n = 0;
-  for (int k = 0; k < 3; k++) {
-    z[k] = target[k] - eye[k];
-    n += z[k] * z[k];
-  }
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  const double up[3] = {0, 0, 1};
-  x[0] = z[1] * up[2] - z[2] * up[1];
-  x[1] = z[2] * up[0] - z[0] * up[2];
-  x[2] = z[0] * up[1] - z[1] * up[0];
-  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  if (n < 1e-9) { /* straight down: any heading will do */
-    x[0] = 0;
-    x[1] = -1;
-    x[2] = 0;
-    n = 1;
-  }
-  for (int k = 0; k < 3; k++) x[k] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  const double R[9] = {x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2]};
-  fg_pose_from_rotmat(R, eye, T);
-}
-
 void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrinsics *in,
                         const double T_tcp_cam[16], int n, double radius_m, double el_min_deg,
                         double el_max_deg, double *T_base_tcp) {
@@ -66,7 +39,7 @@ void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrins
     const double eye[3] = {c[0] + radius_m * cos(el) * cos(az),
                            c[1] + radius_m * cos(el) * sin(az), c[2] + radius_m * sin(el)};
     double T_base_cam[16];
-    look_at(eye, c, T_base_cam);
+    fg_pose_look_at(eye, c, 0, T_base_cam);
     fg_pose_compose(T_base_cam, T_cam_tcp, T_base_tcp + 16 * i);
   }
 }

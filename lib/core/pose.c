@@ -148,6 +148,31 @@ void fg_pose_from_rotmat(const double R_a_b[9], const double p_a[3], double T_a_
   memcpy(T_a_b, out, sizeof out);
 }
 
+void fg_pose_look_at(const double eye[3], const double target[3], double roll_rad, double T[16]) {
+  double z[3], x[3], y[3], n = 0;
+  for (int k = 0; k < 3; k++) {
+    z[k] = target[k] - eye[k];
+    n += z[k] * z[k];
+  }
+  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
+  x[0] = z[1], x[1] = -z[0], x[2] = 0; /* z x (0, 0, 1) */
+  n = hypot(x[0], x[1]);
+  if (n < 1e-9) /* straight up or down: any heading will do */
+    x[0] = 0, x[1] = -1, n = 1;
+  x[0] /= n, x[1] /= n;
+  y[0] = z[1] * x[2] - z[2] * x[1];
+  y[1] = z[2] * x[0] - z[0] * x[2];
+  y[2] = z[0] * x[1] - z[1] * x[0];
+  const double c = cos(roll_rad), s = sin(roll_rad);
+  double R[9];
+  for (int r = 0; r < 3; r++) {
+    R[3 * r] = c * x[r] + s * y[r];
+    R[3 * r + 1] = -s * x[r] + c * y[r];
+    R[3 * r + 2] = z[r];
+  }
+  fg_pose_from_rotmat(R, eye, T);
+}
+
 /* ---------------------------------------------------------------- rotations */
 
 void fg_rotmat_from_quat(const double q[4], double R[9]) {

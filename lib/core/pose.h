@@ -68,6 +68,12 @@ void fg_pose_rotate(const double T_a_b[16], const double v_b[3], double v_a[3]);
 void fg_pose_get_rotmat(const double T_a_b[16], double R_a_b[9]);
 void fg_pose_from_rotmat(const double R_a_b[9], const double p_a[3], double T_a_b[16]);
 
+/* The pose T_world_frame of a frame at eye whose +z points at target (a camera looking at it,
+ * OpenCV's convention), its x level (x = z x world up, normalised; -world y when z is
+ * straight up or down) and its y = z x x (towards world -z: the image's down is the world's),
+ * then turned by roll_rad about its z. eye must differ from target. */
+void fg_pose_look_at(const double eye[3], const double target[3], double roll_rad, double T[16]);
+
 /* ---- rotations: quaternion, 3x3 matrix, rotation vector ---- */
 
 /* R (3x3 row-major) of a unit quaternion [w, x, y, z]; q is normalised first, so any

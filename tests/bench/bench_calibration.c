@@ -18,6 +18,7 @@
 
 #include "benchstat.h"
 #include "calib/calibrate.h"
+#include "core/clock.h"
 #include "core/pose.h"
 #include "core/rng.h"
 
@@ -28,37 +29,6 @@ static uint64_t g_seed, g_draw;
 static double uniform(double lo, double hi) { return lo + (hi - lo) * fg_rng_uniform(g_seed, g_draw++); }
 static double gauss(double s) {
   return s * sqrt(-2 * log(uniform(1e-12, 1))) * cos(2 * M_PI * uniform(0, 1));
-}
-static double now_s(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return t.tv_sec + t.tv_nsec * 1e-9;
-}
-
-static void look_at(const double eye[3], const double at[3], double roll, double T[16]) {
-  double z[3], x[3], y[3], n = 0;
-  for (int k = 0; k < 3; k++) {
-    z[k] = at[k] - eye[k];
-    n += z[k] * z[k];
-  }
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  x[0] = z[1];
-  x[1] = -z[0];
-  x[2] = 0;
-  n = hypot(x[0], x[1]);
-  x[0] /= n;
-  x[1] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  const double c = cos(roll), s = sin(roll);
-  double R[9];
-  for (int r = 0; r < 3; r++) {
-    R[3 * r] = c * x[r] + s * y[r];
-    R[3 * r + 1] = -s * x[r] + c * y[r];
-    R[3 * r + 2] = z[r];
-  }
-  fg_pose_from_rotmat(R, eye, T);
 }
 
 static int project(const double T_cb[16], int *ids, double *px) {
@@ -120,7 +90,7 @@ static trial run(int n, double pos_m, double rot_rad) {
       const double eye[3] = {c[0] + r * cos(el) * cos(az), c[1] + r * cos(el) * sin(az), r * sin(el)};
       const double at[3] = {c[0] + uniform(-0.03, 0.03), c[1] + uniform(-0.03, 0.03), 0};
       double T_bc[16], T_cb_[16], T_bt[16], T_cbw[16];
-      look_at(eye, at, uniform(-0.6, 0.6), T_bc);
+      fg_pose_look_at(eye, at, uniform(-0.6, 0.6), T_bc);
       fg_pose_compose(T_bc, T_ct, T_bt);
       if (round_ == 1) reported(T_bt, pos_m, rot_rad, T_rep + 16 * i);
       fg_pose_inverse(T_bc, T_cbw);
@@ -128,7 +98,7 @@ static trial run(int n, double pos_m, double rot_rad) {
       views[round_][i] = (fg_calib_view){project(T_cb_, ids[round_][i], px[round_][i]),
                                           ids[round_][i], px[round_][i]};
     }
-  const double t0 = now_s();
+  const double t0 = fg_mono_s();
   fg_intrinsics in;
   double rms;
   if (fg_calibrate_intrinsics(&g_board, views[0], n, K.w, K.h, &in, &rms, NULL) != 0) return t;
@@ -150,7 +120,7 @@ static trial run(int n, double pos_m, double rot_rad) {
   const int with_in = getenv("BENCH_REFINE_INTRINSICS") && atoi(getenv("BENCH_REFINE_INTRINSICS"));
   if (fg_calibrate_hand_eye_refine(&g_board, used, T_tcp, m, 0, with_in, &in, X, B, &rms) != 0)
     return t;
-  t.ms = (now_s() - t0) * 1e3;
+  t.ms = (fg_mono_s() - t0) * 1e3;
   t.fx_pct = fabs(in.fx / K.fx - 1) * 100;
   t.c_px = hypot(in.cx - K.cx, in.cy - K.cy);
   t.mm = sqrt(pow(X[3] - T_tc[3], 2) + pow(X[7] - T_tc[7], 2) + pow(X[11] - T_tc[11], 2)) * 1e3;

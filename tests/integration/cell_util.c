@@ -37,35 +37,9 @@ int cu_sim_start(simproc *sim, const char *const *extra) {
 }
 
 void cu_look_at(const double eye[3], const double target[3], double roll_deg, double q[4]) {
-  double z[3], x[3], y[3], n = 0;
-  for (int k = 0; k < 3; k++) {
-    z[k] = target[k] - eye[k];
-    n += z[k] * z[k];
-  }
-  ASSERT(n > 0);
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  /* x = z × up, level; straight down, any heading will do */
-  x[0] = z[1];
-  x[1] = -z[0];
-  x[2] = 0;
-  n = hypot(x[0], x[1]);
-  if (n < 1e-9) {
-    x[0] = 1;
-    x[1] = 0;
-    n = 1;
-  }
-  x[0] /= n;
-  x[1] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  const double c = cos(roll_deg * M_PI / 180), s = sin(roll_deg * M_PI / 180);
-  double R[9];
-  for (int r = 0; r < 3; r++) {
-    R[3 * r] = c * x[r] + s * y[r];
-    R[3 * r + 1] = -s * x[r] + c * y[r];
-    R[3 * r + 2] = z[r];
-  }
+  double T[16], R[9];
+  fg_pose_look_at(eye, target, roll_deg * M_PI / 180, T);
+  fg_pose_get_rotmat(T, R);
   fg_quat_from_rotmat(R, q);
 }
 

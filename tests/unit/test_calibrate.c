@@ -36,29 +36,7 @@ static void pose(double x, double y, double z, const double axis[3], double deg,
 
 /* A camera at eye looking at target (OpenCV: +z forward, +y down), rolled by roll degrees. */
 static void look_at(const double eye[3], const double target[3], double roll, double T[16]) {
-  double z[3], up[3] = {0, 0, 1}, x[3], y[3];
-  double n = 0;
-  for (int k = 0; k < 3; k++) {
-    z[k] = target[k] - eye[k];
-    n += z[k] * z[k];
-  }
-  for (int k = 0; k < 3; k++) z[k] /= sqrt(n);
-  x[0] = z[1] * up[2] - z[2] * up[1];
-  x[1] = z[2] * up[0] - z[0] * up[2];
-  x[2] = z[0] * up[1] - z[1] * up[0];
-  n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  for (int k = 0; k < 3; k++) x[k] /= n;
-  y[0] = z[1] * x[2] - z[2] * x[1];
-  y[1] = z[2] * x[0] - z[0] * x[2];
-  y[2] = z[0] * x[1] - z[1] * x[0];
-  const double c = cos(roll * M_PI / 180), s = sin(roll * M_PI / 180);
-  double R[9];
-  for (int r = 0; r < 3; r++) {
-    R[3 * r] = c * x[r] + s * y[r];
-    R[3 * r + 1] = -s * x[r] + c * y[r];
-    R[3 * r + 2] = z[r];
-  }
-  fg_pose_from_rotmat(R, eye, T);
+  fg_pose_look_at(eye, target, roll * M_PI / 180, T);
 }
 
 /* The corners of the board at T_cam_board as the true camera sees them, with noise; the

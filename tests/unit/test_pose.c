@@ -263,7 +263,52 @@ static void test_slerp(void) {
   ASSERT_NEAR(fg_quat_angle_rad(I, q), 1e-5, 1e-9);
 }
 
+/* A camera looking at a point: z at it, x level, y with the world's down, roll about z. */
+static void test_look_at(void) {
+  const double eye[3] = {0.4, -0.3, 0.5}, target[3] = {0.5, 0.1, 0.02};
+  double T[16], R[9], d[3], n = 0;
+  for (int k = 0; k < 3; k++) d[k] = target[k] - eye[k], n += d[k] * d[k];
+  n = sqrt(n);
+  fg_pose_look_at(eye, target, 0, T);
+  fg_pose_get_rotmat(T, R);
+  for (int k = 0; k < 3; k++) {
+    ASSERT_NEAR(T[4 * k + 3], eye[k], 0);
+    ASSERT_NEAR(R[3 * k + 2], d[k] / n, 1e-12); /* z at the target */
+  }
+  ASSERT_NEAR(R[6], 0, 1e-15);  /* x level */
+  ASSERT(R[7] < 0);             /* y has the world's down */
+  double RtR = 0; /* orthonormal, right-handed */
+  for (int a = 0; a < 3; a++)
+    for (int b = 0; b < 3; b++) {
+      double dot = 0;
+      for (int k = 0; k < 3; k++) dot += R[3 * k + a] * R[3 * k + b];
+      RtR = fmax(RtR, fabs(dot - (a == b)));
+    }
+  ASSERT(RtR < 1e-12);
+  const double det = R[0] * (R[4] * R[8] - R[5] * R[7]) - R[1] * (R[3] * R[8] - R[5] * R[6]) +
+                     R[2] * (R[3] * R[7] - R[4] * R[6]);
+  ASSERT_NEAR(det, 1, 1e-12);
+  /* rolled 30 degrees: the same z, x turned 30 degrees towards the unrolled y */
+  double T2[16], R2[9];
+  fg_pose_look_at(eye, target, M_PI / 6, T2);
+  fg_pose_get_rotmat(T2, R2);
+  double cx = 0, cz = 0;
+  for (int k = 0; k < 3; k++) cx += R[3 * k] * R2[3 * k], cz += R[3 * k + 2] * R2[3 * k + 2];
+  ASSERT_NEAR(cx, cos(M_PI / 6), 1e-12);
+  ASSERT_NEAR(cz, 1, 1e-12);
+  double xy = 0;
+  for (int k = 0; k < 3; k++) xy += R2[3 * k] * R[3 * k + 1];
+  ASSERT_NEAR(xy, sin(M_PI / 6), 1e-12);
+  /* straight down: a heading all the same, still a rotation */
+  const double above[3] = {0.5, 0.1, 0.6};
+  fg_pose_look_at(above, target, 0, T);
+  fg_pose_get_rotmat(T, R);
+  ASSERT_NEAR(R[8], -1, 1e-12);
+  ASSERT_NEAR(R[8] * (R[0] * R[4] - R[1] * R[3]), 1, 1e-12); /* det, with z straight down */
+}
+
 int main(void) {
+  test_look_at();
   test_quat_rotmat_round_trip();
   test_rotvec_round_trip();
   test_rotvec_edges();
