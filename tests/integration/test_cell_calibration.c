@@ -136,6 +136,17 @@ static h_resp *calibrate(const char *kind) {
   return h_post_json(path, body);
 }
 
+/* How far a pose's view ({"position", "quaternion"}) is from the truth p, q: mm, degrees. */
+static void pose_error(json_t *pose, const double p[3], const double q[4], double *mm,
+                       double *deg) {
+  json_t *mp = json_object_get(pose, "position"), *mq = json_object_get(pose, "quaternion");
+  double dp = 0, got_q[4];
+  for (int k = 0; k < 3; k++) dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - p[k], 2);
+  for (int k = 0; k < 4; k++) got_q[k] = json_real_value(json_array_get(mq, (size_t)k));
+  *mm = sqrt(dp) * 1e3;
+  *deg = fg_quat_angle_rad(got_q, q) * 180 / M_PI;
+}
+
 static double num(json_t *o, const char *k) { return json_number_value(json_object_get(o, k)); }
 
 static void fixed_camera(void);
@@ -219,14 +230,8 @@ static void hand_camera(void) {
   ASSERT_STATUS(r, 200);
   json_t *cam = json_object_get(r->json, "camera");
   ASSERT(json_is_true(json_object_get(cam, "calibrated")));
-  json_t *mount = json_object_get(cam, "T_tcp_cam");
-  json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
-  double dp = 0, got_q[4];
-  for (int k = 0; k < 3; k++)
-    dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - MOUNT_P[k], 2);
-  for (int k = 0; k < 4; k++) got_q[k] = json_real_value(json_array_get(mq, (size_t)k));
-  const double err_mm = sqrt(dp) * 1e3;
-  const double err_deg = fg_quat_angle_rad(got_q, MOUNT_Q) * 180 / M_PI;
+  double err_mm, err_deg;
+  pose_error(json_object_get(cam, "T_tcp_cam"), MOUNT_P, MOUNT_Q, &err_mm, &err_deg);
   json_t *cal = json_object_get(json_object_get(cam, "calibration"), "mount");
   fprintf(stderr, "mount: %.3f mm, %.4f deg from the truth; spread %.3f mm %.4f deg, rms %.3f "
           "px (%s)\n", err_mm, err_deg, num(cal, "spread_mm"), num(cal, "spread_deg"),
@@ -358,14 +363,8 @@ static void fixed_camera(void) {
     }
     if (round == 1) {
       json_t *cam = json_object_get(r->json, "camera");
-      json_t *mount = json_object_get(cam, "T_base_cam");
-      json_t *mp = json_object_get(mount, "position"), *mq = json_object_get(mount, "quaternion");
-      double dp = 0, got_q[4];
-      for (int k = 0; k < 3; k++)
-        dp += pow(json_real_value(json_array_get(mp, (size_t)k)) - eye[k], 2);
-      for (int k = 0; k < 4; k++) got_q[k] = json_real_value(json_array_get(mq, (size_t)k));
-      const double err_mm = sqrt(dp) * 1e3;
-      const double err_deg = fg_quat_angle_rad(got_q, qc) * 180 / M_PI;
+      double err_mm, err_deg;
+      pose_error(json_object_get(cam, "T_base_cam"), eye, qc, &err_mm, &err_deg);
       fprintf(stderr, "fixed camera: %d views kept; T_base_cam %.3f mm, %.4f deg from the "
               "truth\n", kept, err_mm, err_deg);
       ASSERT(err_mm < 1);
