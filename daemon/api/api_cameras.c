@@ -116,29 +116,28 @@ static json_t *capture_json(const fg_conf_camera *cam, const fg_capture *cap) {
   return o;
 }
 
-/* The body of a capture: empty, or {"calibration_view": bool}. 1 when decoded, 0 after a
- * 400. */
+/* The body of a capture: empty, or {"calibration_view": bool}. 0, or -1 after a 400. */
 static int parse_capture(fg_req *req, fg_resp *resp, int *keep) {
   *keep = 0;
-  if (!req->body_len) return 1;
+  if (!req->body_len) return 0;
   json_t *body = fg_api_body_object(req, resp);
-  if (!body) return 0;
+  if (!body) return -1;
   static const char *const keys[] = {"calibration_view", NULL};
   json_t *k = json_object_get(body, "calibration_view");
   const char *unknown = fg_json_unknown_key(body, keys);
   int ok = !unknown && (!k || json_is_boolean(k));
   if (ok) *keep = json_is_true(k);
   json_decref(body);
-  if (!ok)
-    fg_resp_error(resp, 400, "invalid_request", "a capture takes only \"calibration_view\": "
-                  "true or false");
-  return ok;
+  if (ok) return 0;
+  fg_resp_error(resp, 400, "invalid_request", "a capture takes only \"calibration_view\": "
+                "true or false");
+  return -1;
 }
 
 int fg_api_camera_capture(fg_req *req, fg_resp *resp) {
   const fg_conf_camera *cam = camera_param(req, resp);
   int keep;
-  if (!cam || !parse_capture(req, resp, &keep)) return 0;
+  if (!cam || parse_capture(req, resp, &keep) != 0) return 0;
   fg_capture cap;
   int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, &cap);
   int corners = 0, kept = 0;
