@@ -10,16 +10,6 @@
 #include "core/error.h"
 #include "decoder/decoder.h"
 
-void cameras_views_free(entry *e) {
-  for (int i = 0; i < e->n_views; i++) {
-    free(e->views[i].ids);
-    free(e->views[i].px);
-  }
-  free(e->views);
-  e->views = NULL;
-  e->n_views = 0;
-}
-
 /* The capture's image as 8-bit grey, decoded in the decoder's children. */
 static int grey(struct fg_decoder *dec, const fg_capture *cap, uint8_t **out, int *w, int *h) {
   const float white[3] = {1, 1, 1};

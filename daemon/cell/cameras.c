@@ -169,6 +169,16 @@ int fg_cameras_new(fg_cameras **out, const char *state_dir) {
   return 0;
 }
 
+void cameras_views_free(entry *e) {
+  for (int i = 0; i < e->n_views; i++) {
+    free(e->views[i].ids);
+    free(e->views[i].px);
+  }
+  free(e->views);
+  e->views = NULL;
+  e->n_views = 0;
+}
+
 void fg_cameras_free(fg_cameras *c) {
   if (!c) return;
   for (int i = 0; i < c->n; i++) cameras_views_free(&c->e[i]);

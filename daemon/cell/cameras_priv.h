@@ -39,7 +39,7 @@ struct fg_cameras {
  * the table is full). */
 entry *cameras_find_locked(fg_cameras *c, const char *name, int add);
 
-/* Frees an entry's views. */
+/* Frees an entry's views (cameras.c: the table's owner frees what its entries hold). */
 void cameras_views_free(entry *e);
 
 #endif
