@@ -145,7 +145,8 @@ static int fetch_grab(const char *grabber, const char *device, int timeout_ms, s
     if (open_o && fds[0].revents) open_o = drain(po[0], &img);
     if (open_e && fds[1].revents) open_e = drain(pe[0], &err);
   }
-  if (timed_out || img.too_big) kill(pid, SIGKILL);
+  /* stopped early (timeout, too big, a failed poll): the child must not outlive the wait */
+  if (timed_out || img.too_big || open_o || open_e) kill(pid, SIGKILL);
   close(po[0]);
   close(pe[0]);
   int status = 0;
