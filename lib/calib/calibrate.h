@@ -29,7 +29,8 @@ typedef struct fg_intrinsics {
   double k[4]; /* k1 k2 p1 p2 */
 } fg_intrinsics;
 
-/* Views with fewer corners than this are left out of a calibration (and reported). */
+/* Views with fewer corners than this, or whose corners lie on one line (a quarter of a square
+ * across it at most), are left out of a calibration (and reported). */
 #define FG_CALIB_MIN_CORNERS 6
 /* The fewest views an intrinsic calibration takes, and a hand-eye calibration. */
 #define FG_CALIB_MIN_VIEWS_INTRINSICS 4
@@ -37,13 +38,14 @@ typedef struct fg_intrinsics {
 
 /* Intrinsics of a w x h camera from n views of board b: *out, the RMS reprojection error
  * (pixels) over all corners in *rms_px, and per view (per_view_rms[i], NAN for a view left
- * out for having fewer than FG_CALIB_MIN_CORNERS corners; may be NULL). FG_EINVAL when fewer
+ * out for having fewer than FG_CALIB_MIN_CORNERS corners or all on one line; may be NULL). FG_EINVAL when fewer
  * than FG_CALIB_MIN_VIEWS_INTRINSICS views are usable. */
 int fg_calibrate_intrinsics(const fg_charuco_board *b, const fg_calib_view *views, int n, int w,
                             int h, fg_intrinsics *out, double *rms_px, double *per_view_rms);
 
 /* The board's pose in the camera (T_cam_board) from one view's corners and the intrinsics;
- * *rms_px its reprojection error. FG_EINVAL with fewer than FG_CALIB_MIN_CORNERS corners. */
+ * *rms_px its reprojection error. FG_EINVAL with fewer than FG_CALIB_MIN_CORNERS corners, or
+ * corners all on one line. */
 int fg_calib_board_pose(const fg_charuco_board *b, const fg_calib_view *view,
                         const fg_intrinsics *in, double T_cam_board[16], double *rms_px);
 

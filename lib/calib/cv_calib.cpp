@@ -35,6 +35,29 @@ void view_points(const fg_charuco_board *b, const fg_calib_view *v,
   }
 }
 
+// Whether the view's corners span the board's plane: not all on one line (one row or column
+// of the board, or a diagonal), which leaves the board's pose, and OpenCV's homography of
+// the view, undetermined. The smaller spread of the corners across their principal axes must
+// be at least a quarter of a square.
+bool spans_plane(const fg_charuco_board *b, const std::vector<cv::Point3f> &obj) {
+  double mx = 0, my = 0;
+  for (const cv::Point3f &p : obj) mx += p.x, my += p.y;
+  mx /= (double)obj.size();
+  my /= (double)obj.size();
+  double sxx = 0, syy = 0, sxy = 0;
+  for (const cv::Point3f &p : obj) {
+    sxx += (p.x - mx) * (p.x - mx);
+    syy += (p.y - my) * (p.y - my);
+    sxy += (p.x - mx) * (p.y - my);
+  }
+  sxx /= (double)obj.size();
+  syy /= (double)obj.size();
+  sxy /= (double)obj.size();
+  const double tr = sxx + syy, det = sxx * syy - sxy * sxy;
+  const double lmin = tr / 2 - std::sqrt(std::max(0.0, tr * tr / 4 - det));
+  return std::sqrt(std::max(0.0, lmin)) >= 0.25 * b->square_m;
+}
+
 void to_pose(const cv::Mat &rvec, const cv::Mat &tvec, double T[16]) {
   cv::Mat R;
   cv::Rodrigues(rvec, R);
@@ -154,11 +177,16 @@ extern "C" int fg_calibrate_intrinsics(const fg_charuco_board *b, const fg_calib
       obj.emplace_back();
       img.emplace_back();
       view_points(b, &views[i], &obj.back(), &img.back());
+      if (!spans_plane(b, obj.back())) {
+        obj.pop_back();
+        img.pop_back();
+        continue;
+      }
       used.push_back(i);
     }
     if ((int)used.size() < FG_CALIB_MIN_VIEWS_INTRINSICS)
-      return fg_fail(FG_EINVAL, "%d of %d views show the board with %d corners or more; "
-                     "intrinsics need %d such views", (int)used.size(), n,
+      return fg_fail(FG_EINVAL, "%d of %d views show the board with %d corners or more, not "
+                     "all on one line; intrinsics need %d such views", (int)used.size(), n,
                      FG_CALIB_MIN_CORNERS, FG_CALIB_MIN_VIEWS_INTRINSICS);
     cv::Mat K, D, std_in, std_ex, per_view;
     std::vector<cv::Mat> rvecs, tvecs;
@@ -197,6 +225,9 @@ extern "C" int fg_calib_board_pose(const fg_charuco_board *b, const fg_calib_vie
     std::vector<cv::Point3f> obj;
     std::vector<cv::Point2f> img;
     view_points(b, view, &obj, &img);
+    if (!spans_plane(b, obj))
+      return fg_fail(FG_EINVAL, "the %d board corners found lie on one line; a pose needs "
+                     "them spread over the board", view->n);
     const cv::Mat K = camera_matrix(in), D = dist_coeffs(in);
     cv::Mat rvec, tvec;
     if (!cv::solvePnP(obj, img, K, D, rvec, tvec, false, cv::SOLVEPNP_IPPE))

@@ -175,6 +175,32 @@ static void test_hand(void) {
   /* too few views for intrinsics */
   ASSERT_EQ(fg_calibrate_intrinsics(&g_board, views, 3, 640, 480, &in, &rms, NULL), FG_EINVAL);
   ASSERT(strstr(fg_error_detail(), "need 4"));
+
+  /* a view whose corners lie on one line (a whole row of the board, 6 corners) is left out
+   * of the intrinsics, and gives no board pose; OpenCV would throw on it */
+  const int per_row = g_board.squares_x - 1;
+  static int row_ids[8];
+  static double row_px[16];
+  fg_calib_view all[N_VIEWS + 1], row = {0, row_ids, row_px};
+  for (int i = 0; i < N_VIEWS && row.n < per_row; i++) {
+    row.n = 0;
+    for (int k = 0; k < views[i].n; k++)
+      if (views[i].ids[k] / per_row == 1) {
+        row_ids[row.n] = views[i].ids[k];
+        row_px[2 * row.n] = views[i].px[2 * k];
+        row_px[2 * row.n + 1] = views[i].px[2 * k + 1];
+        row.n++;
+      }
+  }
+  ASSERT_EQ(row.n, per_row);
+  memcpy(all, views, sizeof views);
+  all[N_VIEWS] = row;
+  double per_all[N_VIEWS + 1];
+  ASSERT_EQ(fg_calibrate_intrinsics(&g_board, all, N_VIEWS + 1, 640, 480, &in, &rms, per_all), 0);
+  ASSERT(isnan(per_all[N_VIEWS]));
+  double T_row[16], e;
+  ASSERT_EQ(fg_calib_board_pose(&g_board, &row, &in, T_row, &e), FG_EINVAL);
+  ASSERT(strstr(fg_error_detail(), "one line"));
 }
 
 static fg_calib_view g_fixed_views[12];
