@@ -139,7 +139,8 @@ json_t *fg_job_info_json(const fg_job_info *j) {
     seed = json_string(s);
   }
   json_object_set_new(o, "id", json_string(j->id));
-  json_object_set_new(o, "scene", json_string(j->scene));
+  json_object_set_new(o, "scene", j->camera[0] ? json_null() : json_string(j->scene));
+  if (j->camera[0]) json_object_set_new(o, "camera", json_string(j->camera));
   json_object_set_new(o, "kind", json_string(j->kind));
   json_object_set_new(o, "state", json_string(fg_job_state_name(j->state)));
   json_object_set_new(o, "step", json_integer(j->step));
@@ -161,7 +162,8 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   json_object_set_new(o, "distortion_weight", json_real(j->params.distortion_weight));
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
-  if (strcmp(j->kind, "scan") == 0) json_object_set_new(o, "skipped", json_integer(j->skipped));
+  if (strcmp(j->kind, "scan") == 0 || strcmp(j->kind, "calibrate") == 0)
+    json_object_set_new(o, "skipped", json_integer(j->skipped));
   json_object_set_new(o, "phase", j->phase[0] ? json_string(j->phase) : json_null());
   json_object_set_new(o, "features",
                       j->features_total
@@ -294,7 +296,8 @@ static void prune_locked(fg_jobs *jobs) {
     pthread_mutex_unlock(&j->lock);
     int newest_of_scene = 1;
     for (fg_job *k = jobs->all; k != j; k = k->next)
-      if (strcmp(k->info.scene, j->info.scene) == 0) newest_of_scene = 0;
+      if (strcmp(k->info.scene, j->info.scene) == 0 && strcmp(k->info.camera, j->info.camera) == 0)
+        newest_of_scene = 0;
     if (done && !newest_of_scene && ++finished > MAX_FINISHED_JOBS) {
       *p = j->next;
       fg_job_unref(j);
@@ -377,18 +380,27 @@ int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind) {
   return rc;
 }
 
-int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
-                   const fg_job_params *params, void *kind_params, fg_job_info *out) {
-  const char *name = fg_scene_name(scene);
+/* What a job works on, for messages: "scene NAME" or "camera NAME". */
+static const char *subject_kind(const fg_job_info *i) { return i->camera[0] ? "camera" : "scene"; }
+static const char *subject_name(const fg_job_info *i) { return i->camera[0] ? i->camera : i->scene; }
+
+/* Queues a new job on scene (a reference is taken) or, scene NULL, on camera. */
+static int submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene, const char *camera,
+                  const fg_job_params *params, void *kind_params, fg_job_info *out) {
   const fg_job_kind *kind = kind_find(jobs, kind_name);
   if (!kind)
     return fg_fail_as(FG_EINVAL, "internal_error", "cannot queue the job: no job kind '%s' is "
                       "registered", kind_name);
   fg_job *j = job_new();
   if (!j) return fg_fail_as(FG_ENOMEM, "internal_error", "cannot queue the job: out of memory");
+  if (scene)
+    snprintf(j->info.scene, sizeof j->info.scene, "%s", fg_scene_name(scene));
+  else
+    snprintf(j->info.camera, sizeof j->info.camera, "%s", camera);
   pthread_mutex_lock(&jobs->lock);
   for (fg_job *k = jobs->all; k; k = k->next) {
-    if (strcmp(k->info.scene, name) != 0) continue;
+    if (strcmp(k->info.scene, j->info.scene) != 0 || strcmp(k->info.camera, j->info.camera) != 0)
+      continue;
     pthread_mutex_lock(&k->lock);
     fg_job_state st = k->info.state;
     char id[FG_JOB_ID_MAX];
@@ -396,33 +408,37 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
     pthread_mutex_unlock(&k->lock);
     if (st == FG_JOB_QUEUED || st == FG_JOB_RUNNING) {
       pthread_mutex_unlock(&jobs->lock);
+      const int rc = fg_fail_as(FG_EBUSY, scene ? "training_in_progress" : "job_in_progress",
+                                "%s %s already has job %s %s; wait for it (GET /v1/jobs/%s) or "
+                                "cancel it (DELETE /v1/jobs/%s)", subject_kind(&j->info),
+                                subject_name(&j->info), id, fg_job_state_name(st), id, id);
       fg_job_unref(j);
-      return fg_fail_as(FG_EBUSY, "training_in_progress", "scene %s already has job %s %s; wait "
-                        "for it (GET /v1/jobs/%s) or cancel it (DELETE /v1/jobs/%s)", name, id,
-                        fg_job_state_name(st), id, id);
+      return rc;
     }
   }
   make_id(j->info.id);
-  snprintf(j->info.scene, sizeof j->info.scene, "%s", name);
   snprintf(j->info.kind, sizeof j->info.kind, "%s", kind->name);
   j->info.state = FG_JOB_QUEUED;
   j->info.params = *params;
   j->info.created_ms = fg_real_ms();
   j->info.version = 1;
-  fg_scene_info si;
-  fg_scene_get_info(scene, &si);
-  j->info.n_frames = (int)si.n_frames;
-  if (params->holdout_every > 0)
-    j->info.n_heldout = (int)((si.n_frames + (size_t)params->holdout_every - 1) /
-                              (size_t)params->holdout_every);
-  if (fg_scene_deleted(scene)) {
-    pthread_mutex_unlock(&jobs->lock);
-    fg_job_unref(j);
-    return fg_fail_as(FG_ENOENT, "scene_not_found", "scene %s was deleted", name);
+  if (scene) {
+    fg_scene_info si;
+    fg_scene_get_info(scene, &si);
+    j->info.n_frames = (int)si.n_frames;
+    if (params->holdout_every > 0)
+      j->info.n_heldout = (int)((si.n_frames + (size_t)params->holdout_every - 1) /
+                                (size_t)params->holdout_every);
+    if (fg_scene_deleted(scene)) {
+      pthread_mutex_unlock(&jobs->lock);
+      fg_job_unref(j);
+      return fg_fail_as(FG_ENOENT, "scene_not_found", "scene %s was deleted",
+                        fg_scene_name(scene));
+    }
+    fg_scene_ref(scene);
+    j->scene = scene;
   }
   fg_ref_get(&j->ref); /* one for the registry, one for the queue */
-  fg_scene_ref(scene);
-  j->scene = scene;
   j->jobs = jobs;
   j->kind = kind;
   j->kind_params = kind_params;
@@ -436,9 +452,20 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene,
   if (out) fg_job_get_info(j, out);
   pthread_mutex_unlock(&jobs->lock);
   persist(jobs, j);
-  fg_info("job %s: %s of scene %s queued (%lld steps, seed %llu)", j->info.id, kind->name,
-          name, (long long)params->steps, (unsigned long long)params->seed);
+  fg_info("job %s: %s of %s %s queued (%lld steps, seed %llu)", j->info.id, kind->name,
+          subject_kind(&j->info), subject_name(&j->info), (long long)params->steps,
+          (unsigned long long)params->seed);
   return 0;
+}
+
+int fg_jobs_submit(fg_jobs *jobs, const char *kind, fg_scene *scene,
+                   const fg_job_params *params, void *kind_params, fg_job_info *out) {
+  return submit(jobs, kind, scene, NULL, params, kind_params, out);
+}
+
+int fg_jobs_submit_camera(fg_jobs *jobs, const char *kind, const char *camera,
+                          const fg_job_params *params, void *kind_params, fg_job_info *out) {
+  return submit(jobs, kind, NULL, camera, params, kind_params, out);
 }
 
 /* Removes j from the queue if it is there; the caller holds jobs->lock. */
@@ -525,6 +552,7 @@ void fg_jobs_cancel_scene(fg_jobs *jobs, const char *scene) {
 const char *fg_job_id(const fg_job *j) { return j->info.id; }
 
 fg_scene *fg_job_scene(fg_job *j) { return j->scene; }
+const char *fg_job_camera(const fg_job *j) { return j->info.camera; }
 
 double fg_job_started_s(fg_job *j) { return j->started_mono; }
 
@@ -654,7 +682,8 @@ static void *worker_main(void *arg) {
     unlock_changed(j, go);
     if (go) {
       persist(jobs, j);
-      fg_info("job %s: %s of scene %s started", j->info.id, j->kind->name, j->info.scene);
+      fg_info("job %s: %s of %s %s started", j->info.id, j->kind->name, subject_kind(&j->info),
+              subject_name(&j->info));
       j->kind->run(j, jobs->app, j->kind_params);
       persist(jobs, j);
       /* The job is over: its scene may go (the reference kept it alive while it ran). */

@@ -1,6 +1,6 @@
-/* Jobs: long work on a scene (trainings, and later other kinds), queued FIFO and run one at a
- * time by one worker thread, so that a job uses every core it is given and never competes with
- * another.
+/* Jobs: long work on a scene (trainings, scans) or on a camera (a calibration the robot
+ * drives), queued FIFO and run one at a time by one worker thread, so that a job uses every
+ * core it is given and never competes with another, and two jobs never move the robot at once.
  *
  * What a job does is its kind's: a table of kinds (fg_job_kind: a name and a run function)
  * that the daemon fills at start-up with fg_jobs_register_kind ("train", job_train.h, first).
@@ -72,7 +72,8 @@ typedef struct fg_job_params {
 /* A consistent copy of a job. Times in Unix milliseconds, 0 when not yet. */
 typedef struct fg_job_info {
   char id[FG_JOB_ID_MAX];
-  char scene[FG_SCENE_NAME_MAX + 1];
+  char scene[FG_SCENE_NAME_MAX + 1];   /* the scene worked on; "" for a camera's job */
+  char camera[FG_CAMERA_NAME_MAX + 1]; /* the camera calibrated; "" for a scene's job */
   char kind[FG_JOB_KIND_MAX]; /* the kind's name, e.g. "train" */
   fg_job_state state;
   fg_job_params params;
@@ -137,6 +138,12 @@ int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind);
 int fg_jobs_submit(fg_jobs *jobs, const char *kind, fg_scene *scene,
                    const fg_job_params *params, void *kind_params, fg_job_info *out);
 
+/* Queues a job of kind on camera (a [camera NAME]), as fg_jobs_submit does for a scene:
+ * FG_EBUSY (job_in_progress) when the camera has a queued or running job. The job's
+ * run function finds the name with fg_job_camera; fg_job_scene is NULL. */
+int fg_jobs_submit_camera(fg_jobs *jobs, const char *kind, const char *camera,
+                          const fg_job_params *params, void *kind_params, fg_job_info *out);
+
 /* The job with that id, with a reference (fg_job_unref); NULL when unknown, with the failure
  * recorded (FG_ENOENT job_not_found). */
 fg_job *fg_jobs_get(fg_jobs *jobs, const char *id);
@@ -167,9 +174,11 @@ json_t *fg_job_info_json(const fg_job_info *info);
 /* ---------------------------------------------------------------- for run functions
  * Called by a kind's run function, on the worker thread, while its job runs. */
 
-/* The job's id and scene; constant while it runs (the job holds a reference to the scene). */
+/* The job's id and scene, or camera; constant while it runs (the job holds a reference to
+ * the scene). A scene's job has no camera (""), a camera's job no scene (NULL). */
 const char *fg_job_id(const fg_job *job);
 fg_scene *fg_job_scene(fg_job *job);
+const char *fg_job_camera(const fg_job *job);
 
 /* fg_mono_s() (core/clock.h) when the job started running. */
 double fg_job_started_s(fg_job *job);
