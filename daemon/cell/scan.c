@@ -5,12 +5,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "core/error.h"
 #include "core/log.h"
 #include "core/pose.h"
-#include "robot/audit.h"
+#include "drive.h"
 #include "frames.h"
 #include "state/ingest.h"
 #include "state/job_train.h"
@@ -52,48 +51,6 @@ static void params_free(void *p) {
   free(r);
 }
 
-/* The audit log's line for one motion of the scan (robot/audit.h): as a request's, the
- * scan's job as its client. */
-static void audit_motion(fg_app *app, fg_job *job, const fg_robot_request *req, int rc,
-                         const fg_robot_cmd_view *v) {
-  char route[128];
-  snprintf(route, sizeof route, "/v1/scenes/%s/scan", fg_scene_name(fg_job_scene(job)));
-  const char *outcome = rc < 0 ? "refused" : fg_cmd_state_name(v->state);
-  json_t *e = json_pack("{s:s, s:s, s:s, s:o, s:o, s:s, s:s, s:s}", "kind", "request", "route",
-                        route, "command", "move", "command_id",
-                        rc < 0 ? json_null() : json_integer((json_int_t)v->id), "pose",
-                        fg_json_pose_quat(req->p_world_m, req->q_wxyz), "outcome", outcome,
-                        "client", "scan job", "request_id", fg_job_id(job));
-  if (e && rc < 0)
-    json_object_set_new(e, "error", json_pack("{s:s, s:s}", "code",
-                                              fg_error_reason() ? fg_error_reason() : "refused",
-                                              "message", fg_error_detail()));
-  if (e && rc == 0 && v->seq) json_object_set_new(e, "robot_seq", json_integer(v->seq));
-  if (e) fg_audit_append(app->audit, e);
-  json_decref(e);
-}
-
-/* Moves to viewpoint T through the gate, recorded in the audit log: 1 reached, 0 refused or
- * failed (skipped), -1 the scan must stop (detail recorded). */
-static int move_to(fg_app *app, fg_job *job, const double T[16]) {
-  fg_robot_request req = {.command = FG_ROBOT_MOVE, .has_pose = 1, .has_approach = 1,
-                          .approach_m = 0, .wait = 1};
-  fg_pose_to_quat(T, req.p_world_m, req.q_wxyz);
-  if (fg_audit_ready(app->audit) < 0) /* nothing moves unrecorded */
-    return fg_fail(FG_EIO, "the robot's audit log cannot be written: %s", fg_error_detail()),
-           -1;
-  fg_robot_cmd_view v;
-  const int rc = fg_robot_execute(app->robot, &req, &v);
-  audit_motion(app, job, &req, rc, &v);
-  if (rc == FG_ELIMIT || rc == FG_ERANGE) return 0;
-  if (rc < 0) return -1;
-  if (v.state == FG_CMD_DONE) return 1;
-  if (v.state == FG_CMD_FAILED) return 0;
-  fg_fail(FG_EPEER, "the robot's motion to a viewpoint ended %s: %s", fg_cmd_state_name(v.state),
-          v.message);
-  return -1;
-}
-
 /* Captures at the viewpoint and stores the frame. 0, or the failure. */
 static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
                          const fg_conf_camera *cam, const char *job_id, int i, int *stored) {
@@ -116,21 +73,18 @@ static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
   return rc;
 }
 
-static void settle(int ms) {
-  const struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-  nanosleep(&ts, NULL);
-}
-
 static void scan_run(fg_job *job, fg_app *app, void *params) {
   fg_scan_request *p = params;
   const fg_conf *conf = fg_app_conf_acquire(app);
   const fg_conf_camera *cam = fg_conf_find_camera(conf, p->camera);
   int stored = 0, skipped = 0, rc = 0;
   if (!cam) rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
+  char route[128];
+  snprintf(route, sizeof route, "/v1/scenes/%s/scan", fg_scene_name(fg_job_scene(job)));
   fg_job_set_phase(job, "scanning");
   for (int i = 0; rc == 0 && i < p->n; i++) {
     if (fg_job_should_stop(job)) break;
-    const int moved = move_to(app, job, p->T_base_tcp + 16 * i);
+    const int moved = fg_cell_move(app, job, route, p->T_base_tcp + 16 * i);
     if (moved < 0) {
       rc = -1;
       break;
@@ -139,7 +93,7 @@ static void scan_run(fg_job *job, fg_app *app, void *params) {
       skipped++;
       fg_info("scan %s: viewpoint %d skipped: %s", fg_job_id(job), i, fg_error_detail());
     } else {
-      settle(p->settle_ms);
+      fg_cell_settle(p->settle_ms);
       rc = capture_store(app, conf, fg_job_scene(job), cam, fg_job_id(job), i, &stored);
     }
     fg_job_info *info = fg_job_update_begin(job);
