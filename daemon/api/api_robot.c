@@ -394,10 +394,11 @@ static json_t *limits_json(fg_robot_svc *svc) {
   fg_robot_limits_get(svc, &l);
   double approach, retreat, speed;
   fg_robot_path_defaults(svc, &approach, &retreat, &speed);
-  return json_pack("{s:o, s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "position_box",
+  return json_pack("{s:o, s:o, s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "position_box",
                    l.has_box ? json_pack("{s:o, s:o}", "min", vec3_json(l.box_min_m), "max",
                                          vec3_json(l.box_max_m))
                              : json_null(),
+                   "reach", l.reach_m > 0 ? json_real(l.reach_m) : json_null(),
                    "approach_cone_deg", l.cone_rad * (180 / M_PI), "max_force", l.max_force_n,
                    "max_speed", l.max_speed_mps, "max_width", l.max_width_m, "speed", speed,
                    "approach", approach, "retreat", retreat);

@@ -60,7 +60,7 @@ enum {
 /* [robot]'s keys past the Modbus ones (robot_keys from index K_LIMIT_MIN on): the motion
  * limits and the path, then the audit log and the claim. */
 enum {
-  K_LIMIT_MIN = K_DONE_TIMEOUT_MS + 1, K_LIMIT_MAX, K_LIMIT_MARGIN, K_APPROACH_CONE_DEG,
+  K_LIMIT_MIN = K_DONE_TIMEOUT_MS + 1, K_LIMIT_MAX, K_LIMIT_MARGIN, K_REACH_M, K_APPROACH_CONE_DEG,
   K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M,
   K_AUDIT_MAX_MB, K_AUDIT_KEEP, K_LOCK_DIR, K_TCP_POSE_BASE
 };
@@ -84,7 +84,7 @@ static const char *const gripper_keys[] = {"model", NULL};
 static const char *const robot_keys[] = {"transport", "host",     "port",           "device",
                                          "baud",      "parity",   "unit_id",        "timeout_ms",
                                          "base",      "encoding", "ack_timeout_ms", "done_timeout_ms",
-                                         "limit_min", "limit_max", "limit_margin",
+                                         "limit_min", "limit_max", "limit_margin", "reach_m",
                                          "approach_cone_deg", "max_force_n", "max_speed_mps",
                                          "speed_mps", "approach_m", "retreat_m",
                                          "audit_max_mb", "audit_keep", "lock_dir",
@@ -326,6 +326,7 @@ static int set_motion(conf_parse *st, fg_conf_motion *m, int k, const char *name
   case K_SPEED_MPS: return parse_bounded(st, name, v, 0, 1, 10, &m->speed_mps);
   case K_APPROACH_M: return parse_bounded(st, name, v, 0, 0, 1, &m->approach_m);
   case K_RETREAT_M: return parse_bounded(st, name, v, 0, 0, 1, &m->retreat_m);
+  case K_REACH_M: return parse_bounded(st, name, v, 0, 0, 10, &m->reach_m);
   }
   return 1;
 }

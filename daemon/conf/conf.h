@@ -53,6 +53,8 @@ typedef struct fg_conf_motion {
   double limit_min[3], limit_max[3]; /* TCP position box, metres, world frame */
   double limit_margin_m;    /* without a box: the scenes' workspaces grown by this; 0..10,
                              * default 0.10 */
+  double reach_m;           /* TCP within this of the base's origin; 0..10, 0 (default): no
+                             * reach limit */
   double approach_cone_deg; /* tool +z within this of straight down; 0..180, default 60 */
   double max_force_n;       /* 0 (default): the gripper model's largest force */
   double max_speed_mps;     /* > 0, default 0.25 */

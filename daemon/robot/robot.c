@@ -169,6 +169,7 @@ void fg_robot_svc_configure(fg_robot_svc *svc, const fg_conf *conf) {
   pthread_mutex_lock(&svc->lock);
   svc->lim = (fg_motion_limits){
       .has_box = m->has_box,
+      .reach_m = m->reach_m,
       .cone_rad = m->approach_cone_deg * (M_PI / 180),
       .max_force_n = m->max_force_n > 0 ? m->max_force_n : model->force_max_n,
       .max_speed_mps = m->max_speed_mps,

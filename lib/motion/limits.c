@@ -41,7 +41,7 @@ static int refuse(fg_motion_violation *v, const char *limit, double value, doubl
   return FG_ELIMIT;
 }
 
-/* Checks one point of the path against the box; name says which point. */
+/* Checks one point of the path against the box and the reach; name says which point. */
 static int check_point(const fg_motion_limits *lim, const double p[3], const char *name,
                        fg_motion_violation *v) {
   static const char axes[] = "xyz";
@@ -54,6 +54,13 @@ static int check_point(const fg_motion_limits *lim, const double p[3], const cha
               p[i]);
       return refuse(v, "position_box", p[i], bound);
     }
+  }
+  const double r = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+  if (lim->reach_m > 0 && !(r <= lim->reach_m + 1e-9)) {
+    fg_fail(FG_ELIMIT, "the %s at (%.4f, %.4f, %.4f) m is %.4f m from the robot's base, "
+            "beyond its reach ([robot] reach_m = %.4f m)", name, p[0], p[1], p[2], r,
+            lim->reach_m);
+    return refuse(v, "reach", r, lim->reach_m);
   }
   return 0;
 }

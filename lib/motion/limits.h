@@ -11,6 +11,7 @@
  *   pose,
  *   retreat   = after a pick the pose lifted along world +z by retreat_m; after a place
  *               the pose moved back along the tool's -z by retreat_m.
+ * With a reach, each of them must also lie within reach_m of the base frame's origin.
  * The approach cone bounds the angle between the tool's +z and straight down (world -z):
  * 0 admits only vertical approaches from above, pi/2 horizontal ones too, and anything
  * beyond pi/2 comes from below. */
@@ -21,6 +22,8 @@ typedef struct fg_motion_limits {
   int has_box;           /* 0: no position box is known; every pose is refused */
   double box_min_m[3];   /* TCP positions allowed, world frame, metres (inclusive) */
   double box_max_m[3];
+  double reach_m;        /* > 0: TCP positions within this of the base frame's origin (the
+                          * arm's reach); 0: not checked */
   double cone_rad;       /* tool +z within this of world -z; >= pi admits every direction */
   double max_force_n;    /* grip or contact force, newtons */
   double max_speed_mps;  /* TCP speed, m/s */
@@ -36,7 +39,7 @@ typedef enum {
 
 /* A refusal: which limit, the offending value and the bound, for the error's JSON. */
 typedef struct fg_motion_violation {
-  const char *limit;     /* "position_box", "approach_cone", "max_force", "max_speed",
+  const char *limit;     /* "position_box", "reach", "approach_cone", "max_force", "max_speed",
                           * "width", or NULL when nothing was violated */
   double value, bound;   /* in the limit's unit: m, degrees, N, m/s, m */
 } fg_motion_violation;

@@ -670,6 +670,7 @@ static void test_errors(void) {
                "below limit_max");
   EXPECT_ERROR("[robot]\napproach_cone_deg = 181\n", 2, "[robot] approach_cone_deg:",
                "at most 180");
+  EXPECT_ERROR("[robot]\nreach_m = -1\n", 2, "[robot] reach_m:", "at most 10");
   EXPECT_ERROR("[robot]\nmax_speed_mps = 0\n", 2, "[robot] max_speed_mps:", "above 0");
   EXPECT_ERROR("[robot]\nspeed_mps = 0.5\n", 2, "[robot] speed_mps:", "above max_speed_mps");
   EXPECT_ERROR("[robot]\napproach_m = 1.5\n", 2, "[robot] approach_m:", "at most 1");
@@ -931,6 +932,7 @@ static void test_shipped(void) {
   ASSERT(c->lock_dir == NULL && d->lock_dir == NULL);
   ASSERT_EQ(c->motion.has_box, 0);
   ASSERT(c->motion.limit_margin_m == d->motion.limit_margin_m &&
+         c->motion.reach_m == d->motion.reach_m && d->motion.reach_m == 0 &&
          c->motion.approach_cone_deg == d->motion.approach_cone_deg &&
          c->motion.max_force_n == d->motion.max_force_n &&
          c->motion.max_speed_mps == d->motion.max_speed_mps &&

@@ -88,6 +88,23 @@ static void test_pose_limits(void) {
   const double up[4] = {1, 0, 0, 0};
   ASSERT_OK(fg_motion_check_pose(&any, ok, up, 0, 0, FG_RETREAT_NONE, &v));
 
+  /* a reach: each point of the path within it of the base's origin */
+  fg_motion_limits reach = lim;
+  reach.reach_m = 0.45;
+  ASSERT_OK(fg_motion_check_pose(&reach, ok, k_down, 0.1, 0.1, FG_RETREAT_UP, &v));
+  const double edge[3] = {0.45, 0.0, 0.05}; /* 0.4528 m out */
+  ASSERT_ERR(fg_motion_check_pose(&reach, edge, k_down, 0, 0, FG_RETREAT_NONE, &v), FG_ELIMIT,
+             "beyond its reach");
+  ASSERT_STREQ(v.limit, "reach");
+  ASSERT_NEAR(v.value, sqrt(0.45 * 0.45 + 0.05 * 0.05), 1e-12);
+  ASSERT_NEAR(v.bound, 0.45, 1e-12);
+  /* the pose within it, its approach's start (0.15 m up) not */
+  const double near[3] = {0.40, 0.0, 0.10};
+  ASSERT_OK(fg_motion_check_pose(&reach, near, k_down, 0, 0, FG_RETREAT_NONE, &v));
+  ASSERT_ERR(fg_motion_check_pose(&reach, near, k_down, 0.15, 0, FG_RETREAT_NONE, &v),
+             FG_ELIMIT, "approach start");
+  ASSERT_STREQ(v.limit, "reach");
+
   /* no box known: nothing moves */
   fg_motion_limits none = lim;
   none.has_box = 0;
