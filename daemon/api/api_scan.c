@@ -104,14 +104,16 @@ int fg_api_scene_scan(fg_req *req, fg_resp *resp) {
   fg_scan_request r;
   if (body && parse_scan(body, req->conf, &r, resp) == 0) {
     fg_job_info job;
+    const int listed = r.T_base_tcp != NULL;
     const int rc = fg_scan_submit(req->app, req->conf, s, &r, &job);
     free(r.T_base_tcp); /* NULL once the job took them */
     if (rc < 0) {
       fg_api_fail(resp, rc);
     } else {
       snprintf(resp->location, sizeof resp->location, "/v1/jobs/%s", job.id);
-      fg_resp_json(resp, 202, json_pack("{s:s, s:s, s:i}", "job", job.id, "state",
-                                        fg_job_state_name(job.state), "viewpoints", r.n));
+      fg_resp_json(resp, 202, json_pack("{s:s, s:s, s:i, s:o}", "job", job.id, "state",
+                                        fg_job_state_name(job.state), "viewpoints", r.n,
+                                        "radius_m", listed ? json_null() : json_real(r.radius_m)));
     }
   }
   json_decref(body);

@@ -17,17 +17,24 @@
 
 /* ---------------------------------------------------------------- viewpoints */
 
+/* Half the narrower field of view, and the radius of the box's bounding sphere. */
+static void view_and_box(const double lo[3], const double hi[3], const fg_intrinsics *in,
+                         double *half_fov, double *r_box) {
+  double r2 = 0;
+  for (int k = 0; k < 3; k++) r2 += (hi[k] - lo[k]) * (hi[k] - lo[k]) / 4;
+  *r_box = sqrt(r2);
+  *half_fov = fmin(atan(in->w / (2 * in->fx)), atan(in->h / (2 * in->fy)));
+}
+
 void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrinsics *in,
                         const double T_tcp_cam[16], int n, double radius_m, double el_min_deg,
                         double el_max_deg, double *T_base_tcp) {
-  double c[3], r2 = 0;
-  for (int k = 0; k < 3; k++) {
-    c[k] = (lo[k] + hi[k]) / 2;
-    r2 += (hi[k] - lo[k]) * (hi[k] - lo[k]) / 4;
-  }
+  double c[3];
+  for (int k = 0; k < 3; k++) c[k] = (lo[k] + hi[k]) / 2;
   if (!(radius_m > 0)) {
-    const double half_fov = fmin(atan(in->w / (2 * in->fx)), atan(in->h / (2 * in->fy)));
-    radius_m = sqrt(r2) / sin(0.8 * half_fov);
+    double half_fov, r_box;
+    view_and_box(lo, hi, in, &half_fov, &r_box);
+    radius_m = r_box / sin(0.8 * half_fov);
   }
   double T_cam_tcp[16];
   fg_pose_inverse(T_tcp_cam, T_cam_tcp);
@@ -41,6 +48,32 @@ void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrins
     fg_pose_look_at(eye, c, 0, T_base_cam);
     fg_pose_compose(T_base_cam, T_cam_tcp, T_base_tcp + 16 * i);
   }
+}
+
+double fg_scan_default_radius(const double lo[3], const double hi[3], const fg_intrinsics *in,
+                              const double T_tcp_cam[16], int n, double el_min_deg,
+                              double el_max_deg, const fg_motion_limits *lim) {
+  double half_fov, r_box;
+  view_and_box(lo, hi, in, &half_fov, &r_box);
+  const double r_far = r_box / sin(0.8 * half_fov), r_near = r_box / sin(half_fov);
+  double *T = malloc(sizeof *T * 16 * (size_t)n), best_r = r_far;
+  int best = 0;
+  for (int s = 0; T && s <= 16; s++) {
+    const double r = r_far + (r_near - r_far) * s / 16;
+    fg_scan_viewpoints(lo, hi, in, T_tcp_cam, n, r, el_min_deg, el_max_deg, T);
+    int ok = 0;
+    for (int i = 0; i < n; i++) {
+      double p[3], q[4];
+      fg_pose_to_quat(T + 16 * i, p, q);
+      ok += fg_motion_check_pose(lim, p, q, 0, 0, FG_RETREAT_NONE, NULL) == 0;
+    }
+    if (ok > best) {
+      best = ok;
+      best_r = r;
+    }
+  }
+  free(T);
+  return best_r;
 }
 
 /* ---------------------------------------------------------------- the job */
@@ -137,6 +170,13 @@ int fg_scan_submit(fg_app *app, const fg_conf *conf, fg_scene *s, fg_scan_reques
     fg_scene_get_info(s, &si);
     req->T_base_tcp = malloc(sizeof *req->T_base_tcp * 16 * (size_t)req->n);
     if (!req->T_base_tcp) return fg_fail(FG_ENOMEM, "viewpoints");
+    if (!(req->radius_m > 0)) {
+      fg_motion_limits lim;
+      fg_robot_limits_get(app->robot, &lim);
+      req->radius_m = fg_scan_default_radius(si.params.workspace_min, si.params.workspace_max,
+                                             &cal.in, cal.T_mount, req->n, req->el_min_deg,
+                                             req->el_max_deg, &lim);
+    }
     fg_scan_viewpoints(si.params.workspace_min, si.params.workspace_max, &cal.in, cal.T_mount,
                        req->n, req->radius_m, req->el_min_deg, req->el_max_deg,
                        req->T_base_tcp);

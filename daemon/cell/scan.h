@@ -10,6 +10,7 @@
 #define FG_DAEMON_CELL_SCAN_H
 
 #include "cameras.h"
+#include "motion/limits.h"
 #include "state/app.h"
 #include "state/jobs.h"
 
@@ -20,7 +21,8 @@ typedef struct fg_scan_request {
   char camera[FG_CAMERA_NAME_MAX + 1];
   int n;                 /* viewpoints */
   double *T_base_tcp;    /* n TCP poses (16 each), owned; NULL: placed on a sphere cap */
-  double radius_m;       /* the cap's: camera to the workspace's centre; 0: from the view */
+  double radius_m;       /* the cap's: camera to the workspace's centre; 0: from the view
+                            and the limits (fg_scan_default_radius) */
   double el_min_deg, el_max_deg; /* the cap's elevations, default 35 .. 75 */
   int settle_ms;         /* after each motion, default 300 */
   int train;             /* then train the scene in the same job, with train_params */
@@ -36,6 +38,14 @@ extern const fg_job_kind fg_job_kind_scan;
 void fg_scan_viewpoints(const double lo[3], const double hi[3], const fg_intrinsics *in,
                         const double T_tcp_cam[16], int n, double radius_m, double el_min_deg,
                         double el_max_deg, double *T_base_tcp);
+
+/* The radius of a scan's cap when the request gives none: from where the box's bounding
+ * sphere fills 80 % of the narrower field of view in to where it fills all of it, the
+ * farthest at which the motion limits lim (the position box and the reach) accept the most
+ * of the n viewpoints; the 80 % radius when they accept none anywhere. */
+double fg_scan_default_radius(const double lo[3], const double hi[3], const fg_intrinsics *in,
+                              const double T_tcp_cam[16], int n, double el_min_deg,
+                              double el_max_deg, const fg_motion_limits *lim);
 
 /* Queues the scan of req (taken: its poses are the job's) on scene s with camera cam, after
  * checking what can be checked now: a hand camera, calibrated, a robot. Failures as

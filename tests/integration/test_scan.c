@@ -196,6 +196,52 @@ int main(int argc, char **argv) {
   ASSERT(json_is_true(json_object_get(r->json, "trained")));
   h_resp_free(r);
 
+  /* the cap's radius by default: between where the workspace (0.225 m to its bounding
+   * sphere) fills 80 % of the narrower field of view (16.75 degrees half, vertically) and
+   * where it fills all of it, as far out as the position box allows the most viewpoints */
+  const double half = atan(180 / 598.0), far = 0.225 / sin(0.8 * half), near = 0.225 / sin(half);
+  r = scan("{\"camera\": \"wrist\", \"viewpoints\": 30, \"settle_ms\": 0}");
+  ASSERT_STATUS(r, 202);
+  const double boxed = json_real_value(json_object_get(r->json, "radius_m"));
+  ASSERT(boxed > near - 1e-6 && boxed < far + 1e-6);
+  snprintf(id, sizeof id, "%s", json_string_value(json_object_get(r->json, "job")));
+  h_resp_free(r);
+  char *job_path = h_fmt("/v1/jobs/%s", id);
+  r = h_delete(job_path); /* it goes too far for the simulated arm */
+  h_resp_free(r);
+  free(job_path);
+  h_resp_free(wait_job(id));
+  /* with the arm's reach known, as close as keeps the workspace in view, where the reach
+   * admits the most viewpoints; the rest are refused by the limits, not the robot */
+  char reach_conf[1200];
+  snprintf(reach_conf, sizeof reach_conf, "[robot]\nreach_m = 0.85\n%s", conf + 8);
+  h_write_config(reach_conf);
+  h_reload();
+  r = scan("{\"camera\": \"wrist\", \"viewpoints\": 30, \"settle_ms\": 0}");
+  ASSERT_STATUS(r, 202);
+  const double radius = json_real_value(json_object_get(r->json, "radius_m"));
+  fprintf(stderr, "default radius %.3f m in the box, %.3f m with a reach of 0.85 m (%.3f to "
+          "%.3f)\n", boxed, radius, near, far);
+  ASSERT(radius < boxed && radius > near - 1e-6);
+  snprintf(id, sizeof id, "%s", json_string_value(json_object_get(r->json, "job")));
+  h_resp_free(r);
+  r = wait_job(id);
+  ASSERT_STREQ(json_string_value(json_object_get(r->json, "state")), "done");
+  const json_int_t skipped = json_integer_value(json_object_get(r->json, "skipped"));
+  ASSERT(skipped > 0 && skipped < 30);
+  h_resp_free(r);
+  r = h_get("/v1/robot/log?limit=40");
+  int reach_refusals = 0;
+  json_t *log = json_object_get(r->json, "entries");
+  for (size_t i = 0; i < json_array_size(log); i++) {
+    json_t *e = json_array_get(log, i);
+    const char *rid = json_string_value(json_object_get(e, "request_id"));
+    reach_refusals += rid && strcmp(rid, id) == 0 &&
+                      strcmp(json_string_value(json_object_get(e, "outcome")), "refused") == 0;
+  }
+  ASSERT_EQ(reach_refusals, skipped);
+  h_resp_free(r);
+
   h_stop();
   simproc_stop(&sim);
   h_done();
