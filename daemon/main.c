@@ -10,6 +10,7 @@
 #include "http/http.h"
 #include "state/idem.h"
 #include "robot/cmd_ids.h"
+#include "cell/calib_job.h"
 #include "cell/cameras.h"
 #include "cell/scan.h"
 #include "state/job_train.h"
@@ -390,7 +391,8 @@ int main(int argc, char **argv) {
    * the API can start. */
   if (fg_jobs_new(&app.jobs, &app) != 0 ||
       fg_jobs_register_kind(app.jobs, &fg_job_kind_train) != 0 ||
-      fg_jobs_register_kind(app.jobs, &fg_job_kind_scan) != 0) {
+      fg_jobs_register_kind(app.jobs, &fg_job_kind_scan) != 0 ||
+      fg_jobs_register_kind(app.jobs, &fg_job_kind_calibrate) != 0) {
     fg_error("cannot set up background jobs: %s", fg_error_detail());
     app_teardown(&app);
     return 1;

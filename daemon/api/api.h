@@ -61,12 +61,13 @@ int fg_api_camera_views_clear(fg_req *req, fg_resp *resp);
 int fg_api_camera_calibrate(fg_req *req, fg_resp *resp);
 int fg_api_scene_scan(fg_req *req, fg_resp *resp);
 int fg_api_grasp_execute(fg_req *req, fg_resp *resp);
-/* api_audit.c: the three routes that may move something, each its handler above under the
- * audit log; and the log read back. */
+/* api_audit.c: the routes that may move something, each its handler above under the audit
+ * log; and the log read back. */
 int fg_api_audit_robot_command(fg_req *req, fg_resp *resp);
 int fg_api_audit_robot_stop(fg_req *req, fg_resp *resp);
 int fg_api_audit_robot_reset(fg_req *req, fg_resp *resp);
 int fg_api_audit_scene_scan(fg_req *req, fg_resp *resp);
+int fg_api_audit_camera_calibrate(fg_req *req, fg_resp *resp);
 int fg_api_audit_gripper_action(fg_req *req, fg_resp *resp);
 int fg_api_audit_grasp_execute(fg_req *req, fg_resp *resp);
 int fg_api_robot_log(fg_req *req, fg_resp *resp);

@@ -1,6 +1,7 @@
 /* The audit trail of the routes that move the robot or the gripper (POST /v1/robot/commands,
- * POST /v1/gripper/{action}, POST /v1/scenes/{s}/grasps/{id}/execute), and GET
- * /v1/robot/log that reads it back.
+ * POST /v1/gripper/{action}, POST /v1/scenes/{s}/grasps/{id}/execute, and the jobs that
+ * drive the robot: POST /v1/scenes/{s}/scan, POST /v1/cameras/{c}/calibrate with "drive"),
+ * and GET /v1/robot/log that reads it back.
  *
  * The trail wraps those routes' handlers rather than living inside them, so that every
  * answer is recorded, whichever of the many places in them (decoding, a grasp not found,
@@ -83,6 +84,7 @@ static json_t *request_entry(const fg_req *req, const fg_resp *resp, json_t *bod
   if (strcmp(req->path, "/v1/robot/reset") == 0) command = "reset";
   const size_t plen = strlen(req->path);
   if (plen > 5 && strcmp(req->path + plen - 5, "/scan") == 0) command = "scan";
+  if (plen > 10 && strcmp(req->path + plen - 10, "/calibrate") == 0) command = "calibrate";
   if (!command) command = json_string_value(json_object_get(body, "command"));
   if (!command) command = json_string_value(json_object_get(cmd, "command"));
   json_object_set_new(e, "command", command ? json_string(command) : json_null());
@@ -208,6 +210,16 @@ int fg_api_audit_grasp_execute(fg_req *req, fg_resp *resp) {
 
 int fg_api_audit_scene_scan(fg_req *req, fg_resp *resp) {
   return audited(req, resp, fg_api_scene_scan);
+}
+
+/* A calibration moves the robot only when it drives it ("drive"); one on the views kept is
+ * not the audit's. */
+int fg_api_audit_camera_calibrate(fg_req *req, fg_resp *resp) {
+  json_t *body = body_object(req);
+  const int drives = json_object_get(body, "drive") != NULL;
+  json_decref(body);
+  return drives ? audited(req, resp, fg_api_camera_calibrate)
+                : fg_api_camera_calibrate(req, resp);
 }
 
 void fg_api_audit_finished(fg_app *app, const fg_robot_cmd_view *v) {

@@ -1,10 +1,12 @@
 /* GET /v1/cameras, GET /v1/cameras/{c}, POST /v1/cameras/{c}/capture, POST and DELETE
- * /v1/cameras/{c}/views: the cameras of [camera NAME], what their calibration says, a
- * capture, and the views kept for the next calibration. */
+ * /v1/cameras/{c}/views, POST /v1/cameras/{c}/calibrate: the cameras of [camera NAME], what
+ * their calibration says, a capture, the views kept for the next calibration, and
+ * calibrating on them (or queueing a calibration the robot drives). */
 #include "api.h"
 
 #include "core/error.h"
 
+#include "cell/calib_job.h"
 #include "cell/cameras.h"
 #include "state/json.h"
 
@@ -244,24 +246,95 @@ static json_t *report_json(const fg_conf_camera *cam, const fg_calibration_repor
   return o;
 }
 
+/* "drive": {"target", "viewpoints", "distance_m", "elevations_deg", "roll_deg", "settle_ms",
+ * "mount"} into *d (cell/calib_job.h). 0, or -1 after a 400. */
+static int parse_drive(json_t *v, fg_calib_drive *d, fg_resp *resp) {
+  static const char *const keys[] = {"target", "viewpoints", "distance_m", "elevations_deg",
+                                     "roll_deg", "settle_ms", "mount", NULL};
+  const char *unknown = json_is_object(v) ? fg_json_unknown_key(v, keys) : "(not an object)";
+  if (unknown)
+    return fg_resp_error(resp, 400, "invalid_request", "\"drive\" takes target, viewpoints, "
+                         "distance_m, elevations_deg, roll_deg, settle_ms, mount; not %s",
+                         unknown), -1;
+  d->n = 30;
+  d->dist_m[0] = 0.30;
+  d->dist_m[1] = 0.40;
+  d->el_deg[0] = 50;
+  d->el_deg[1] = 80;
+  d->roll_deg = 60;
+  long long n = d->n, settle = 300;
+  json_t *dist = json_object_get(v, "distance_m"), *el = json_object_get(v, "elevations_deg"),
+         *mount = json_object_get(v, "mount");
+  if (fg_json_vec(json_object_get(v, "target"), d->target, 3, "target") != 0)
+    return fg_resp_error(resp, 400, "invalid_request", "\"drive\" needs \"target\": [x, y, "
+                         "z], where the board lies (its centre, or near it) in the base frame, "
+                         "metres"), -1;
+  if ((json_object_get(v, "viewpoints") &&
+       fg_json_int_range(v, "viewpoints", FG_CALIB_MIN_VIEWS_INTRINSICS,
+                         FG_CALIB_DRIVE_MAX_VIEWS, &n) != 1) ||
+      (dist && (fg_json_vec(dist, d->dist_m, 2, "distance_m") != 0 ||
+                !(d->dist_m[0] > 0 && d->dist_m[0] <= d->dist_m[1] && d->dist_m[1] <= 2))) ||
+      (el && (fg_json_vec(el, d->el_deg, 2, "elevations_deg") != 0 ||
+              !(d->el_deg[0] >= 0 && d->el_deg[0] <= d->el_deg[1] && d->el_deg[1] <= 90))) ||
+      (json_object_get(v, "roll_deg") &&
+       (fg_json_number(v, "roll_deg", &d->roll_deg) != 1 ||
+        !(d->roll_deg >= 0 && d->roll_deg <= 90))) ||
+      (json_object_get(v, "settle_ms") &&
+       fg_json_int_range(v, "settle_ms", 0, 10000, &settle) != 1))
+    return fg_resp_error(resp, 400, "invalid_request", "drive: viewpoints %d to %d; "
+                         "distance_m [near, far] above 0, at most 2; elevations_deg [low, "
+                         "high] from 0 to 90, low <= high; roll_deg 0 to 90; settle_ms 0 to "
+                         "10000", FG_CALIB_MIN_VIEWS_INTRINSICS, FG_CALIB_DRIVE_MAX_VIEWS), -1;
+  d->n = (int)n;
+  d->settle_ms = (int)settle;
+  double q[4];
+  d->has_mount_guess = mount != NULL;
+  if (mount && fg_json_pose_parse(mount, "drive.mount", d->T_mount_guess, q) != 0)
+    return fg_resp_error(resp, 400, "invalid_pose", "%s", fg_error_detail()), -1;
+  return 0;
+}
+
+/* Queues the driven calibration d: 202 and the job, or the refusal. */
+static int calibrate_driven(fg_req *req, fg_resp *resp, fg_calib_drive *d) {
+  fg_job_info job;
+  const int rc = fg_calib_drive_submit(req->app, req->conf, d, &job);
+  free(d->T_base_tcp); /* NULL once the job took them */
+  if (rc < 0) return fg_api_fail(resp, rc);
+  snprintf(resp->location, sizeof resp->location, "/v1/jobs/%s", job.id);
+  fg_resp_json(resp, 202, json_pack("{s:s, s:s, s:i}", "job", job.id, "state",
+                                    fg_job_state_name(job.state), "viewpoints", d->n));
+  return 0;
+}
+
 int fg_api_camera_calibrate(fg_req *req, fg_resp *resp) {
   const fg_conf_camera *cam = camera_param(req, resp);
   if (!cam) return 0;
   json_t *body = fg_api_body_object(req, resp);
   if (!body) return 0;
-  static const char *const keys[] = {"kind", NULL};
+  static const char *const keys[] = {"kind", "drive", NULL};
+  static const char *const kinds[] = {"intrinsics", "hand_eye", "both"};
   const char *kind = json_string_value(json_object_get(body, "kind"));
-  const int ok = !fg_json_unknown_key(body, keys) && kind &&
-                 (strcmp(kind, "intrinsics") == 0 || strcmp(kind, "hand_eye") == 0);
-  const fg_calibrate_kind k = ok && strcmp(kind, "intrinsics") == 0 ? FG_CALIBRATE_INTRINSICS
-                                                                    : FG_CALIBRATE_HAND_EYE;
+  int k = -1;
+  for (int i = 0; kind && i < 3; i++)
+    if (strcmp(kind, kinds[i]) == 0) k = i;
+  fg_calib_drive d = {.kind = (fg_calibrate_kind)k};
+  json_t *drive = json_object_get(body, "drive");
+  int rc = 0;
+  if (fg_json_unknown_key(body, keys) || k < 0) {
+    fg_resp_error(resp, 400, "invalid_request", "calibrate takes {\"kind\": \"intrinsics\" | "
+                  "\"hand_eye\" | \"both\"}: on the views kept by captures with "
+                  "\"calibration_view\": true and uploads; with \"drive\": {\"target\": [x, y, "
+                  "z], ...} the robot takes the views itself");
+    rc = -1;
+  } else if (drive) {
+    rc = parse_drive(drive, &d, resp);
+  }
+  if (rc == 0 && drive) snprintf(d.camera, sizeof d.camera, "%s", cam->name);
   json_decref(body);
-  if (!ok)
-    return fg_resp_error(resp, 400, "invalid_request", "calibrate takes {\"kind\": "
-                         "\"intrinsics\" | \"hand_eye\"}: on the views kept by captures with "
-                         "\"calibration_view\": true");
+  if (rc < 0) return 0;
+  if (drive) return calibrate_driven(req, resp, &d);
   fg_calibration_report r;
-  const int rc = fg_camera_calibrate(req->app->cameras, &req->conf->board, cam, k, &r);
+  rc = fg_camera_calibrate(req->app->cameras, &req->conf->board, cam, d.kind, &r);
   if (rc < 0) return fg_api_fail(resp, rc);
   fg_camera_calib now;
   fg_cameras_calib_get(req->app->cameras, cam->name, &now);

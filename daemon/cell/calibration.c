@@ -226,10 +226,9 @@ int fg_camera_calibrate(fg_cameras *c, const fg_charuco_board *b, const fg_conf_
   if (n == 0)
     rc = fg_fail_as(FG_EINVAL, "not_enough_views", "%s has no views kept: capture with "
                     "{\"calibration_view\": true} first", cam->name);
-  else if (kind == FG_CALIBRATE_INTRINSICS)
+  else if (kind != FG_CALIBRATE_HAND_EYE)
     rc = calibrate_intrinsics(b, kv, n, r);
-  else
-    rc = calibrate_mount(b, cam, kv, n, r);
+  if (rc == 0 && kind != FG_CALIBRATE_INTRINSICS) rc = calibrate_mount(b, cam, kv, n, r);
   if (rc == 0) rc = fg_cameras_calib_set(c, cam->name, &r->calib);
   if (rc < 0) {
     views_put_back(c, cam->name, kv, n);

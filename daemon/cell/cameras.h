@@ -87,17 +87,23 @@ void fg_cameras_views_clear(fg_cameras *c, const char *name);
 #define FG_CALIB_MAX_SPREAD_MM 2.0   /* the fixed frame's spread over the views */
 #define FG_CALIB_MAX_SPREAD_DEG 0.5
 
-typedef enum { FG_CALIBRATE_INTRINSICS, FG_CALIBRATE_HAND_EYE } fg_calibrate_kind;
+/* What to calibrate: the intrinsics, the mount (hand-eye) on intrinsics calibrated before, or
+ * both on the same views (the intrinsics first; kept only when both meet the bounds). */
+typedef enum {
+  FG_CALIBRATE_INTRINSICS,
+  FG_CALIBRATE_HAND_EYE,
+  FG_CALIBRATE_BOTH
+} fg_calibrate_kind;
 
 /* What a calibration found, kept or not. */
 typedef struct fg_calibration_report {
-  int views, views_used;
+  int views, views_used;          /* both: views_used is the mount's */
   fg_camera_calib calib;          /* the new calibration (the kind's part) */
   fg_hand_eye_result methods[FG_HAND_EYE_METHODS]; /* hand_eye: each closed-form method */
   int best;                       /* hand_eye: the method refined */
 } fg_calibration_report;
 
-/* Calibrates cam's intrinsics or mount on its kept views (consumed when the calibration is
+/* Calibrates cam's intrinsics, mount or both on its kept views (consumed when the calibration is
  * kept) with board b, and keeps the result (the other part of the calibration stays).
  * hand_eye needs the camera's intrinsics (kept as calibrated: refining them with the mount
  * would absorb the robot's pose errors, tests/bench/bench_calibration) and a robot pose with

@@ -11,8 +11,10 @@
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "cell_util.h"
 #include "robot_util.h"
+#include "training.h"
 
 #include "core/pose.h"
+#include "core/rng.h"
 
 #include <limits.h>
 #include <math.h>
@@ -281,11 +283,14 @@ static void hand_camera(void) {
   simproc_stop(&sim);
 }
 
+static void driven(void);
+
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
   simproc_init(argv[2], h_tmpdir());
   hand_camera();
+  driven();
   fixed_camera();
   h_done();
   printf("ok\n");
@@ -373,6 +378,151 @@ static void fixed_camera(void) {
     h_resp_free(r);
   }
   ASSERT(kept >= 24);
+  h_stop();
+  simproc_stop(&sim);
+}
+
+/* ---------------------------------------------------------------- the robot drives */
+
+/* Counts the audit log's lines of route: its motions (each done, of job id) and requests. */
+static void audit_count(const char *route, const char *id, int *moves, int *requests) {
+  h_resp *r = h_get("/v1/robot/log?limit=200");
+  ASSERT_STATUS(r, 200);
+  *moves = *requests = 0;
+  json_t *entries = json_object_get(r->json, "entries");
+  for (size_t i = 0; i < json_array_size(entries); i++) {
+    json_t *e = json_array_get(entries, i);
+    const char *rt = json_string_value(json_object_get(e, "route"));
+    const char *cmd = json_string_value(json_object_get(e, "command"));
+    if (!rt || strcmp(rt, route) != 0 || !cmd) continue;
+    if (strcmp(cmd, "move") == 0) {
+      (*moves)++;
+      ASSERT_STREQ(json_string_value(json_object_get(e, "request_id")), id);
+      ASSERT_STREQ(json_string_value(json_object_get(e, "client")), "calibration job");
+    }
+    *requests += strcmp(cmd, "calibrate") == 0;
+  }
+  h_resp_free(r);
+}
+
+/* A hand camera whose intrinsics, distortion and mount the test draws at random (seed
+ * FG_TEST_SEED, default 38), calibrated by one request: the robot takes the views itself
+ * ("drive"), aimed with the mount as a ruler gives it (to the centimetre, no angle). */
+static void driven(void) {
+  const char *env = getenv("FG_TEST_SEED");
+  const uint64_t seed = env ? strtoull(env, NULL, 10) : 38;
+  double u[12];
+  for (int i = 0; i < 12; i++) u[i] = fg_rng_uniform(seed, (uint64_t)i);
+  const double fx = 560 + 80 * u[0], fy = fx * (0.99 + 0.02 * u[1]);
+  const double cx = 310 + 20 * u[2], cy = 230 + 20 * u[3], k1 = -0.12 + 0.09 * u[4];
+  const double mp[3] = {-0.03 + 0.06 * u[5], -0.03 + 0.06 * u[6], -0.04 - 0.05 * u[7]};
+  /* up to 5 degrees about an axis across the optical one */
+  const double ang = 5 * u[8] * M_PI / 180, phi = 2 * M_PI * u[9];
+  const double rv[3] = {ang * cos(phi), ang * sin(phi), 0};
+  double mq[4];
+  fg_quat_from_rotvec(rv, mq);
+  char camera[160], mount[160];
+  snprintf(camera, sizeof camera, "%.3f %.3f %.2f %.2f 640 480 %.4f 0.02 0.0004 -0.0006", fx,
+           fy, cx, cy, k1);
+  snprintf(mount, sizeof mount, "%.5f %.5f %.5f %.8f %.8f %.8f %.8f", mp[0], mp[1], mp[2],
+           mq[0], mq[1], mq[2], mq[3]);
+  fprintf(stderr, "driven (seed %llu): camera %s, mount %s\n", (unsigned long long)seed, camera,
+          mount);
+  simproc sim;
+  const char *args[] = {"--camera", camera, "--camera-mount", mount, "--board", BOARD, NULL};
+  const int cam_port = cu_sim_start(&sim, args);
+  char conf[1024];
+  snprintf(conf, sizeof conf,
+           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
+           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
+           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
+           "dictionary = DICT_5X5_100\n"
+           "[camera arm]\nsource = http://127.0.0.1:%d/rgb.png\n"
+           "[camera top]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
+           sim.port, cam_port, cam_port);
+  h_write_config(conf);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+
+  /* where the board lies, as in hand_camera; the mount to the centimetre */
+  const double yaw = 15 * M_PI / 180;
+  const double target[3] = {0.32 + 0.105 * cos(yaw), -0.20 + 0.105 * sin(yaw), 0};
+  char body[512];
+  snprintf(body, sizeof body, "{\"kind\": \"both\", \"drive\": {\"target\": [%.4f, %.4f, 0], "
+           "\"mount\": {\"position\": [%.2f, %.2f, %.2f], \"quaternion\": [1, 0, 0, 0]}}}",
+           target[0], target[1], mp[0], mp[1], mp[2]);
+
+  /* bad requests: nothing queued, nothing moved */
+  static const struct {
+    const char *path, *body;
+    long status;
+    const char *code;
+  } bad[] = {
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"both\", \"drive\": {}}", 400, "invalid_request"},
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0], "
+     "\"viewpoints\": 2}}", 400, "invalid_request"},
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0], "
+     "\"distance_m\": [0.5, 0.3]}}", 400, "invalid_request"},
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0], "
+     "\"mount\": [1]}}", 400, "invalid_pose"},
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"all\", \"drive\": {\"target\": [0.4, 0, 0]}}",
+     400, "invalid_request"},
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"hand_eye\", \"drive\": {\"target\": [0.4, 0, "
+     "0]}}", 409, "not_calibrated"},
+    {"/v1/cameras/top/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0]}}",
+     400, "invalid_request"},
+    {"/v1/cameras/none/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0]}}",
+     404, "camera_not_found"},
+  };
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    h_resp *r = h_post_json(bad[i].path, bad[i].body);
+    ASSERT_HTTP_ERROR(r, bad[i].status, bad[i].code);
+    h_resp_free(r);
+  }
+  int moves, requests;
+  audit_count("/v1/cameras/arm/calibrate", "", &moves, &requests);
+  ASSERT_EQ(moves, 0);
+  ASSERT_EQ(requests, 6); /* each refusal on this route recorded */
+
+  h_resp *r = h_post_json("/v1/cameras/arm/calibrate", body);
+  ASSERT_STATUS(r, 202);
+  char id[64];
+  snprintf(id, sizeof id, "%s", json_string_value(json_object_get(r->json, "job")));
+  h_resp_free(r);
+  /* one driving job per camera: a second is refused while the first runs */
+  r = h_post_json("/v1/cameras/arm/calibrate", body);
+  if (r->status != 202) ASSERT_HTTP_ERROR(r, 409, "job_in_progress");
+  else FG_TEST_FAIL("a second driven calibration was queued beside %s", id);
+  h_resp_free(r);
+  json_t *job = t_wait_job(id, "done", 300);
+  ASSERT_STREQ(json_string_value(json_object_get(job, "kind")), "calibrate");
+  ASSERT_STREQ(json_string_value(json_object_get(job, "camera")), "arm");
+  ASSERT(json_is_null(json_object_get(job, "scene")));
+  ASSERT_EQ(json_integer_value(json_object_get(job, "step")), 30); /* the default */
+  const json_int_t kept = json_integer_value(json_object_get(job, "frames"));
+  fprintf(stderr, "driven: %lld of 30 views showed the board, %lld skipped\n", (long long)kept,
+          (long long)json_integer_value(json_object_get(job, "skipped")));
+  ASSERT(kept >= 20);
+  json_decref(job);
+  audit_count("/v1/cameras/arm/calibrate", id, &moves, &requests);
+  ASSERT_EQ(moves, 30);
+  ASSERT_EQ(requests, 8); /* the refusals, the job's request and the busy one */
+
+  r = h_get("/v1/cameras/arm");
+  ASSERT_STATUS(r, 200);
+  ASSERT(json_is_true(json_object_get(r->json, "calibrated")));
+  json_t *in = json_object_get(r->json, "intrinsics");
+  fprintf(stderr, "driven: fx %.2f fy %.2f cx %.2f cy %.2f (truth %.2f %.2f %.2f %.2f)\n",
+          num(in, "fl_x"), num(in, "fl_y"), num(in, "cx"), num(in, "cy"), fx, fy, cx, cy);
+  ASSERT(fabs(num(in, "fl_x") / fx - 1) < 0.005);
+  ASSERT(fabs(num(in, "fl_y") / fy - 1) < 0.005);
+  ASSERT(fabs(num(in, "cx") - cx) < 1 && fabs(num(in, "cy") - cy) < 1);
+  double err_mm, err_deg;
+  pose_error(json_object_get(r->json, "T_tcp_cam"), mp, mq, &err_mm, &err_deg);
+  fprintf(stderr, "driven: mount %.3f mm, %.4f deg from the truth\n", err_mm, err_deg);
+  ASSERT(err_mm < 1);
+  ASSERT(err_deg < 0.2);
+  h_resp_free(r);
   h_stop();
   simproc_stop(&sim);
 }
