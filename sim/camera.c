@@ -18,7 +18,9 @@
 
 #include "core/error.h"
 #include "core/pose.h"
+#include "core/half.h"
 #include "io/image.h"
+#include "io/npy.h"
 
 #define BOARD_PX_PER_M 4000.0 /* the board's texture: a texel of 0.25 mm */
 #define SUB 4                 /* board samples per pixel side */
@@ -61,6 +63,7 @@ void sim_camera_config_default(sim_camera_config *c) {
   c->h = 480;
   c->cx = 319.5;
   c->cy = 239.5;
+  c->patch = 16;
 }
 
 /* Up to max numbers from s; their count, or -1 when something else is in it. */
@@ -153,6 +156,14 @@ int sim_camera_parse_board_on_tool(sim_camera_config *c, const char *s, char *er
   c->has_board = 1;
   c->board_on_tool = 1;
   c->board = b;
+  return 0;
+}
+
+int sim_camera_parse_patch(sim_camera_config *c, const char *s, char *err, size_t errsz) {
+  double v[1] = {0};
+  if (numbers(s, v, 1) != 1 || !(v[0] >= 1 && v[0] <= 64) || v[0] != floor(v[0]))
+    return errf(err, errsz, "--camera-patch: pixels per feature cell, 1 to 64, not \"%s\"", s);
+  c->patch = (int)v[0];
   return 0;
 }
 
@@ -294,7 +305,7 @@ static double board_pixel(const sim_camera *cam, const double T_bw[16], const do
 }
 
 void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t *rgb,
-                       uint16_t *depth_mm, double T_wc[16]) {
+                       uint16_t *depth_mm, int *geom, double T_wc[16]) {
   const sim_camera_config *c = &cam->cfg;
   double p[3], q[4], T_wt[16];
   sim_cell_view_tcp(view, p, q);
@@ -328,13 +339,15 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
       double d[3], tb, bx, by;
       float col[3] = {0.8f, 0.8f, 0.82f}; /* nothing: a grey room */
       world_dir(T_wc, r[0], r[1], d);
-      const double tg = sim_cell_view_ray(view, o, d, col);
+      int g;
+      const double tg = sim_cell_view_ray(view, o, d, col, &g);
+      if (geom) geom[i] = g;
       double t = tg;
       if (c->has_board && board_hit(T_bw, o, d, &tb, &bx, &by) && board_at(cam, bx, by) >= 0 &&
           (tg < 0 || tb <= tg + 2e-4)) {
-        const double g = board_pixel(cam, T_bw, T_wc, o, u, v);
-        if (g >= 0) {
-          col[0] = col[1] = col[2] = (float)g;
+        const double grey = board_pixel(cam, T_bw, T_wc, o, u, v);
+        if (grey >= 0) {
+          col[0] = col[1] = col[2] = (float)grey;
           t = tb;
         }
       }
@@ -407,26 +420,73 @@ static void reply_text(int fd, int status, const char *reason, const char *text)
   reply(fd, status, reason, "text/plain", text, strlen(text), NULL);
 }
 
-/* Renders the cell as it is now and encodes the image asked for (depth: 0 rgb, 1 depth);
- * T_wc: where the camera was. */
-static int snapshot_png(sim_camera *cam, int depth, uint8_t **png, size_t *len,
-                        double T_wc[16]) {
+enum { SNAP_RGB, SNAP_DEPTH, SNAP_FEATURES };
+
+/* The patch features of a rendered view (see camera.h): float16 [fh][fw][D]. */
+static int features_npy(const sim_camera *cam, const int *geom, uint8_t **out, size_t *len) {
+  const sim_camera_config *c = &cam->cfg;
+  const int D = sim_cell_feature_dim(cam->cell);
+  const int fh = (c->h + c->patch - 1) / c->patch, fw = (c->w + c->patch - 1) / c->patch;
+  const double **vec = malloc(sizeof *vec * (size_t)c->w * c->h); /* each pixel's vector */
+  const double **seen = malloc(sizeof *seen * (size_t)c->w * c->h);
+  int *count = malloc(sizeof *count * (size_t)c->w * c->h);
+  uint16_t *f = malloc(sizeof *f * (size_t)fh * fw * D);
+  int rc = -1;
+  if (vec && seen && count && f) {
+    for (size_t i = 0; i < (size_t)c->w * c->h; i++) vec[i] = sim_cell_feature(cam->cell, geom[i]);
+    for (int r = 0; r < fh; r++)
+      for (int q = 0; q < fw; q++) {
+        /* the pixels of cell (r, q): v with floor(v fh / h) == r, likewise u */
+        const int v0 = (r * c->h + fh - 1) / fh, v1 = ((r + 1) * c->h + fh - 1) / fh;
+        const int u0 = (q * c->w + fw - 1) / fw, u1 = ((q + 1) * c->w + fw - 1) / fw;
+        int n = 0, best = 0;
+        for (int v = v0; v < v1 && v < c->h; v++)
+          for (int u = u0; u < u1 && u < c->w; u++) {
+            const double *x = vec[(size_t)v * c->w + u];
+            int k = 0;
+            while (k < n && seen[k] != x) k++;
+            if (k == n) {
+              seen[n] = x;
+              count[n++] = 0;
+            }
+            if (++count[k] > count[best]) best = k;
+          }
+        uint16_t *cell = f + ((size_t)r * fw + q) * D;
+        for (int k = 0; k < D; k++)
+          cell[k] = fg_float_to_half(n ? (float)seen[best][k] : 0.0f);
+      }
+    const size_t shape[3] = {(size_t)fh, (size_t)fw, (size_t)D};
+    rc = fg_npy_encode(FG_DTYPE_F16, 3, shape, f, out, len) == 0 ? 0 : -1;
+  }
+  free(vec);
+  free(seen);
+  free(count);
+  free(f);
+  return rc;
+}
+
+/* Renders the cell as it is now and encodes what was asked for: the colour or depth image
+ * (PNG), or the patch features (.npy); T_wc: where the camera was. */
+static int snapshot(sim_camera *cam, int kind, uint8_t **out, size_t *len, double T_wc[16]) {
   const size_t n = (size_t)cam->cfg.w * cam->cfg.h;
   sim_cell_view *view = sim_cell_view_new(cam->cell);
   uint8_t *rgb = malloc(3 * n);
   uint16_t *d = malloc(sizeof *d * n);
+  int *geom = kind == SNAP_FEATURES ? malloc(sizeof *geom * n) : NULL;
   int rc = -1;
-  if (view && rgb && d) {
+  if (view && rgb && d && (geom || kind != SNAP_FEATURES)) {
     pthread_mutex_lock(cam->lock);
     sim_cell_view_take(view, cam->cell);
     pthread_mutex_unlock(cam->lock);
-    sim_camera_render(cam, view, rgb, d, T_wc);
-    rc = depth ? fg_image_encode_png(d, cam->cfg.w, cam->cfg.h, 1, 16, png, len)
-               : fg_image_encode_png(rgb, cam->cfg.w, cam->cfg.h, 3, 8, png, len);
+    sim_camera_render(cam, view, rgb, d, geom, T_wc);
+    rc = kind == SNAP_FEATURES ? features_npy(cam, geom, out, len)
+         : kind == SNAP_DEPTH  ? fg_image_encode_png(d, cam->cfg.w, cam->cfg.h, 1, 16, out, len)
+                               : fg_image_encode_png(rgb, cam->cfg.w, cam->cfg.h, 3, 8, out, len);
   }
   sim_cell_view_free(view);
   free(rgb);
   free(d);
+  free(geom);
   return rc;
 }
 
@@ -445,15 +505,21 @@ static void serve_one(sim_camera *cam, int fd) {
   char method[16], path[256];
   if (sscanf(req, "%15s %255s", method, path) != 2)
     return reply_text(fd, 400, "Bad Request", "a request line: GET /rgb.png HTTP/1.1\n");
-  if (strcmp(method, "GET") != 0)
-    return reply_text(fd, 405, "Method Not Allowed", "GET /rgb.png or /depth.png\n");
-  const int depth = strcmp(path, "/depth.png") == 0;
-  if (!depth && strcmp(path, "/rgb.png") != 0)
-    return reply_text(fd, 404, "Not Found", "GET /rgb.png or /depth.png\n");
+  static const char *const paths[] = {"/rgb.png", "/depth.png", "/features.npy"};
+  static const char *const names[] = {"rgb", "depth", "features"};
+  int kind = -1;
+  for (int k = 0; k < 3; k++)
+    if (strcmp(path, paths[k]) == 0) kind = k;
+  const int has_features = sim_cell_feature_dim(cam->cell) > 0;
+  const char *which = has_features ? "GET /rgb.png, /depth.png or /features.npy\n"
+                                   : "GET /rgb.png or /depth.png\n";
+  if (strcmp(method, "GET") != 0) return reply_text(fd, 405, "Method Not Allowed", which);
+  if (kind < 0 || (kind == SNAP_FEATURES && !has_features))
+    return reply_text(fd, 404, "Not Found", which);
   uint8_t *png = NULL;
   size_t len = 0;
   double T[16], p[3], q[4];
-  if (snapshot_png(cam, depth, &png, &len, T) != 0)
+  if (snapshot(cam, kind, &png, &len, T) != 0)
     return reply_text(fd, 500, "Internal Server Error", "rendering failed\n");
   /* the truth a test compares calibrations and scans with (fieldgripd never reads it) */
   fg_pose_to_quat(T, p, q);
@@ -464,11 +530,12 @@ static void serve_one(sim_camera *cam, int fd) {
   if (cam->cfg.log_path) { /* before the answer: whoever has the image finds its line */
     FILE *f = fopen(cam->cfg.log_path, "a");
     if (f) {
-      fprintf(f, "%s %s\n", depth ? "depth" : "rgb", pose);
+      fprintf(f, "%s %s\n", names[kind], pose);
       fclose(f);
     }
   }
-  reply(fd, 200, "OK", "image/png", png, len, extra);
+  reply(fd, 200, "OK", kind == SNAP_FEATURES ? "application/octet-stream" : "image/png", png,
+        len, extra);
   free(png);
 }
 

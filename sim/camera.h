@@ -2,7 +2,11 @@
  * robot's tool at a mount fieldgripd is not told, with its own intrinsics and distortion,
  * serving what the physics cell holds as seen from the current TCP pose, and a ChArUco board
  * lying on the table. GET /rgb.png (8-bit RGB) and GET /depth.png (16-bit z-depth in
- * millimetres, 0 where nothing was hit) over HTTP/1.1, one request per connection; each
+ * millimetres, 0 where nothing was hit) over HTTP/1.1, one request per connection, and, when
+ * the cell's model holds feature vectors (cell.h, sim_cell_feature), GET /features.npy: per
+ * patch of P x P pixels the vector of what most of its pixels show, float16 [ceil(h / P),
+ * ceil(w / P), D], pixel (u, v) in cell (floor(v ceil(h / P) / h), floor(u ceil(w / P) / w))
+ * as SPEC.md lays features out: what a feature extractor on the camera's side would send. Each
  * answer carries the camera's true pose as "X-Camera-Pose: x y z qw qx qy qz" (world frame,
  * OpenCV convention) for tests to compare with, which fieldgripd does not read.
  *
@@ -37,6 +41,7 @@ typedef struct sim_camera_config {
                                    * turned by yaw */
   int board_on_tool;            /* --board-on-tool: the tool holds the board ... */
   double T_tcp_board[16];       /* ... there (the board frame in the TCP's) */
+  int patch;                    /* --camera-patch: pixels per feature cell (default 16) */
   int fixed;                    /* --camera-fixed: the camera stands still ... */
   double T_base_cam[16];        /* ... there (OpenCV convention), not on the tool */
 } sim_camera_config;
@@ -56,6 +61,8 @@ int sim_camera_parse_board(sim_camera_config *c, const char *s, char *err, size_
 int sim_camera_parse_fixed(sim_camera_config *c, const char *s, char *err, size_t errsz);
 int sim_camera_parse_board_on_tool(sim_camera_config *c, const char *s, char *err,
                                    size_t errsz);
+/* "P": 1 to 64 pixels. */
+int sim_camera_parse_patch(sim_camera_config *c, const char *s, char *err, size_t errsz);
 
 typedef struct sim_camera sim_camera;
 
@@ -64,12 +71,13 @@ sim_camera *sim_camera_new(const sim_camera_config *cfg, sim_cell *cell, char *e
                            size_t errsz);
 void sim_camera_free(sim_camera *cam);
 
-/* Renders the view: rgb (w * h * 3 bytes) and depth_mm (w * h); T_world_cam: the camera's
- * pose it was rendered from (OpenCV convention). */
+/* Renders the view: rgb (w * h * 3 bytes) and depth_mm (w * h); geom (w * h; may be NULL)
+ * the geom each pixel's ray met, -1 for none, the board's pixels the geom it lies on;
+ * T_world_cam: the camera's pose it was rendered from (OpenCV convention). */
 void sim_camera_render(const sim_camera *cam, const sim_cell_view *v, uint8_t *rgb,
-                       uint16_t *depth_mm, double T_world_cam[16]);
+                       uint16_t *depth_mm, int *geom, double T_world_cam[16]);
 
-/* Serves GET /rgb.png and /depth.png on cfg->listen from a thread of its own, copying the
+/* Serves GET /rgb.png, /depth.png and /features.npy on cfg->listen from a thread of its own, copying the
  * cell's state under lock (which the caller holds whenever it changes the cell). 0, or -1
  * with a message (the port could not be bound). The port is in *port. */
 int sim_camera_serve(sim_camera *cam, pthread_mutex_t *lock, int *port, char *err,

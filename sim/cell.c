@@ -68,6 +68,9 @@ struct sim_cell {
   int act[2];             /* their motors */
   int hand_qadr;          /* the hand's free joint */
   int table_geom;
+  int feat_dim;           /* the length of the model's feature vectors; 0: it has none */
+  int *geom_feat;         /* per geom, the custom numeric of its feature vector */
+  int feat_background;    /* ... and of what a ray that meets nothing shows */
   cell_object obj[CELL_MAX_OBJECTS];
   int n_obj;
   /* clock */
@@ -432,9 +435,10 @@ void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]) {
 }
 
 double sim_cell_view_ray(const sim_cell_view *v, const double p[3], const double dir[3],
-                         float rgb[3]) {
+                         float rgb[3], int *geom_out) {
   int geom = -1;
   const double t = mj_ray(v->m, v->d, p, dir, NULL, 1, v->hand, &geom);
+  if (geom_out) *geom_out = t < 0 ? -1 : geom;
   if (t < 0 || geom < 0) return -1;
   const int mat = v->m->geom_matid[geom];
   const float *c = mat >= 0 ? v->m->mat_rgba + 4 * mat : v->m->geom_rgba + 4 * geom;
@@ -692,6 +696,43 @@ void sim_cell_config_default(sim_cell_config *cfg) {
 
 /* Finds the hand's parts and the objects; checks that every object stands on or above the
  * table. 0, or -1 with err. */
+/* The feature vectors of the model's geoms (cell.h, sim_cell_feature): "feature:NAME" for a
+ * geom named NAME or NAME/PART, else "feature:background". A model without
+ * "feature:background" has none; vectors of different lengths are refused. */
+static int feature_index(sim_cell *c, char *err, size_t errsz) {
+  const mjModel *m = c->m;
+  c->feat_background = mj_name2id(m, mjOBJ_NUMERIC, "feature:background");
+  if (c->feat_background < 0) return 0;
+  c->feat_dim = m->numeric_size[c->feat_background];
+  c->geom_feat = malloc(sizeof *c->geom_feat * (size_t)(m->ngeom ? m->ngeom : 1));
+  if (!c->geom_feat) {
+    errf(err, errsz, "out of memory");
+    return -1;
+  }
+  for (int g = 0; g < m->ngeom; g++) {
+    const char *name = mj_id2name(m, mjOBJ_GEOM, g);
+    char key[128];
+    snprintf(key, sizeof key, "feature:%.*s", name ? (int)strcspn(name, "/") : 0,
+             name ? name : "");
+    const int id = name ? mj_name2id(m, mjOBJ_NUMERIC, key) : -1;
+    c->geom_feat[g] = id >= 0 ? id : c->feat_background;
+    if (m->numeric_size[c->geom_feat[g]] != c->feat_dim) {
+      errf(err, errsz, "%s: numeric %s has %d values, feature:background %d",
+           c->cfg.scene_path, key, m->numeric_size[c->geom_feat[g]], c->feat_dim);
+      return -1;
+    }
+  }
+  return 0;
+}
+
+int sim_cell_feature_dim(const sim_cell *c) { return c->feat_dim; }
+
+const double *sim_cell_feature(const sim_cell *c, int geom) {
+  if (!c->feat_dim) return NULL;
+  const int id = geom >= 0 && geom < c->m->ngeom ? c->geom_feat[geom] : c->feat_background;
+  return c->m->numeric_data + c->m->numeric_adr[id];
+}
+
 static int cell_index(sim_cell *c, char *err, size_t errsz) {
   const mjModel *m = c->m;
   const int target = mj_name2id(m, mjOBJ_BODY, "fg_target");
@@ -783,7 +824,9 @@ sim_cell *sim_cell_open(const sim_cell_config *cfg, char *err, size_t errsz) {
     errf(err, errsz, "out of memory");
     goto fail;
   }
-  if (cell_index(c, err, errsz) != 0 || check_on_table(c, err, errsz) != 0) goto fail;
+  if (cell_index(c, err, errsz) != 0 || feature_index(c, err, errsz) != 0 ||
+      check_on_table(c, err, errsz) != 0)
+    goto fail;
   c->f_target = c->f_ramp = 0;
   c->f_speed = c->drive->speed_max_mps / 2;
   c->f_force = c->drive->force_min_n;
@@ -816,5 +859,6 @@ void sim_cell_close(sim_cell *c) {
   if (!c) return;
   if (c->d) mj_deleteData(c->d);
   if (c->m) mj_deleteModel(c->m);
+  free(c->geom_feat);
   free(c);
 }

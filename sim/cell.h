@@ -98,9 +98,18 @@ void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]);
 
 /* The nearest surface along the ray from p in the unit direction dir, leaving out the palm
  * (a camera on the tool sits on it; the fingers stay in view): its distance in metres and
- * its colour (the geom's material or rgba, 0..1), or -1 when the ray meets nothing. */
+ * its colour (the geom's material or rgba, 0..1), or -1 when the ray meets nothing; *geom
+ * (may be NULL) the geom met, -1 for none. */
 double sim_cell_view_ray(const sim_cell_view *v, const double p[3], const double dir[3],
-                         float rgb[3]);
+                         float rgb[3], int *geom);
+
+/* Feature vectors: what a feature extractor would see on each geom, from the model's custom
+ * numerics "feature:NAME" (scenegen's cell.xml writes its classes' embeddings so): the
+ * vector of a geom named NAME or NAME/PART, else "feature:background", which is also what a
+ * ray that meets nothing (geom -1) shows. A model without "feature:background" has none:
+ * dimension 0, NULL. */
+int sim_cell_feature_dim(const sim_cell *c);
+const double *sim_cell_feature(const sim_cell *c, int geom);
 
 /* The cell's clock, seconds. */
 double sim_cell_time(const sim_cell *c);

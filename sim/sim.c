@@ -117,7 +117,7 @@ static void usage(FILE *f) {
           "  --camera-listen H:P    serve GET /rgb.png and /depth.png (16-bit mm) of the cell\n"
           "                         as a camera on the tool sees it from the current TCP pose\n"
           "  --camera-port-file F   write the camera's bound port + newline to F\n"
-          "  --camera-log F         append \"rgb|depth x y z qw qx qy qz\" per image served: the\n"
+          "  --camera-log F         append \"rgb|depth|features x y z qw qx qy qz\" per answer: the\n"
           "                         camera's true pose (world frame, OpenCV convention)\n"
           "  --camera-mount \"x y z qw qx qy qz\"  T_tcp_cam, OpenCV convention (default\n"
           "                         0.05 m behind the TCP, looking along the tool's +z)\n"
@@ -128,7 +128,10 @@ static void usage(FILE *f) {
           "  --camera-fixed \"x y z qw qx qy qz\"  the camera stands there (T_base_cam) instead\n"
           "                         of riding on the tool\n"
           "  --board-on-tool \"sx sy square_m marker_m DICT x y z qw qx qy qz\"  the tool holds\n"
-          "                         the board (T_tcp_board) instead of the table\n");
+          "                         the board (T_tcp_board) instead of the table\n"
+          "  --camera-patch P       with a scene that holds feature vectors (custom numerics\n"
+          "                         feature:NAME, as scenegen writes them), GET /features.npy\n"
+          "                         serves one per P x P patch (default 16)\n");
 }
 
 /* ---------------------------------------------------------------- time */
@@ -254,6 +257,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"camera-log", required_argument, NULL, 1010},
       {"camera-fixed", required_argument, NULL, 1011},
       {"board-on-tool", required_argument, NULL, 1012},
+      {"camera-patch", required_argument, NULL, 1013},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -351,6 +355,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     case 1010: cfg->camera.log_path = optarg; break;
     case 1011: rc = sim_camera_parse_fixed(&cfg->camera, optarg, err, sizeof err); break;
     case 1012: rc = sim_camera_parse_board_on_tool(&cfg->camera, optarg, err, sizeof err); break;
+    case 1013: rc = sim_camera_parse_patch(&cfg->camera, optarg, err, sizeof err); break;
     case 1007: rc = sim_camera_parse_mount(&cfg->camera, optarg, err, sizeof err); break;
     case 1008: rc = sim_camera_parse_intrinsics(&cfg->camera, optarg, err, sizeof err); break;
     case 1009: rc = sim_camera_parse_board(&cfg->camera, optarg, err, sizeof err); break;

@@ -89,10 +89,12 @@ void cu_frame_errors(json_t *frames, const char *cam_log, double *worst_mm, doub
   ASSERT(f);
   *worst_mm = *worst_deg = 0;
   for (size_t i = 0; i < json_array_size(frames); i++) {
-    char kind[8];
+    char kind[16];
     double t[7];
-    ASSERT_EQ(fscanf(f, "%7s %lf %lf %lf %lf %lf %lf %lf", kind, &t[0], &t[1], &t[2], &t[3],
-                     &t[4], &t[5], &t[6]), 8);
+    do /* a frame's image: its depth and features have lines of their own */
+      ASSERT_EQ(fscanf(f, "%15s %lf %lf %lf %lf %lf %lf %lf", kind, &t[0], &t[1], &t[2], &t[3],
+                       &t[4], &t[5], &t[6]), 8);
+    while (strcmp(kind, "rgb") != 0);
     json_t *m = json_object_get(json_array_get(frames, i), "transform_matrix");
     double M[16];
     for (int row = 0; row < 4; row++)

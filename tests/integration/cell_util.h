@@ -29,8 +29,8 @@ void cu_look_at(const double eye[3], const double target[3], double roll_deg, do
 void cu_calibration_truth(const char *name);
 
 /* Each frame of frames (GET /v1/scenes/{s}/frames' list, OpenGL convention) against the
- * simulator's true camera pose of the image it served (its --camera-log, line by line from
- * the first): the worst position error in mm and rotation error in degrees. */
+ * simulator's true camera pose of the image it served (its --camera-log's "rgb" lines, in
+ * order from the first): the worst position error in mm and rotation error in degrees. */
 struct json_t;
 void cu_frame_errors(struct json_t *frames, const char *cam_log, double *worst_mm,
                      double *worst_deg);

@@ -383,6 +383,21 @@ static int print_object(FILE *f, const sg_object *ob, part_list *l) {
   return 0;
 }
 
+/* Each class's feature vector (gt.json's embedding, without the views' noise) as a custom
+ * numeric "feature:NAME", NAME the class: what a simulator's camera serves per patch for the
+ * geoms named NAME or NAME/PART ("table", "mug/wall03"), and for rays that meet nothing
+ * ("background"). */
+static void print_features(FILE *f, const sg_scene *sc) {
+  fputs("  <custom>\n", f);
+  for (int c = 0; c < SG_N_CLASSES; c++) {
+    fprintf(f, "    <numeric name=\"feature:%s\" data=\"", sg_class_names[c]);
+    for (int k = 0; k < sc->cfg.dim; k++)
+      fprintf(f, k ? " %.6f" : "%.6f", tidy(sc->embeddings[(size_t)c * sc->cfg.dim + k]));
+    fputs("\"/>\n", f);
+  }
+  fputs("  </custom>\n", f);
+}
+
 static int print_cell(FILE *f, const sg_scene *sc, part_list *l) {
   fprintf(f, "<mujoco model=\"fieldgrip-scenegen seed %llu\">\n",
           (unsigned long long)sc->cfg.seed);
@@ -415,7 +430,9 @@ static int print_cell(FILE *f, const sg_scene *sc, part_list *l) {
   fprintf(f, "\" friction=\"%.2f 0.005 0.0001\" rgba=\"0.550 0.400 0.250 1\"/>\n",
           SG_CELL_TABLE_FRICTION);
   for (int k = 0; k < SG_N_OBJECTS; k++) FG_TRY(print_object(f, &sc->objects[k], l));
-  fputs("  </worldbody>\n</mujoco>\n", f);
+  fputs("  </worldbody>\n", f);
+  print_features(f, sc);
+  fputs("</mujoco>\n", f);
   return 0;
 }
 

@@ -2,8 +2,8 @@
  * on the table, GET /rgb.png decoded and searched for the board, and every corner found where
  * the camera's true pose (X-Camera-Pose), the board's pose on the table, the intrinsics and
  * the distortion given on the command line put it; the depth image agrees; the TCP pose
- * registers, composed with the mount, give that same camera pose. Bad requests and refused
- * options too.
+ * registers, composed with the mount, give that same camera pose. Per-patch features from
+ * the cell's labelled geoms. Bad requests and refused options too.
  * argv[1]: fieldgrip-sim, argv[2]: the cells folder. */
 #include <arpa/inet.h>
 #include <errno.h>
@@ -17,7 +17,9 @@
 #include "calib/charuco.h"
 #include "cellproc.h"
 #include "core/pose.h"
+#include "core/half.h"
 #include "io/image.h"
+#include "io/npy.h"
 #include "test.h"
 
 static char g_sim[PATH_MAX], g_cells[PATH_MAX], g_dir[PATH_MAX];
@@ -226,6 +228,59 @@ static void test_sees_the_board(void) {
   cellproc_stop(&c);
 }
 
+/* Features: a cell whose geoms carry vectors (cells/labelled.xml) serves one per 16 x 16
+ * patch, the vector of what most of the patch shows; a cell without them answers 404. */
+static void test_features(void) {
+  cellproc c;
+  char scene[PATH_MAX + 32], port_file[PATH_MAX + 16];
+  snprintf(scene, sizeof scene, "%s/labelled.xml", g_cells);
+  snprintf(port_file, sizeof port_file, "%s/camera.port", g_dir);
+  unlink(port_file);
+  /* straight down from 0.40 m over the crate's centre: it fills the middle of the view */
+  const char *extra[] = {"--camera-listen", "127.0.0.1:0", "--camera-port-file", port_file,
+                         "--camera-mount", "0 0 0 1 0 0 0", "--camera", "600 600 319.5 239.5 "
+                         "640 480", NULL};
+  cellproc_start(&c, scene, "int16", g_dir, extra);
+  const double p[3] = {0.45, 0, 0.48}, rv[3] = {M_PI, 0, 0};
+  ASSERT_EQ(cellproc_command(&c, 1, 5, p, rv, 0.085, 0, 0), 2);
+  response r;
+  http_get(camera_port(), "GET /features.npy HTTP/1.1\r\n\r\n", &r);
+  ASSERT_EQ(r.status, 200);
+  ASSERT(strstr(r.head, "X-Camera-Pose: "));
+  fg_npy f;
+  ASSERT_EQ(fg_npy_parse(r.body, r.len, &f), 0);
+  ASSERT_EQ(f.dtype, FG_DTYPE_F16);
+  ASSERT_EQ(f.ndim, 3);
+  ASSERT_EQ(f.shape[0], 30);
+  ASSERT_EQ(f.shape[1], 40);
+  ASSERT_EQ(f.shape[2], 4);
+  /* the crate's top, 0.40 m away, spans 0.12 * 600 / 0.40 = 180 px: cells 12..17 by 15..24
+   * are inside it; the table fills the view's edges (1.2 m wide at 0.48 m: past the view) */
+  const uint16_t *h = f.data;
+  int crate = 0, table = 0, other = 0;
+  for (size_t i = 0; i < 30 * 40; i++) {
+    const int k = fg_half_to_float(h[4 * i + 2]) == 1 ? 2 : fg_half_to_float(h[4 * i + 1]) == 1 ? 1 : 0;
+    crate += k == 2, table += k == 1, other += k == 0;
+    const size_t row = i / 40, col = i % 40;
+    if (row >= 12 && row <= 17 && col >= 15 && col <= 24 && k != 2)
+      FG_TEST_FAIL("cell (%zu, %zu) inside the crate shows class %d", row, col, k);
+    if ((row == 0 || row == 29 || col == 0 || col == 39) && k != 1)
+      FG_TEST_FAIL("cell (%zu, %zu) at the view's edge shows class %d", row, col, k);
+  }
+  fprintf(stderr, "features: %d crate, %d table, %d background cells\n", crate, table, other);
+  ASSERT_EQ(other, 0);
+  /* about (180 / 16)^2 = 127 cells of crate */
+  ASSERT(crate >= 100 && crate <= 160);
+  free(r.body);
+  cellproc_stop(&c);
+
+  start(&c); /* blocks.xml: no vectors */
+  http_get(camera_port(), "GET /features.npy HTTP/1.1\r\n\r\n", &r);
+  ASSERT_EQ(r.status, 404);
+  free(r.body);
+  cellproc_stop(&c);
+}
+
 static void test_refused_options(void) {
   char scene[PATH_MAX + 32];
   snprintf(scene, sizeof scene, "%s/blocks.xml", g_cells);
@@ -253,6 +308,8 @@ int main(int argc, char **argv) {
   signal(SIGPIPE, SIG_IGN);
   test_sees_the_board();
   fprintf(stderr, "ok sees_the_board\n");
+  test_features();
+  fprintf(stderr, "ok features\n");
   test_refused_options();
   fprintf(stderr, "ok refused_options\n");
   printf("camera: ok\n");
