@@ -89,6 +89,8 @@ static const char *const robot_keys[] = {"transport", "host",     "port",       
                                          "speed_mps", "approach_m", "retreat_m",
                                          "audit_max_mb", "audit_keep", "lock_dir",
                                          "tcp_pose_base", NULL};
+_Static_assert(sizeof robot_keys / sizeof *robot_keys - 1 <= MAX_KEYS,
+               "conf_parse.key_line holds a line per key of a section");
 static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",    "device",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};

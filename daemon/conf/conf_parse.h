@@ -29,13 +29,13 @@ typedef enum {
 /* Per-scene parse bookkeeping, parallel to fg_conf.scenes. */
 typedef struct scene_meta {
   int header_line;
-  int key_line[4]; /* line of each scene key, 0 when not set */
+  int key_line[MAX_KEYS]; /* line of each scene key, 0 when not set */
 } scene_meta;
 
 /* Per-camera parse bookkeeping, parallel to fg_conf.cameras. */
 typedef struct camera_meta {
   int header_line;
-  int key_line[4];
+  int key_line[MAX_KEYS]; /* line of each camera key, 0 when not set */
 } camera_meta;
 
 typedef enum { LINE_BLANK, LINE_COMMENT, LINE_HEADER, LINE_KEY, LINE_CONTINUATION } line_kind;
