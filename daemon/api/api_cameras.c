@@ -44,10 +44,12 @@ static json_t *calibration_json(const fg_camera_calib *c) {
 }
 
 static json_t *camera_json(const fg_conf_camera *cam, const fg_camera_calib *c, int views) {
-  json_t *o = json_pack("{s:s, s:s, s:o, s:f, s:s, s:b}", "name", cam->name, "source",
+  json_t *o = json_pack("{s:s, s:s, s:o, s:f, s:o, s:s, s:b}", "name", cam->name, "source",
                         cam->source, "depth_source",
                         cam->depth_source ? json_string(cam->depth_source) : json_null(),
-                        "depth_scale", cam->depth_scale, "mount",
+                        "depth_scale", cam->depth_scale, "features_source",
+                        cam->features_source ? json_string(cam->features_source) : json_null(),
+                        "mount",
                         cam->mount == FG_MOUNT_HAND ? "hand" : "fixed", "calibrated",
                         c->has_intrinsics && c->has_mount);
   json_object_set_new(o, "intrinsics", intrinsics_json(c));
@@ -101,7 +103,7 @@ static json_t *base64_json(const uint8_t *data, size_t len) {
   return s;
 }
 
-/* The capture's view: the images (base64), the robot's pose, the camera's pose (OpenCV
+/* The capture's view: the images and the features (base64), the robot's pose, the camera's pose (OpenCV
  * convention) and intrinsics when calibrated. */
 static json_t *capture_json(const fg_conf_camera *cam, const fg_capture *cap) {
   json_t *o = json_pack("{s:s, s:s}", "camera", cam->name, "image_type",
@@ -109,6 +111,7 @@ static json_t *capture_json(const fg_conf_camera *cam, const fg_capture *cap) {
   json_object_set_new(o, "image", base64_json(cap->image, cap->image_len));
   json_object_set_new(o, "depth", base64_json(cap->depth, cap->depth_len));
   json_object_set_new(o, "depth_scale", cap->depth ? json_real(cam->depth_scale) : json_null());
+  json_object_set_new(o, "features", base64_json(cap->features, cap->features_len));
   json_object_set_new(o, "robot_pose",
                       cap->has_robot_pose ? fg_json_pose(cap->T_base_tcp) : json_null());
   json_object_set_new(o, "camera_pose",

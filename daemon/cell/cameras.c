@@ -19,6 +19,7 @@
 #include "core/log.h"
 #include "core/pose.h"
 #include "io/image.h"
+#include "io/npy.h"
 
 #define SNAPSHOT_TIMEOUT_MS 5000
 #define SNAPSHOT_MAX_BYTES ((size_t)64 << 20)
@@ -258,6 +259,14 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no image",
                       cam->depth_source);
   }
+  if (rc == 0 && cam->features_source) {
+    fg_npy npy;
+    rc = fg_snapshot_fetch(c->grabber, cam->features_source, SNAPSHOT_TIMEOUT_MS,
+                           SNAPSHOT_MAX_BYTES, &out->features, &out->features_len);
+    if (rc == 0 && fg_npy_parse(out->features, out->features_len, &npy) != 0)
+      rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no .npy: %s",
+                      cam->features_source, fg_error_detail());
+  }
   if (rc == 0 && posed) {
     rc = robot_pose(robot, T_after);
     if (rc == 0 && (sqrt(pow(T_after[3] - out->T_base_tcp[3], 2) +
@@ -285,5 +294,6 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
 void fg_capture_release(fg_capture *cap) {
   free(cap->image);
   free(cap->depth);
-  cap->image = cap->depth = NULL;
+  free(cap->features);
+  cap->image = cap->depth = cap->features = NULL;
 }

@@ -49,6 +49,8 @@ typedef struct fg_capture {
   size_t image_len;
   uint8_t *depth;          /* NULL without a depth source */
   size_t depth_len;
+  uint8_t *features;       /* the patch features (.npy); NULL without a features source */
+  size_t features_len;
   int has_robot_pose;      /* the robot's TCP pose was read (always for a hand camera) */
   double T_base_tcp[16];
   int has_camera_pose;     /* calibrated (and, on the hand, with the robot's pose) */
@@ -57,7 +59,8 @@ typedef struct fg_capture {
 } fg_capture;
 
 /* Captures from cam: reads the TCP pose (a hand camera with a robot; for a fixed camera when
- * it can be read), fetches the image and the depth image, reads the pose again and refuses
+ * it can be read), fetches the image, the depth image and the features (a .npy; their shape
+ * is checked when they are stored), reads the pose again and refuses
  * (robot_moved) when it changed by more than 0.5 mm or 0.1 degree. Failures: the robot's (fg_robot_tcp_read), camera_unavailable (the
  * source did not answer, answered an error, or sent no image: 502 / 504), robot_moved. */
 int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *cam,

@@ -11,6 +11,7 @@
 #include "core/pose.h"
 #include "drive.h"
 #include "frames.h"
+#include "io/npy.h"
 #include "state/ingest.h"
 #include "state/job_train.h"
 #include "state/json.h"
@@ -91,9 +92,12 @@ static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
   FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, &cap));
   char source[96];
   snprintf(source, sizeof source, "scan-%s-%03d", job_id, i);
+  fg_npy features;
   fg_ingest_input fi = {.image = cap.image, .image_len = cap.image_len, .depth = cap.depth,
                         .depth_len = cap.depth_len, .depth_scale = cam->depth_scale,
                         .source = source};
+  if (cap.features && fg_npy_parse(cap.features, cap.features_len, &features) == 0)
+    fi.features = &features;
   fg_cell_frame_camera(&cap.calib, cap.T_base_cam, &fi);
   int index;
   fg_frame frame;

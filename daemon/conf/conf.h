@@ -83,6 +83,9 @@ typedef struct fg_conf_camera {
   char *depth_source;   /* the same for a depth image (16-bit PNG), or NULL */
   double depth_scale;   /* metres per depth unit; default 0.001 (millimetres) */
   fg_camera_mount mount; /* key "mount": hand (default) or fixed */
+  char *features_source; /* a URL that serves the view's patch features (.npy, SPEC.md's
+                            layout: what a feature extractor beside the camera computes), or
+                            NULL: the frames get CLIP's ([clip]) or none */
 } fg_conf_camera;
 
 typedef struct fg_conf {

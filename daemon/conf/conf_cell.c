@@ -11,8 +11,11 @@ const char *const conf_calibration_keys[] = {"squares_x", "squares_y", "square_m
                                              "dictionary", NULL};
 enum { K_SQUARES_X, K_SQUARES_Y, K_SQUARE_M, K_MARKER_M, K_DICTIONARY };
 
-const char *const conf_camera_keys[] = {"source", "depth_source", "depth_scale", "mount", NULL};
-enum { K_SOURCE, K_DEPTH_SOURCE, K_DEPTH_SCALE, K_MOUNT };
+const char *const conf_camera_keys[] = {"source", "depth_source", "depth_scale", "mount",
+                                        "features_source", NULL};
+enum { K_SOURCE, K_DEPTH_SOURCE, K_DEPTH_SCALE, K_MOUNT, K_FEATURES_SOURCE };
+_Static_assert(sizeof conf_camera_keys / sizeof *conf_camera_keys - 1 <= MAX_KEYS,
+               "camera_meta.key_line holds a line per camera key");
 
 static const char *const mount_names[] = {"hand", "fixed", NULL};
 
@@ -122,6 +125,12 @@ int conf_set_camera(conf_parse *st, int k, const char *name, const char *v) {
     cam->mount = (fg_camera_mount)x;
     return 1;
   }
+  case K_FEATURES_SOURCE:
+    if (!source_ok(v))
+      return conf_fail_at(st, st->line, st->sec_text, name,
+                          "expected a URL that serves the view's features as .npy "
+                          "(http://HOST:PORT/PATH), got '%s'", v);
+    return conf_set_string(st, &cam->features_source, v);
   }
   return 1;
 }

@@ -317,6 +317,7 @@ void fg_conf_free(fg_conf *conf) {
   for (size_t i = 0; i < conf->n_cameras; i++) {
     free(conf->cameras[i].source);
     free(conf->cameras[i].depth_source);
+    free(conf->cameras[i].features_source);
   }
   free(conf->cameras);
   free(conf);

@@ -34,8 +34,12 @@ int main(int argc, char **argv) {
            "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
            "depth_source = http://127.0.0.1:%d/depth.png\n"
            "[camera dead]\nsource = http://127.0.0.1:1/rgb.png\nmount = fixed\n"
-           "[camera usb]\nsource = v4l2:/dev/video-none\nmount = fixed\n",
-           sim.port, cam_port, cam_port);
+           "[camera usb]\nsource = v4l2:/dev/video-none\nmount = fixed\n"
+           "[camera nofeat]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n"
+           "features_source = http://127.0.0.1:%d/features.npy\n"
+           "[camera badfeat]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n"
+           "features_source = http://127.0.0.1:%d/depth.png\n",
+           sim.port, cam_port, cam_port, cam_port, cam_port, cam_port, cam_port);
   h_write_config(conf);
   h_start();
   ASSERT(r_wait_status("/v1/robot", 10));
@@ -44,7 +48,7 @@ int main(int argc, char **argv) {
   h_resp *r = h_get("/v1/cameras");
   ASSERT_STATUS(r, 200);
   json_t *list = json_object_get(r->json, "cameras");
-  ASSERT_EQ(json_array_size(list), 3);
+  ASSERT_EQ(json_array_size(list), 5);
   json_t *w = json_array_get(list, 0);
   ASSERT_STREQ(json_string_value(json_object_get(w, "name")), "wrist");
   ASSERT_STREQ(json_string_value(json_object_get(w, "mount")), "hand");
@@ -77,6 +81,7 @@ int main(int argc, char **argv) {
   ASSERT_NEAR(json_real_value(json_array_get(pos, 0)), 0.30, 0.002);
   ASSERT_NEAR(json_real_value(json_array_get(pos, 2)), 0.40, 0.002);
   ASSERT(json_is_null(json_object_get(r->json, "camera_pose"))); /* not calibrated */
+  ASSERT(json_is_null(json_object_get(r->json, "features"))); /* no features_source */
   h_resp_free(r);
 
   /* what fails */
@@ -90,6 +95,15 @@ int main(int argc, char **argv) {
   r = h_post_json("/v1/cameras/usb/capture", "");
   ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
   ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "cannot open /dev/video-none");
+  h_resp_free(r);
+  /* features that are not there (this cell's geoms carry none: 404), or not a .npy */
+  r = h_post_json("/v1/cameras/nofeat/capture", "");
+  ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
+  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "features.npy");
+  h_resp_free(r);
+  r = h_post_json("/v1/cameras/badfeat/capture", "");
+  ASSERT_HTTP_ERROR(r, 502, "camera_unavailable");
+  ASSERT_STRCONTAINS(JSTR(r->json, "error.message"), "sent no .npy");
   h_resp_free(r);
   r = h_post_json("/v1/cameras/wrist/capture", "{\"exposure\": 3}");
   ASSERT_HTTP_ERROR(r, 400, "invalid_request");

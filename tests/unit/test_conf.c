@@ -671,6 +671,8 @@ static void test_errors(void) {
   EXPECT_ERROR("[robot]\napproach_cone_deg = 181\n", 2, "[robot] approach_cone_deg:",
                "at most 180");
   EXPECT_ERROR("[robot]\nreach_m = -1\n", 2, "[robot] reach_m:", "at most 10");
+  EXPECT_ERROR("[camera c]\nsource = http://h/a.png\nfeatures_source = /dev/x\n", 3,
+               "[camera c] features_source:", "serves the view's features as .npy");
   EXPECT_ERROR("[robot]\nmax_speed_mps = 0\n", 2, "[robot] max_speed_mps:", "above 0");
   EXPECT_ERROR("[robot]\nspeed_mps = 0.5\n", 2, "[robot] speed_mps:", "above max_speed_mps");
   EXPECT_ERROR("[robot]\napproach_m = 1.5\n", 2, "[robot] approach_m:", "at most 1");
