@@ -11,9 +11,11 @@ void fg_cell_frame_camera(const fg_camera_calib *calib, const double T_base_cam[
   const fg_intrinsics *k = &calib->in;
   memset(&in->camera, 0, sizeof in->camera);
   in->camera.file_path = "robot";
-  in->camera.cam = (fg_camera){k->fx, k->fy, k->cx, k->cy, k->w, k->h, FG_CAMERA_OPENCV,
-                               k->k[0], k->k[1], 0, k->k[2], k->k[3]};
-  in->camera.has_size = 1;
+  /* the calibration's principal point is OpenCV's (pixel centres at integers), a frame's
+   * camera counts from the pixels' corners */
+  const fg_camera cam = {k->fx, k->fy, k->cx + 0.5, k->cy + 0.5, k->w, k->h, FG_CAMERA_OPENCV,
+                         k->k[0], k->k[1], 0, k->k[2], k->k[3]};
+  fg_transforms_frame_set_camera(&in->camera, &cam);
   memcpy(in->T_world_cam, T_base_cam, sizeof in->T_world_cam);
   fg_pose_flip_yz(in->T_world_cam); /* frames keep SPEC.md's default, OpenGL's */
 }

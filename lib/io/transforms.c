@@ -462,6 +462,13 @@ error:
   return rc;
 }
 
+void fg_transforms_frame_set_camera(fg_transforms_frame *f, const fg_camera *cam) {
+  f->cam = *cam;
+  f->has_size = 1;
+  f->has_fl_x = f->has_fl_y = f->has_cx = f->has_cy = 1;
+  f->camera_angle_x = f->camera_angle_y = 0;
+}
+
 int fg_transforms_complete_camera(fg_transforms_frame *f, int image_w, int image_h) {
   if (!f) return fg_fail(FG_EINVAL, "no frame given");
   const char *name = f->file_path ? f->file_path : "?";

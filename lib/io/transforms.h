@@ -37,6 +37,11 @@ typedef struct fg_transforms_frame {
   int has_fl_x, has_fl_y, has_cx, has_cy;
 } fg_transforms_frame;
 
+/* Makes f the frame of a camera known in full (its size and every intrinsic, in pixels, in
+ * fg_camera's convention), as a transforms file that gives them all would: nothing of it is
+ * filled in from the image later (fg_transforms_complete_camera only checks the size). */
+void fg_transforms_frame_set_camera(fg_transforms_frame *f, const fg_camera *cam);
+
 typedef struct fg_transforms {
   fg_transforms_frame *frames; /* owned */
   size_t n_frames;

@@ -96,6 +96,16 @@ int main(int argc, char **argv) {
   r = h_get("/v1/scenes/table/frames");
   ASSERT_STATUS(r, 200);
   ASSERT_EQ(json_array_size(json_object_get(r->json, "frames")), N_VIEWS);
+  /* ... and its camera the calibration's: the principal point far off the image's centre
+   * (318.2, 241.4 in OpenCV's count, 318.7, 241.9 from the pixels' corners), where the
+   * undistortion keeps it to a pixel, at the stored size */
+  json_t *f0 = json_array_get(json_object_get(r->json, "frames"), 0);
+  const double s_x = 480.0 / json_integer_value(json_object_get(json_object_get(f0, "camera"), "w"));
+  const double s_y = 360.0 / json_integer_value(json_object_get(json_object_get(f0, "camera"), "h"));
+  const double pp_x = json_number_value(json_object_get(json_object_get(f0, "camera"), "cx")) * s_x;
+  const double pp_y = json_number_value(json_object_get(json_object_get(f0, "camera"), "cy")) * s_y;
+  fprintf(stderr, "stored principal point %.2f %.2f (at 480 x 360)\n", pp_x, pp_y);
+  ASSERT(fabs(pp_x - 318.7) < 1.5 && fabs(pp_y - 241.9) < 1.5);
   double worst_mm, worst_deg;
   cu_frame_errors(json_object_get(r->json, "frames"), cam_log, &worst_mm, &worst_deg);
   fprintf(stderr, "%d frames: poses within %.3f mm and %.4f degrees of the truth\n", N_VIEWS,
