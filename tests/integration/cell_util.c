@@ -14,9 +14,14 @@
 int cu_sim_start(simproc *sim, const char *const *extra) {
   const char *src = getenv("FG_SOURCE_DIR");
   ASSERT(src);
-  static char scene[PATH_MAX], port_file[PATH_MAX];
-  static int n_started;
+  static char scene[PATH_MAX];
   snprintf(scene, sizeof scene, "%s/tests/sim/cells/blocks.xml", src);
+  return cu_sim_start_scene(sim, scene, extra);
+}
+
+int cu_sim_start_scene(simproc *sim, const char *scene, const char *const *extra) {
+  static char port_file[PATH_MAX];
+  static int n_started;
   snprintf(port_file, sizeof port_file, "%s/camera%d.port", h_tmpdir(), n_started++);
   const char *args[32] = {"--scene", scene, "--time-scale", "0", "--camera-listen",
                           "127.0.0.1:0", "--camera-port-file", port_file};

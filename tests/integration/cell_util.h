@@ -13,6 +13,8 @@
  * its camera served on a free loopback port, with the options in extra (NULL-terminated;
  * NULL: none). Returns the camera's port. */
 int cu_sim_start(simproc *sim, const char *const *extra);
+/* The same on the MJCF file scene (a scenegen layout's cell.xml, say). */
+int cu_sim_start_scene(simproc *sim, const char *scene, const char *const *extra);
 
 /* The orientation (w x y z) of a frame at eye whose +z points at target, its x level (world
  * z = 0) and its y towards world -z, turned by roll_deg about its z: a camera's looking at
