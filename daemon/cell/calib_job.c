@@ -7,7 +7,6 @@
 #include <string.h>
 
 #include "core/error.h"
-#include "core/log.h"
 #include "core/pose.h"
 #include "drive.h"
 
@@ -36,14 +35,22 @@ static void params_free(void *p) {
   free(r);
 }
 
-/* Captures at the viewpoint and keeps the view when it shows the board: 0 (*kept: the views
- * kept now, unchanged when the board was not seen), or the failure. */
-static int capture_view(fg_app *app, const fg_conf *conf, const fg_conf_camera *cam, int *kept) {
+typedef struct view_ctx {
+  fg_app *app;
+  const fg_conf *conf;
+  const fg_conf_camera *cam;
+} view_ctx;
+
+/* Captures at the viewpoint and keeps the view when it shows the board (drive.h's visit): 0
+ * (*kept: the views kept now, unchanged when the board was not seen), or the failure. */
+static int capture_view(void *ctx, int i, int *kept) {
+  const view_ctx *c = ctx;
+  (void)i;
   fg_capture cap;
-  FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, &cap));
+  FG_TRY(fg_camera_capture(c->app->cameras, c->app->robot, c->cam, &cap));
   int corners, now;
-  const int rc = fg_cameras_view_add(app->cameras, app->decoder, &conf->board, cam, &cap,
-                                     &corners, &now);
+  const int rc = fg_cameras_view_add(c->app->cameras, c->app->decoder, &c->conf->board, c->cam,
+                                     &cap, &corners, &now);
   fg_capture_release(&cap);
   if (rc == 0 && now > 0) *kept = now;
   return rc;
@@ -56,27 +63,14 @@ static void calibrate_run(fg_job *job, fg_app *app, void *params) {
   char route[128];
   snprintf(route, sizeof route, "/v1/cameras/%s/calibrate", p->camera);
   int kept = 0, skipped = 0, rc = 0, at = 0; /* at: the viewpoint being worked on */
-  if (!cam) rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
-  else fg_cameras_views_clear(app->cameras, cam->name);
   fg_job_set_phase(job, "capturing");
-  for (; rc == 0 && at < p->n && !fg_job_should_stop(job); at++) {
-    const int moved = fg_cell_move(app, job, route, p->T_base_tcp + 16 * at);
-    if (moved < 0) {
-      rc = -1;
-      break;
-    }
-    if (moved == 0) {
-      skipped++;
-      fg_info("calibration %s: viewpoint %d skipped: %s", fg_job_id(job), at, fg_error_detail());
-    } else {
-      fg_cell_settle(p->settle_ms);
-      if ((rc = capture_view(app, conf, cam, &kept)) < 0) break;
-    }
-    fg_job_info *info = fg_job_update_begin(job);
-    info->step = at + 1;
-    info->n_frames = kept;
-    info->skipped = skipped;
-    fg_job_update_end(job);
+  if (!cam) {
+    rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
+  } else {
+    fg_cameras_views_clear(app->cameras, cam->name);
+    view_ctx c = {app, conf, cam};
+    rc = fg_cell_visit(app, job, route, p->T_base_tcp, p->n, p->settle_ms, capture_view, &c,
+                       &kept, &skipped, &at);
   }
   if (!fg_job_should_stop(job)) {
     if (rc < 0) {

@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include "core/error.h"
+#include "core/log.h"
 #include "core/pose.h"
 #include "robot/audit.h"
 #include "robot/robot.h"
@@ -48,6 +49,29 @@ int fg_cell_move(fg_app *app, fg_job *job, const char *route, const double T[16]
   fg_fail(FG_EPEER, "the robot's motion to a viewpoint ended %s: %s",
           fg_cmd_state_name(v.state), v.message);
   return -1;
+}
+
+int fg_cell_visit(fg_app *app, fg_job *job, const char *route, const double *T, int n,
+                  int settle_ms, fg_cell_visit_fn visit, void *ctx, int *count, int *skipped,
+                  int *at) {
+  *count = *skipped = 0;
+  for (*at = 0; *at < n && !fg_job_should_stop(job); (*at)++) {
+    const int moved = fg_cell_move(app, job, route, T + 16 * *at);
+    if (moved < 0) return -1;
+    if (moved == 0) {
+      (*skipped)++;
+      fg_info("job %s: viewpoint %d skipped: %s", fg_job_id(job), *at, fg_error_detail());
+    } else {
+      fg_cell_settle(settle_ms);
+      if (visit(ctx, *at, count) < 0) return -1;
+    }
+    fg_job_info *info = fg_job_update_begin(job);
+    info->step = *at + 1;
+    info->n_frames = *count;
+    info->skipped = *skipped;
+    fg_job_update_end(job);
+  }
+  return 0;
 }
 
 void fg_cell_settle(int ms) {

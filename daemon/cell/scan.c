@@ -7,7 +7,6 @@
 #include <string.h>
 
 #include "core/error.h"
-#include "core/log.h"
 #include "core/pose.h"
 #include "drive.h"
 #include "frames.h"
@@ -110,38 +109,38 @@ static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
   return rc;
 }
 
+/* A viewpoint of the scan (drive.h's visit): capture_store. */
+typedef struct scan_ctx {
+  fg_app *app;
+  const fg_conf *conf;
+  fg_scene *scene;
+  const fg_conf_camera *cam;
+  const char *job_id;
+} scan_ctx;
+
+static int scan_visit(void *ctx, int i, int *stored) {
+  const scan_ctx *c = ctx;
+  return capture_store(c->app, c->conf, c->scene, c->cam, c->job_id, i, stored);
+}
+
 static void scan_run(fg_job *job, fg_app *app, void *params) {
   fg_scan_request *p = params;
   const fg_conf *conf = fg_app_conf_acquire(app);
   const fg_conf_camera *cam = fg_conf_find_camera(conf, p->camera);
-  int stored = 0, skipped = 0, rc = 0;
-  if (!cam) rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
+  int stored = 0, skipped = 0, at = 0, rc = 0;
   char route[128];
   snprintf(route, sizeof route, "/v1/scenes/%s/scan", fg_scene_name(fg_job_scene(job)));
   fg_job_set_phase(job, "scanning");
-  for (int i = 0; rc == 0 && i < p->n; i++) {
-    if (fg_job_should_stop(job)) break;
-    const int moved = fg_cell_move(app, job, route, p->T_base_tcp + 16 * i);
-    if (moved < 0) {
-      rc = -1;
-      break;
-    }
-    if (moved == 0) {
-      skipped++;
-      fg_info("scan %s: viewpoint %d skipped: %s", fg_job_id(job), i, fg_error_detail());
-    } else {
-      fg_cell_settle(p->settle_ms);
-      rc = capture_store(app, conf, fg_job_scene(job), cam, fg_job_id(job), i, &stored);
-    }
-    fg_job_info *info = fg_job_update_begin(job);
-    info->step = i + 1;
-    info->n_frames = stored;
-    info->skipped = skipped;
-    fg_job_update_end(job);
+  if (!cam) {
+    rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
+  } else {
+    scan_ctx c = {app, conf, fg_job_scene(job), cam, fg_job_id(job)};
+    rc = fg_cell_visit(app, job, route, p->T_base_tcp, p->n, p->settle_ms, scan_visit, &c,
+                       &stored, &skipped, &at);
   }
   if (!fg_job_should_stop(job)) {
     if (rc < 0)
-      fg_job_fail(job, "viewpoint %d of %d: %s", stored + skipped, p->n, fg_error_detail());
+      fg_job_fail(job, "viewpoint %d of %d: %s", at, p->n, fg_error_detail());
     else if (stored == 0)
       fg_job_fail(job, "no viewpoint was reachable: the robot refused or failed all %d", p->n);
     else if (!p->train && fg_job_commit_begin(job) == 0)
