@@ -61,6 +61,20 @@ static void move_to(const double p[3], const double q[4]) {
 
 static const char *g_cam = "wrist"; /* the camera the helpers below use */
 
+/* Starts fieldgripd on the simulator at sim_port with the board of BOARD and the cameras of
+ * the text cameras, and waits for the robot. */
+static void start_daemon(int sim_port, const char *cameras) {
+  char *conf = h_fmt("[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
+                     "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
+                     "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\n"
+                     "marker_m = 0.022\ndictionary = DICT_5X5_100\n%s",
+                     sim_port, cameras);
+  h_write_config(conf);
+  free(conf);
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+}
+
 /* Keeps a calibration view and returns the board corners it shows: every other one as
  * fieldgripd captures it ("calibration_view"), the others as a robot stack that moves the
  * robot itself would give it: captured plainly, then uploaded to POST /v1/cameras/{c}/views
@@ -157,18 +171,10 @@ static void fixed_camera(void);
 static void hand_camera(void) {
   simproc sim;
   const char *args[] = {"--camera", CAMERA, "--camera-mount", MOUNT, "--board", BOARD, NULL};
-  const int cam_port = cu_sim_start(&sim, args);
-  char conf[1024];
-  snprintf(conf, sizeof conf,
-           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
-           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
-           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
-           "dictionary = DICT_5X5_100\n"
-           "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n",
-           sim.port, cam_port);
-  h_write_config(conf);
-  h_start();
-  ASSERT(r_wait_status("/v1/robot", 10));
+  char *cameras = h_fmt("[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n",
+                        cu_sim_start(&sim, args));
+  start_daemon(sim.port, cameras);
+  free(cameras);
 
   /* nothing kept yet */
   h_resp *r = calibrate("intrinsics");
@@ -330,18 +336,10 @@ static void fixed_camera(void) {
   simproc sim;
   const char *args[] = {"--camera", CAMERA, "--camera-fixed", cam_pose, "--board-on-tool",
                         BOARD_ON_TOOL, NULL};
-  const int cam_port = cu_sim_start(&sim, args);
-  char conf[1024];
-  snprintf(conf, sizeof conf,
-           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
-           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
-           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
-           "dictionary = DICT_5X5_100\n"
-           "[camera over]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
-           sim.port, cam_port);
-  h_write_config(conf);
-  h_start();
-  ASSERT(r_wait_status("/v1/robot", 10));
+  char *cameras = h_fmt("[camera over]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
+                        cu_sim_start(&sim, args));
+  start_daemon(sim.port, cameras);
+  free(cameras);
   g_cam = "over";
   int kept = 0;
   for (int round = 0; round < 2; round++) {
@@ -431,18 +429,11 @@ static void driven(void) {
   simproc sim;
   const char *args[] = {"--camera", camera, "--camera-mount", mount, "--board", BOARD, NULL};
   const int cam_port = cu_sim_start(&sim, args);
-  char conf[1024];
-  snprintf(conf, sizeof conf,
-           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
-           "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
-           "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\nmarker_m = 0.022\n"
-           "dictionary = DICT_5X5_100\n"
-           "[camera arm]\nsource = http://127.0.0.1:%d/rgb.png\n"
-           "[camera top]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
-           sim.port, cam_port, cam_port);
-  h_write_config(conf);
-  h_start();
-  ASSERT(r_wait_status("/v1/robot", 10));
+  char *cameras = h_fmt("[camera arm]\nsource = http://127.0.0.1:%d/rgb.png\n"
+                        "[camera top]\nsource = http://127.0.0.1:%d/rgb.png\nmount = fixed\n",
+                        cam_port, cam_port);
+  start_daemon(sim.port, cameras);
+  free(cameras);
 
   /* where the board lies, as in hand_camera; the mount to the centimetre */
   const double yaw = 15 * M_PI / 180;
