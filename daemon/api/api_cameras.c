@@ -144,7 +144,7 @@ int fg_api_camera_capture(fg_req *req, fg_resp *resp) {
   int keep;
   if (!cam || parse_capture(req, resp, &keep) != 0) return 0;
   fg_capture cap;
-  int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, &cap);
+  int rc = fg_camera_capture(req->app->cameras, req->app->robot, cam, 0, &cap);
   int corners = 0, kept = 0;
   if (rc == 0 && keep)
     rc = fg_cameras_view_add(req->app->cameras, req->app->decoder, &req->conf->board, cam, &cap,

@@ -47,7 +47,7 @@ static int capture_view(void *ctx, int i, int *kept) {
   const view_ctx *c = ctx;
   (void)i;
   fg_capture cap;
-  FG_TRY(fg_camera_capture(c->app->cameras, c->app->robot, c->cam, &cap));
+  FG_TRY(fg_camera_capture(c->app->cameras, c->app->robot, c->cam, 1, &cap));
   int corners, now;
   const int rc = fg_cameras_view_add(c->app->cameras, c->app->decoder, &c->conf->board, c->cam,
                                      &cap, &corners, &now);

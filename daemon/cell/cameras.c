@@ -235,7 +235,7 @@ static int robot_pose(fg_robot_svc *robot, double T[16]) {
 }
 
 int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *cam,
-                      fg_capture *out) {
+                      int image_only, fg_capture *out) {
   memset(out, 0, sizeof *out);
   fg_cameras_calib_get(c, cam->name, &out->calib);
   /* a hand camera's pose needs the robot's; a fixed camera's capture carries it when it can
@@ -252,14 +252,14 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
   if (rc == 0 && !fg_image_sniff(out->image, out->image_len))
     rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent %zu bytes that are no image "
                     "(PNG, JPEG, EXR or TIFF)", cam->source, out->image_len);
-  if (rc == 0 && cam->depth_source) {
+  if (rc == 0 && cam->depth_source && !image_only) {
     rc = fg_snapshot_fetch(c->grabber, cam->depth_source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES,
                            &out->depth, &out->depth_len);
     if (rc == 0 && !fg_image_sniff(out->depth, out->depth_len))
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no image",
                       cam->depth_source);
   }
-  if (rc == 0 && cam->features_source) {
+  if (rc == 0 && cam->features_source && !image_only) {
     fg_npy npy;
     rc = fg_snapshot_fetch(c->grabber, cam->features_source, SNAPSHOT_TIMEOUT_MS,
                            SNAPSHOT_MAX_BYTES, &out->features, &out->features_len);

@@ -59,12 +59,13 @@ typedef struct fg_capture {
 } fg_capture;
 
 /* Captures from cam: reads the TCP pose (a hand camera with a robot; for a fixed camera when
- * it can be read), fetches the image, the depth image and the features (a .npy; their shape
- * is checked when they are stored), reads the pose again and refuses
- * (robot_moved) when it changed by more than 0.5 mm or 0.1 degree. Failures: the robot's (fg_robot_tcp_read), camera_unavailable (the
- * source did not answer, answered an error, or sent no image: 502 / 504), robot_moved. */
+ * it can be read), fetches the image and, unless image_only (a calibration view needs no
+ * more), the depth image and the features (a .npy; their shape is checked when they are
+ * stored), reads the pose again and refuses (robot_moved) when it changed by more than 0.5 mm
+ * or 0.1 degree. Failures: the robot's (fg_robot_tcp_read), camera_unavailable (the source
+ * did not answer, answered an error, or sent no image: 502 / 504), robot_moved. */
 int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *cam,
-                      fg_capture *out);
+                      int image_only, fg_capture *out);
 void fg_capture_release(fg_capture *cap);
 
 /* ---- calibration.c: views kept from captures, and calibrating on them */

@@ -88,7 +88,7 @@ static void params_free(void *p) {
 static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
                          const fg_conf_camera *cam, const char *job_id, int i, int *stored) {
   fg_capture cap;
-  FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, &cap));
+  FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, 0, &cap));
   char source[96];
   snprintf(source, sizeof source, "scan-%s-%03d", job_id, i);
   fg_npy features;
