@@ -3,16 +3,20 @@
 # weights and no hardware, driven through the HTTP API exactly as a robot stack drives it.
 #
 #   1. builds (meson, in build/) unless that is done already;
-#   2. renders two tabletop scans with fieldgrip-scenegen (RGB-D views with per-patch
-#      features; the objects are moved between them) and starts fieldgrip-sim, which plays
-#      the robot controller and the Robotiq gripper on 127.0.0.1:1502;
+#   2. renders two tabletop layouts with fieldgrip-scenegen (RGB-D views with per-patch
+#      features; the objects stand elsewhere in the second) and starts fieldgrip-sim, which
+#      plays the robot controller and the Robotiq gripper on 127.0.0.1:1502 in the physics
+#      cell of the second layout (MuJoCo), and a camera on the robot's tool on 127.0.0.1:1503
+#      whose intrinsics, distortion and mount fieldgripd is not told, with a calibration
+#      board on the table;
 #   3. starts fieldgripd with config/demo.conf and, printing every curl command it runs:
-#      uploads the first scan's frames, trains, records two demos (how to pick up the box
-#      and the ball), uploads and trains the second scan, asks "where is the mug?" (heatmap
-#      PLY and PNG), asks for a grasp of the box by query, executes it in the simulator's
-#      physics cell of the second scan (MuJoCo) and prints the gripper's report and what
-#      physics says: the box lifted and by how much, or the miss; puts the box back, and
-#      does the same for the ball, asked for by its task;
+#      uploads the first layout's frames, trains, records two demos (how to pick up the box
+#      and the ball); then from the bare cell: calibrates the camera (the robot takes 30
+#      views of the board: intrinsics and mount), scans the table with it (30 viewpoints,
+#      trained in the same job), asks "where is the mug?" (heatmap PLY and PNG), asks for a
+#      grasp of the box by query, executes it in the physics cell and prints the gripper's
+#      report and what physics says: the box lifted and by how much, or the miss; puts the
+#      box back, and does the same for the ball, asked for by its task;
 #   4. keeps the daemon and the simulator running for you to explore; Ctrl-C stops both.
 #
 # With [clip] in the configuration the questions are texts ("a mug") and the daemon computes
@@ -23,8 +27,8 @@
 # Options: --exit (stop both processes after the loop and exit 0 if it ran through: the
 # tests run it so), --steps N (training steps per scan, default 300), --config FILE
 # (default config/demo.conf; the daemon's address is its [http] listen, the simulator's its
-# [robot] host and port), --out DIR (default demo-out: scans, heatmaps, logs), --build DIR
-# (take the programs from that meson build folder as they are, instead of building build/).
+# [robot] host and port, its camera's [camera wrist] source's), --out DIR (default
+# demo-out: scans, heatmaps, logs), --build DIR (take the programs from that meson build folder as they are, instead of building build/).
 # Needs curl and jq. Exit status: 0 when the loop ran through, 1 on any failed step (the
 # message says which; the daemon's log is in OUT/fieldgripd.log).
 set -euo pipefail
@@ -102,6 +106,11 @@ sim_port=$(ini_get "$config" robot port)
 sim_host=$(ini_get "$config" robot host)
 [ -n "$sim_port" ] && [ -n "$sim_host" ] || die "$config has no [robot] host and port for the simulator"
 token=$(ini_get "$config" http token)
+# the simulator's camera serves what [camera wrist] fetches
+camera=$(ini_get "$config" "camera wrist" source)
+camera=${camera#http://}
+camera=${camera%%/*}
+[ -n "$camera" ] || die "$config has no [camera wrist] source (http://HOST:PORT/rgb.png) for the simulator's camera"
 api="http://$listen"
 
 mkdir -p "$out"
@@ -189,7 +198,13 @@ say "Starting the robot and gripper simulator on $sim_host:$sim_port"
 port_busy "$sim_host" "$sim_port" && die "$sim_host:$sim_port is taken: is a simulator or robot already there?"
 # The physics cell of the second scan (MuJoCo): its table and objects, the gripper and what
 # every command did to them, in $out/physics.jsonl
-sim_args=(--listen "$sim_host:$sim_port" --scene "$out/scan0/cell.xml" --report "$out/physics.jsonl")
+# and its camera on the tool: 640 x 480 with a little barrel distortion, 6 cm behind the TCP
+# and turned 5 degrees, a ChArUco board on the table to the right of the objects, motions at
+# ten times real time
+sim_args=(--listen "$sim_host:$sim_port" --scene "$out/scan0/cell.xml" --report "$out/physics.jsonl"
+          --camera-listen "$camera" --camera "604 602 323.5 236.5 640 480 -0.06 0.02 0.0004 -0.0003"
+          --camera-mount "0.03 -0.02 -0.06 0.9990482 0.0436194 0 0"
+          --board "7 5 0.03 0.022 DICT_5X5_100 0.15 -0.45 0 0" --camera-patch 16 --time-scale 0.1)
 echo "${dim}\$ $(quote "$sim" "${sim_args[@]}") &${reset}   (the second scan's table and objects in physics)"
 "$sim" "${sim_args[@]}" >"$out/sim.log" 2>&1 &
 pids+=($!)
@@ -254,34 +269,41 @@ upload_scan() { # SCENE LAYOUT
   show=1
 }
 
-train() { # SCENE
-  local scene=$1 job line data state step
-  say "Training $scene's feature field ($steps steps)"
-  api_json POST "/v1/scenes/$scene/train" "{\"steps\": $steps, \"seed\": 0}"
-  expect 202
+follow() { # WHAT: the job of the last reply, its progress as Server-Sent Events, drawn as a bar
+  local what=$1 job line state= step total phase shown= views
+  views=$(jq -r '.viewpoints // 0' <<<"$reply")
   job=$(jq -r .job <<<"$reply")
   echo "$reply"
-  # The job's progress as Server-Sent Events, drawn as a bar
   echo "${dim}\$ $(quote curl -sN "$api/v1/jobs/$job/events")${reset}"
-  state=
-  local shown_tenth=-1 bar_format='  [%-40s] %5d/%d steps  %s\n'
-  [ -z "$bold" ] || bar_format='\r  [%-40s] %5d/%d steps  %s  '
+  local bar_format='  [%-40s] %5d/%d %-9s %s\n'
+  [ -z "$bold" ] || bar_format='\r  [%-40s] %5d/%d %-9s %s  '
   while IFS= read -r line; do
     line=${line%$'\r'}
     [[ "$line" == data:* ]] || continue
     data=${line#data: }
-    read -r state step < <(jq -r '"\(.state) \(.step // 0)"' <<<"$data")
-    # a bar redrawn in place on a terminal, else a line per tenth of the steps
-    local tenth=$((step * 10 / steps))
-    if [ -n "$bold" ] || [ "$tenth" != "$shown_tenth" ]; then
-      shown_tenth=$tenth
-      printf "$bar_format" "$(printf '%*s' $((tenth * 4)) '' | tr ' ' '#')" "$step" "$steps" \
-        "$(jq -r '"loss \(.loss // "-" | tostring | .[0:6])  \(.elapsed_s // 0 | floor) s"' <<<"$data")"
+    read -r state step total phase < <(jq -r '"\(.state) \(.step // 0) \(.steps) \(.phase // "-")"' <<<"$data")
+    [ "$phase" != scanning ] || total=$views
+    # a bar redrawn in place on a terminal, else a line per tenth of the steps and per phase
+    local tenth=$((step * 10 / (total > 0 ? total : 1)))
+    if [ -n "$bold" ] || [ "$phase $tenth" != "$shown" ]; then
+      shown="$phase $tenth"
+      printf "$bar_format" "$(printf '%*s' $((tenth * 4)) '' | tr ' ' '#')" "$step" "$total" \
+        "$phase" "$(jq -r 'if .phase == "scanning" or .phase == "capturing" or .phase == "calibrating"
+          then "\(.frames // 0) kept, \(.skipped // 0) out of reach  \(.elapsed_s // 0 | floor) s"
+          else "loss \(.loss // "-" | tostring | .[0:6])  \(.elapsed_s // 0 | floor) s" end' <<<"$data")"
     fi
     case "$state" in done|failed|cancelled) break ;; esac
   done < <(curl -sN "${auth[@]}" "$api/v1/jobs/$job/events")
   [ -z "$bold" ] || echo
-  [ "$state" = done ] || die "training of $scene ended '$state': $(jq -r '.error // .' <<<"$data")"
+  [ "$state" = done ] || die "$what ended '$state': $(jq -r '.error // .' <<<"$data")"
+}
+
+train() { # SCENE
+  local scene=$1
+  say "Training $scene's feature field ($steps steps)"
+  api_json POST "/v1/scenes/$scene/train" "{\"steps\": $steps, \"seed\": 0}"
+  expect 202
+  follow "the training of $scene"
   echo "$data" | jq -c '{state, step, psnr, samples_per_s, elapsed_s}'
 }
 
@@ -314,7 +336,33 @@ demo ball ball
 
 # ---------------------------------------------------------------- the questions
 
-upload_scan tabletop 0
+# ---------------------------------------------------------------- the cell
+
+# The camera on the robot's tool, from a bare cell: fieldgripd knows where the board lies on
+# the table (roughly: its centre within a few centimetres) and where the camera sits on the
+# tool as a ruler gives it, and finds its intrinsics, its distortion and its mount itself.
+say "Calibrating the camera on the tool: the robot takes 30 views of the board on the table"
+api_json POST /v1/cameras/wrist/calibrate '{"kind": "both", "drive": {"target": [0.255, -0.45, 0],
+  "mount": {"position": [0.03, -0.02, -0.06], "quaternion": [1, 0, 0, 0]}, "settle_ms": 100}}'
+expect 202
+follow "the calibration"
+api_curl GET /v1/cameras/wrist
+expect 200
+jq -c '{intrinsics: .intrinsics | {fl_x, fl_y, cx, cy, k1, k2}, T_tcp_cam: .T_tcp_cam | {position, quaternion},
+        calibration: .calibration | {intrinsics: .intrinsics.rms_px, mount: .mount | {rms_px, spread_mm, spread_deg}}}' <<<"$reply"
+
+# The table scanned by the robot with the calibrated camera, and trained in the same job
+say "Scanning the table: the robot moves the camera through 30 viewpoints, then trains ($steps steps)"
+show=0
+api_curl DELETE /v1/scenes/tabletop
+show=1
+api_json POST /v1/scenes "{\"name\": \"tabletop\", \"workspace\": $workspace, \"voxel_size\": 0.01}"
+expect 201
+api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": 30, \"radius_m\": 0.5,
+  \"elevations_deg\": [40, 75], \"settle_ms\": 100, \"train\": {\"steps\": $steps, \"seed\": 0}}"
+expect 202
+follow "the scan of tabletop"
+echo "$data" | jq -c '{state, frames, skipped, step, psnr, elapsed_s}'
 
 # A question as JSON members: a text with CLIP, else the class's embedding (rounded to 4
 # decimals to keep the commands short) with the other classes as negatives
@@ -328,8 +376,6 @@ question() { # CLASS
       "$out/scan0/gt.json"
   fi
 }
-
-train tabletop
 
 say "Where is the mug? (a heatmap over the workspace's voxels)"
 mug=$(question mug)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The README's first command, end to end: scripts/demo.sh --exit on a throwaway state folder
 # and free loopback ports, with the programs of this build. The script itself stops at the
-# first step that goes wrong (a non-2xx answer, a best heatmap voxel off the mug, a query
+# first step that goes wrong (a non-2xx answer, a calibration refused, a scan that fails, a
+# best heatmap voxel off the mug, a query
 # that retrieves another task than the box's, no grasp, a pick that does not end done, a
 # gripper that holds nothing, an object physics did not lift); here we check that it ran through, that it printed every
 # step's curl command and the files it names, and that it left no process behind. A second
@@ -34,6 +35,10 @@ free_port() {
 http_port=$(free_port)
 modbus_port=$(free_port)
 while [ "$modbus_port" = "$http_port" ]; do modbus_port=$(free_port); done
+camera_port=$(free_port)
+while [ "$camera_port" = "$http_port" ] || [ "$camera_port" = "$modbus_port" ]; do
+  camera_port=$(free_port)
+done
 
 cat >"$tmp/demo.conf" <<CONF
 [http]
@@ -48,10 +53,24 @@ model = robotiq-2f85
 transport = tcp
 host = 127.0.0.1
 port = $modbus_port
+limit_min = -0.30 -1.00 -0.05
+limit_max = 1.00 1.00 1.00
+reach_m = 0.85
+speed_mps = 0.25
 [gripper.modbus]
 transport = tcp
 host = 127.0.0.1
 port = $modbus_port
+[calibration]
+squares_x = 7
+squares_y = 5
+square_m = 0.03
+marker_m = 0.022
+dictionary = DICT_5X5_100
+[camera wrist]
+source = http://127.0.0.1:$camera_port/rgb.png
+depth_source = http://127.0.0.1:$camera_port/depth.png
+features_source = http://127.0.0.1:$camera_port/features.npy
 CONF
 
 run_demo() { # CONFIG [demo.sh options]: runs it into $tmp/out, output in $out_log
@@ -69,7 +88,8 @@ grep -q '"task":"box"' "$out_log" || fail "the grasp's task is not printed"
 grep -q '^the box was lifted by 0\.[0-9]* m' "$out_log" || fail "physics did not lift the box"
 grep -q '^the ball was lifted by 0\.[0-9]* m' "$out_log" || fail "physics did not lift the ball"
 # every request it made is shown as a command to copy, with the daemon's address
-for path in /v1/health /v1/scenes /v1/scenes/tabletop-demos/frames /v1/scenes/tabletop/train \
+for path in /v1/health /v1/scenes /v1/scenes/tabletop-demos/frames /v1/scenes/tabletop-demos/train \
+            /v1/cameras/wrist/calibrate /v1/cameras/wrist /v1/scenes/tabletop/scan \
             /v1/robot/commands \
             /v1/tasks/box/demos /v1/scenes/tabletop/heatmap /v1/scenes/tabletop/render \
             /v1/scenes/tabletop/grasps /v1/gripper; do
@@ -78,7 +98,9 @@ for path in /v1/health /v1/scenes /v1/scenes/tabletop-demos/frames /v1/scenes/ta
 done
 grep -q "^\$ curl -sN http://127.0.0.1:$http_port/v1/jobs/j[0-9a-f-]*/events" "$out_log" ||
   fail "no event stream command"
-grep -Eq '^  \[#{40}\] +300/300 steps' "$out_log" || fail "no full progress bar"
+grep -Eq '^  \[#{40}\] +300/300 ' "$out_log" || fail "no full progress bar"
+grep -Eq '^  \[#{40}\] +30/30 calibrating' "$out_log" || fail "no calibration that took its 30 views"
+grep -q '"T_tcp_cam":{"position"' "$out_log" || fail "the calibrated mount is not shown"
 
 ply=$tmp/out/mug-heatmap.ply
 png=$tmp/out/mug-heatmap.png
@@ -98,7 +120,7 @@ emb=${emb%%&*}
   fail "the viewer link's embedding is not the mug's: $emb"
 
 # both processes were stopped: nothing listens on either port any more
-for p in "$http_port" "$modbus_port"; do
+for p in "$http_port" "$modbus_port" "$camera_port"; do
   if (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then fail "something still listens on $p"; fi
 done
 echo "ok: the demo ran through in $SECONDS s"
@@ -109,7 +131,9 @@ fi
 
 # With [clip]: texts, and CLIP computes the frames' features in the trainings
 "$gen_clip" "$tmp/clip.safetensors" --preset tiny >/dev/null
-{ cat "$tmp/demo.conf"; printf '[clip]\nweights = %s\nvocab = %s\n' "$tmp/clip.safetensors" "$vocab"; } \
+# (the camera then sends its images only: the daemon computes the scan's features with CLIP)
+{ grep -v '^features_source' "$tmp/demo.conf"
+  printf '[clip]\nweights = %s\nvocab = %s\n' "$tmp/clip.safetensors" "$vocab"; } \
   >"$tmp/clip.conf"
 start=$SECONDS
 # A random tiny model's features find nothing in particular, so the trainings need not be
