@@ -10,9 +10,13 @@
 #include "core/pose.h"
 #include "drive.h"
 
-void fg_calib_drive_viewpoints(const double target[3], const double T_tcp_cam[16], int n,
-                               const double dist_m[2], const double el_deg[2], double roll_deg,
-                               double *T_base_tcp) {
+/* The n TCP poses that put a camera at T_tcp_cam on the tool at eyes around target, each
+ * looking at it: azimuths spread over the circle, elevations, distances and rolls over their
+ * ranges in interleaved patterns, so that any 8 consecutive views turn about several axes
+ * (hand-eye needs that). */
+static void drive_viewpoints(const double target[3], const double T_tcp_cam[16], int n,
+                             const double dist_m[2], const double el_deg[2], double roll_deg,
+                             double *T_base_tcp) {
   double T_cam_tcp[16];
   fg_pose_inverse(T_tcp_cam, T_cam_tcp);
   for (int i = 0; i < n; i++) {
@@ -123,8 +127,8 @@ int fg_calib_drive_submit(fg_app *app, const fg_conf *conf, fg_calib_drive *req,
     free(own);
     return fg_fail(FG_ENOMEM, "a calibration's viewpoints");
   }
-  fg_calib_drive_viewpoints(req->target, T_guess, req->n, req->dist_m, req->el_deg,
-                            req->roll_deg, req->T_base_tcp);
+  drive_viewpoints(req->target, T_guess, req->n, req->dist_m, req->el_deg, req->roll_deg,
+                   req->T_base_tcp);
   *own = *req;
   const fg_job_params jp = {.steps = req->n};
   const int rc = fg_jobs_submit_camera(app->jobs, "calibrate", cam->name, &jp, own, out);

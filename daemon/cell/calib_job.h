@@ -32,14 +32,6 @@ typedef struct fg_calib_drive {
 
 extern const fg_job_kind fg_job_kind_calibrate;
 
-/* The n TCP poses that put a camera at T_tcp_cam on the tool at eyes around target, each
- * looking at it: azimuths spread over the circle, elevations, distances and rolls over their
- * ranges in interleaved patterns, so that any 8 consecutive views turn about several axes
- * (hand-eye needs that). */
-void fg_calib_drive_viewpoints(const double target[3], const double T_tcp_cam[16], int n,
-                               const double dist_m[2], const double el_deg[2], double roll_deg,
-                               double *T_base_tcp);
-
 /* Queues the driven calibration req (its poses filled in and taken by the job) after checking
  * what can be checked now: the camera exists (camera_not_found) and is on the tool
  * (invalid_request), a robot is configured (not_configured), a mount-only calibration has
