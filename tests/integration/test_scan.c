@@ -224,6 +224,7 @@ int main(int argc, char **argv) {
   /* with the arm's reach known, as close as keeps the workspace in view, where the reach
    * admits the most viewpoints; the rest are refused by the limits, not the robot */
   char reach_conf[1200];
+  /* conf starts with "[robot]\n" (8 characters): the reach goes into that section */
   snprintf(reach_conf, sizeof reach_conf, "[robot]\nreach_m = 0.85\n%s", conf + 8);
   h_write_config(reach_conf);
   h_reload();
