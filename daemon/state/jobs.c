@@ -384,6 +384,35 @@ int fg_jobs_register_kind(fg_jobs *jobs, const fg_job_kind *kind) {
 static const char *subject_kind(const fg_job_info *i) { return i->camera[0] ? "camera" : "scene"; }
 static const char *subject_name(const fg_job_info *i) { return i->camera[0] ? i->camera : i->scene; }
 
+/* FG_EBUSY when the subject of info (its scene, or its camera) has a queued or running job,
+ * with the detail that names it; else 0. Under jobs->lock. */
+static int idle_locked(fg_jobs *jobs, const fg_job_info *info) {
+  for (fg_job *k = jobs->all; k; k = k->next) {
+    if (strcmp(k->info.scene, info->scene) != 0 || strcmp(k->info.camera, info->camera) != 0)
+      continue;
+    pthread_mutex_lock(&k->lock);
+    fg_job_state st = k->info.state;
+    char id[FG_JOB_ID_MAX];
+    snprintf(id, sizeof id, "%s", k->info.id);
+    pthread_mutex_unlock(&k->lock);
+    if (st == FG_JOB_QUEUED || st == FG_JOB_RUNNING)
+      return fg_fail_as(FG_EBUSY, info->camera[0] ? "job_in_progress" : "training_in_progress",
+                        "%s %s already has job %s %s; wait for it (GET /v1/jobs/%s) or "
+                        "cancel it (DELETE /v1/jobs/%s)", subject_kind(info),
+                        subject_name(info), id, fg_job_state_name(st), id, id);
+  }
+  return 0;
+}
+
+int fg_jobs_scene_idle(fg_jobs *jobs, const char *scene) {
+  fg_job_info info = {0};
+  snprintf(info.scene, sizeof info.scene, "%s", scene);
+  pthread_mutex_lock(&jobs->lock);
+  const int rc = idle_locked(jobs, &info);
+  pthread_mutex_unlock(&jobs->lock);
+  return rc;
+}
+
 /* Queues a new job on scene (a reference is taken) or, scene NULL, on camera. */
 static int submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene, const char *camera,
                   const fg_job_params *params, void *kind_params, fg_job_info *out) {
@@ -398,23 +427,11 @@ static int submit(fg_jobs *jobs, const char *kind_name, fg_scene *scene, const c
   else
     snprintf(j->info.camera, sizeof j->info.camera, "%s", camera);
   pthread_mutex_lock(&jobs->lock);
-  for (fg_job *k = jobs->all; k; k = k->next) {
-    if (strcmp(k->info.scene, j->info.scene) != 0 || strcmp(k->info.camera, j->info.camera) != 0)
-      continue;
-    pthread_mutex_lock(&k->lock);
-    fg_job_state st = k->info.state;
-    char id[FG_JOB_ID_MAX];
-    snprintf(id, sizeof id, "%s", k->info.id);
-    pthread_mutex_unlock(&k->lock);
-    if (st == FG_JOB_QUEUED || st == FG_JOB_RUNNING) {
-      pthread_mutex_unlock(&jobs->lock);
-      const int rc = fg_fail_as(FG_EBUSY, scene ? "training_in_progress" : "job_in_progress",
-                                "%s %s already has job %s %s; wait for it (GET /v1/jobs/%s) or "
-                                "cancel it (DELETE /v1/jobs/%s)", subject_kind(&j->info),
-                                subject_name(&j->info), id, fg_job_state_name(st), id, id);
-      fg_job_unref(j);
-      return rc;
-    }
+  const int busy = idle_locked(jobs, &j->info);
+  if (busy != 0) {
+    pthread_mutex_unlock(&jobs->lock);
+    fg_job_unref(j);
+    return busy;
   }
   make_id(j->info.id);
   snprintf(j->info.kind, sizeof j->info.kind, "%s", kind->name);

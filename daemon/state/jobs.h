@@ -144,6 +144,10 @@ int fg_jobs_submit(fg_jobs *jobs, const char *kind, fg_scene *scene,
 int fg_jobs_submit_camera(fg_jobs *jobs, const char *kind, const char *camera,
                           const fg_job_params *params, void *kind_params, fg_job_info *out);
 
+/* 0 when scene has no queued or running job, else FG_EBUSY (training_in_progress) with a
+ * detail that names the job. */
+int fg_jobs_scene_idle(fg_jobs *jobs, const char *scene);
+
 /* The job with that id, with a reference (fg_job_unref); NULL when unknown, with the failure
  * recorded (FG_ENOENT job_not_found). */
 fg_job *fg_jobs_get(fg_jobs *jobs, const char *id);
