@@ -39,14 +39,23 @@ struct fg_frame_file_header {
   char source[FG_FRAME_SOURCE_MAX]; /* 224: NUL-terminated */
   int32_t depth_w, depth_h;     /* 480: depth map, 0 when absent (version 2) */
   double depth_valid;           /* 488: share of valid depth pixels (version 2) */
-  uint8_t reserved[16];         /* 496: zero */
+  int64_t capture;              /* 496: the frame's capture (version 3) */
+  int32_t has_robot_pose;       /* 504: 0 or 1 (version 3) */
+  int32_t pad;                  /* 508: zero */
+  double T_world_tcp[16];       /* 512: the robot's TCP pose, world frame (version 3) */
+  uint8_t reserved[384];        /* 640: zero */
 };
 _Static_assert(sizeof(struct fg_frame_file_header) == FG_FRAME_HEADER_SIZE,
                "the frame header must be exactly FG_FRAME_HEADER_SIZE bytes");
 _Static_assert(offsetof(struct fg_frame_file_header, created_ms) == 200, "header layout");
 _Static_assert(offsetof(struct fg_frame_file_header, source) == 224, "header layout");
 _Static_assert(offsetof(struct fg_frame_file_header, depth_valid) == 488, "header layout");
-_Static_assert(offsetof(struct fg_frame_file_header, reserved) == 496, "header layout");
+_Static_assert(offsetof(struct fg_frame_file_header, capture) == 496, "header layout");
+_Static_assert(offsetof(struct fg_frame_file_header, T_world_tcp) == 512, "header layout");
+_Static_assert(offsetof(struct fg_frame_file_header, reserved) == 640, "header layout");
+
+/* The header's size in versions 1 and 2: everything before `capture`. */
+#define HEADER_SIZE_V2 512
 
 #define HOFF(field) offsetof(struct fg_frame_file_header, field)
 
@@ -83,7 +92,7 @@ static int host_is_le(void) {
   return b == 1;
 }
 
-/* Serialises the header struct into its 512 on-disk bytes. */
+/* Serialises the header struct into its FG_FRAME_HEADER_SIZE on-disk bytes. */
 static void header_encode(const struct fg_frame_file_header *h, uint8_t b[FG_FRAME_HEADER_SIZE]) {
   memset(b, 0, FG_FRAME_HEADER_SIZE);
   memcpy(b + HOFF(magic), h->magic, 8);
@@ -109,6 +118,9 @@ static void header_encode(const struct fg_frame_file_header *h, uint8_t b[FG_FRA
   put_u32(b + HOFF(depth_w), (uint32_t)h->depth_w);
   put_u32(b + HOFF(depth_h), (uint32_t)h->depth_h);
   put_f64(b + HOFF(depth_valid), h->depth_valid);
+  put_u64(b + HOFF(capture), (uint64_t)h->capture);
+  put_u32(b + HOFF(has_robot_pose), (uint32_t)h->has_robot_pose);
+  for (int i = 0; i < 16; i++) put_f64(b + HOFF(T_world_tcp) + 8 * (size_t)i, h->T_world_tcp[i]);
 }
 
 static void header_decode(const uint8_t b[FG_FRAME_HEADER_SIZE], struct fg_frame_file_header *h) {
@@ -137,6 +149,10 @@ static void header_decode(const uint8_t b[FG_FRAME_HEADER_SIZE], struct fg_frame
   h->depth_w = (int32_t)get_u32(b + HOFF(depth_w));
   h->depth_h = (int32_t)get_u32(b + HOFF(depth_h));
   h->depth_valid = get_f64(b + HOFF(depth_valid));
+  if (h->version < 3) return; /* the bytes beyond HEADER_SIZE_V2 are not the header's */
+  h->capture = (int64_t)get_u64(b + HOFF(capture));
+  h->has_robot_pose = (int32_t)get_u32(b + HOFF(has_robot_pose));
+  for (int i = 0; i < 16; i++) h->T_world_tcp[i] = get_f64(b + HOFF(T_world_tcp) + 8 * (size_t)i);
 }
 
 /* ---- sizes -------------------------------------------------------------------------- */
@@ -509,6 +525,15 @@ int fg_frame_save(const fg_frame *f, const char *path) {
                               "PINHOLE one that fg_frame_prepare produces",
                    path);
   FG_TRY(fg_camera_validate(&f->cam));
+  if (f->capture < 0)
+    return fg_fail(FG_EINVAL, "cannot save frame to %s: capture %lld is negative", path,
+                   (long long)f->capture);
+  if (f->has_robot_pose && fg_pose_validate(f->T_world_tcp) != 0) {
+    char why[256];
+    snprintf(why, sizeof why, "%s", fg_error_detail());
+    return fg_fail(FG_EINVAL, "cannot save frame to %s: its robot pose is invalid (%s)", path,
+                   why);
+  }
 
   struct fg_frame_file_header h;
   memset(&h, 0, sizeof h);
@@ -536,6 +561,9 @@ int fg_frame_save(const fg_frame *f, const char *path) {
   h.depth_w = f->depth_w;
   h.depth_h = f->depth_h;
   h.depth_valid = f->depth_valid;
+  h.capture = f->capture;
+  h.has_robot_pose = f->has_robot_pose ? 1 : 0;
+  if (f->has_robot_pose) memcpy(h.T_world_tcp, f->T_world_tcp, sizeof h.T_world_tcp);
   uint8_t hb[FG_FRAME_HEADER_SIZE];
   header_encode(&h, hb);
 
@@ -577,9 +605,10 @@ static void swap_in_place(void *data, size_t n, size_t size) {
 }
 
 /* Opens path, reads and checks its header and the file's length, and fills out's scalar
- * fields. On success *fpp is open at the first pixel byte and hb holds the raw header. */
+ * fields. On success *fpp is open at the first pixel byte, hb holds the raw header and
+ * *hb_len its size (512 bytes before version 3). */
 static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
-                                uint8_t hb[FG_FRAME_HEADER_SIZE]) {
+                                uint8_t hb[FG_FRAME_HEADER_SIZE], size_t *hb_len) {
   memset(out, 0, sizeof *out);
   *fpp = NULL;
   FILE *fp = fopen(path, "rb");
@@ -594,22 +623,31 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
     return fg_fail(FG_EIO, "%s is not a regular file", path);
   }
   int rc;
-  if (fread(hb, 1, FG_FRAME_HEADER_SIZE, fp) != FG_FRAME_HEADER_SIZE) {
+  if (fread(hb, 1, HEADER_SIZE_V2, fp) != HEADER_SIZE_V2) {
+    rc = fg_fail(FG_EFORMAT, "frame file %s is truncated: it is shorter than its header", path);
+    goto error;
+  }
+  const uint32_t version = get_u32(hb + HOFF(version));
+  const uint32_t header_size = get_u32(hb + HOFF(header_size));
+  if (memcmp(hb + HOFF(magic), FRAME_MAGIC, 8) != 0) {
+    rc = fg_fail(FG_EFORMAT, "%s is not a fieldgrip frame file (bad magic)", path);
+    goto error;
+  }
+  if (version < 1 || version > FG_FRAME_VERSION ||
+      header_size != (version < 3 ? HEADER_SIZE_V2 : FG_FRAME_HEADER_SIZE)) {
+    rc = fg_fail(FG_EFORMAT, "frame file %s has version %u (header %u bytes); this build reads "
+                             "versions 1 to %d",
+                 path, version, header_size, FG_FRAME_VERSION);
+    goto error;
+  }
+  if (header_size > HEADER_SIZE_V2 &&
+      fread(hb + HEADER_SIZE_V2, 1, header_size - HEADER_SIZE_V2, fp) !=
+        header_size - HEADER_SIZE_V2) {
     rc = fg_fail(FG_EFORMAT, "frame file %s is truncated: it is shorter than its header", path);
     goto error;
   }
   struct fg_frame_file_header h;
   header_decode(hb, &h);
-  if (memcmp(h.magic, FRAME_MAGIC, 8) != 0) {
-    rc = fg_fail(FG_EFORMAT, "%s is not a fieldgrip frame file (bad magic)", path);
-    goto error;
-  }
-  if (h.version < 1 || h.version > FG_FRAME_VERSION || h.header_size != FG_FRAME_HEADER_SIZE) {
-    rc = fg_fail(FG_EFORMAT, "frame file %s has version %u (header %u bytes); this build reads "
-                             "versions 1 to %d",
-                 path, h.version, h.header_size, FG_FRAME_VERSION);
-    goto error;
-  }
   memcpy(out->T_world_cam, h.T_world_cam, sizeof out->T_world_cam);
   out->cam.fl_x = h.fl_x;
   out->cam.fl_y = h.fl_y;
@@ -632,15 +670,26 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
     out->depth_h = h.depth_h;
     out->depth_valid = h.depth_valid;
   }
+  out->capture = h.version >= 3 ? h.capture : 1;
+  out->has_robot_pose = h.has_robot_pose != 0;
+  if (out->has_robot_pose) memcpy(out->T_world_tcp, h.T_world_tcp, sizeof out->T_world_tcp);
+  const int pose_bad = out->has_robot_pose && fg_pose_validate(out->T_world_tcp) != 0;
   if (h.model != FG_CAMERA_PINHOLE || check_frame_sizes(out) < 0 ||
-      fg_camera_validate(&out->cam) < 0) {
+      fg_camera_validate(&out->cam) < 0 || out->capture < 0 || pose_bad ||
+      (h.has_robot_pose != 0 && h.has_robot_pose != 1)) {
     char why[256];
     snprintf(why, sizeof why, "%s", fg_error_detail());
+    if (out->capture < 0)
+      snprintf(why, sizeof why, "capture %lld", (long long)out->capture);
+    else if (h.has_robot_pose != 0 && h.has_robot_pose != 1)
+      snprintf(why, sizeof why, "robot pose flag %d", (int)h.has_robot_pose);
+    else if (pose_bad)
+      snprintf(why, sizeof why, "robot pose: %s", fg_error_detail());
     if (h.model != FG_CAMERA_PINHOLE) snprintf(why, sizeof why, "camera model %d", h.model);
     rc = fg_fail(FG_EFORMAT, "frame file %s has an invalid header (%s)", path, why);
     goto error;
   }
-  size_t want = FG_FRAME_HEADER_SIZE + rgb_bytes(out) + feat_bytes(out) + depth_bytes(out) + 4;
+  size_t want = header_size + rgb_bytes(out) + feat_bytes(out) + depth_bytes(out) + 4;
   if ((unsigned long long)st.st_size != want) {
     rc = fg_fail(FG_EFORMAT, "frame file %s is %lld bytes but its header declares %zu; it is %s",
                  path, (long long)st.st_size, want,
@@ -648,6 +697,7 @@ static int open_and_read_header(const char *path, fg_frame *out, FILE **fpp,
     goto error;
   }
   *fpp = fp;
+  *hb_len = header_size;
   return 0;
 error:
   fclose(fp);
@@ -659,7 +709,8 @@ int fg_frame_load_header(const char *path, fg_frame *out) {
   if (!path || !out) return fg_fail(FG_EINVAL, "fg_frame_load_header: null argument");
   FILE *fp;
   uint8_t hb[FG_FRAME_HEADER_SIZE];
-  FG_TRY(open_and_read_header(path, out, &fp, hb));
+  size_t hb_len;
+  FG_TRY(open_and_read_header(path, out, &fp, hb, &hb_len));
   fclose(fp);
   return 0;
 }
@@ -668,7 +719,8 @@ int fg_frame_load(const char *path, fg_frame *out) {
   if (!path || !out) return fg_fail(FG_EINVAL, "fg_frame_load: null argument");
   FILE *fp;
   uint8_t hb[FG_FRAME_HEADER_SIZE];
-  FG_TRY(open_and_read_header(path, out, &fp, hb));
+  size_t hb_len;
+  FG_TRY(open_and_read_header(path, out, &fp, hb, &hb_len));
   int rc = 0;
   size_t nrgb = rgb_bytes(out), nfeat = feat_bytes(out), ndepth = depth_bytes(out);
   out->rgb = malloc(nrgb);
@@ -685,7 +737,7 @@ int fg_frame_load(const char *path, fg_frame *out) {
     goto error;
   }
   uLong crc = crc32_z(0L, Z_NULL, 0);
-  crc = crc32_z(crc, hb, sizeof hb);
+  crc = crc32_z(crc, hb, hb_len);
   crc = crc32_z(crc, (const Bytef *)out->rgb, nrgb);
   if (nfeat) crc = crc32_z(crc, out->feat, nfeat);
   if (ndepth) crc = crc32_z(crc, (const Bytef *)out->depth, ndepth);

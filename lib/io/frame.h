@@ -3,13 +3,16 @@
  * loads without decoding anything.
  *
  * File layout (little-endian):
- *   header  struct fg_frame_file_header (FG_FRAME_HEADER_SIZE bytes, magic "FGFRAME\0")
+ *   header  struct fg_frame_file_header (FG_FRAME_HEADER_SIZE bytes, magic "FGFRAME\0";
+ *           512 bytes in versions 1 and 2)
  *   pixels  uint16 [h][w][3], sRGB-encoded, 0..65535
  *   feats   feat_dtype [feat_h][feat_w][feat_d] (absent when feat_d is 0)
  *   depth   float32 [depth_h][depth_w], z-depth in metres, 0 where invalid (absent when
  *           depth_w is 0; version 2 only)
  *   crc     uint32, zlib crc32 of everything before it
- * Version 1 files (no depth fields) are still read. The depth map, when there is one, is
+ * Version 3 adds the capture the frame belongs to and the robot's TCP pose it was taken at
+ * (a header of 1024 bytes); versions 1 and 2 (no depth fields in 1) are still read, their
+ * frames in capture 1 without a robot pose. The depth map, when there is one, is
  * stored at the image's stored size, pixel for pixel (see fg_frame_prepare_image_depth).
  * A reader refuses a wrong magic, an unknown version, sizes that disagree with the file's
  * length, and a CRC mismatch. */
@@ -24,8 +27,8 @@
 #include "io/image.h"
 #include "io/npy.h"
 
-#define FG_FRAME_VERSION 2
-#define FG_FRAME_HEADER_SIZE 512
+#define FG_FRAME_VERSION 3
+#define FG_FRAME_HEADER_SIZE 1024 /* version 3; 512 before */
 #define FG_FRAME_SOURCE_MAX 256
 #define FG_FRAME_MAX_FEAT_D 4096
 
@@ -44,6 +47,11 @@ typedef struct fg_frame {
   double depth_valid;      /* share of depth pixels that are valid, [0, 1] */
   float *depth;            /* [depth_h][depth_w] z-depth in metres, 0 where invalid; owned;
                               NULL when none or header only */
+  int64_t capture;         /* the capture (one scan or upload session) the frame belongs
+                              to, >= 1; 0 until its scene gives it one (the store writes
+                              0 as is, and reads files of versions 1-2 as capture 1) */
+  int has_robot_pose;      /* 1 when T_world_tcp holds the robot's TCP pose at the frame */
+  double T_world_tcp[16];  /* that pose (world frame, metres, row-major); else zero */
 } fg_frame;
 
 /* Options of fg_frame_prepare. */

@@ -66,6 +66,21 @@ static void write_bytes(const char *path, const void *buf, size_t len) {
   ASSERT_OK(fg_write_file_atomic(path, buf, len));
 }
 
+/* Rewrites the version 3 frame file raw[0..len) in place as the same frame in an earlier
+ * version (1 or 2): the 512-byte header of those versions, then the same sections, its own
+ * CRC. Returns the new length. */
+static size_t downgrade(char *raw, size_t len, int version) {
+  enum { OLD_HEADER = 512 };
+  raw[8] = (char)version;
+  raw[12] = (char)(OLD_HEADER & 0xff);
+  raw[13] = (char)(OLD_HEADER >> 8);
+  memmove(raw + OLD_HEADER, raw + FG_FRAME_HEADER_SIZE, len - FG_FRAME_HEADER_SIZE);
+  len -= FG_FRAME_HEADER_SIZE - OLD_HEADER;
+  const uint32_t crc = (uint32_t)crc32_z(crc32_z(0L, Z_NULL, 0), (const Bytef *)raw, len - 4);
+  for (int i = 0; i < 4; i++) raw[len - 4 + i] = (char)(crc >> (8 * i));
+  return len;
+}
+
 static void test_prepare_save_load(void) {
   uint8_t *png, *npy;
   size_t png_len, npy_len;
@@ -507,12 +522,11 @@ static void test_depth(void) {
   ASSERT_OK(fg_frame_prepare_image(&plain, &img, &cam800, T, NULL, &opts));
   ASSERT_OK(fg_frame_save(&plain, path));
   ASSERT_OK(fg_read_file(path, 1u << 26, &raw, &raw_len));
-  raw[8] = 1;
-  const uint32_t crc = (uint32_t)crc32_z(crc32_z(0L, Z_NULL, 0), (const Bytef *)raw, raw_len - 4);
-  for (int i = 0; i < 4; i++) raw[raw_len - 4 + i] = (char)(crc >> (8 * i));
-  write_bytes(bad, raw, raw_len);
+  size_t old_len = downgrade(raw, raw_len, 1);
+  write_bytes(bad, raw, old_len);
   ASSERT_OK(fg_frame_load(bad, &g));
   ASSERT(!g.depth && g.depth_w == 0 && g.cam.w == 400);
+  ASSERT_EQ(g.capture, 1);
   fg_frame_clear(&g);
   fg_frame_clear(&plain);
   free(raw);
@@ -583,6 +597,78 @@ static void test_depth_opencv(void) {
   free(png);
 }
 
+/* Version 3: the capture and the robot's TCP pose go with the frame; a version 2 file is a
+ * frame of capture 1 without a robot pose; a bad pose is refused on save and on load. */
+static void test_capture_robot_pose(void) {
+  uint8_t *png;
+  size_t png_len;
+  make_rgba_png(&png, &png_len);
+  double T[16];
+  make_pose(T);
+  fg_ingest_opts opts = {.background_rgb = {bg[0], bg[1], bg[2]}, .max_image_side = 200};
+  fg_frame f;
+  ASSERT_OK(fg_frame_prepare(&f, png, png_len, &cam800, T, NULL, &opts));
+  ASSERT_EQ(f.capture, 0); /* the store gives it one */
+  ASSERT_EQ(f.has_robot_pose, 0);
+  f.capture = 7;
+  f.has_robot_pose = 1;
+  const double tcp[16] = {0, -1, 0, 0.40, 1, 0, 0, -0.15, 0, 0, 1, 0.62, 0, 0, 0, 1};
+  memcpy(f.T_world_tcp, tcp, sizeof tcp);
+  char *path = tmp_path("capture.fgf");
+  ASSERT_OK(fg_frame_save(&f, path));
+  fg_frame g;
+  ASSERT_OK(fg_frame_load(path, &g));
+  ASSERT_EQ(g.capture, 7);
+  ASSERT_EQ(g.has_robot_pose, 1);
+  ASSERT_EQ(memcmp(g.T_world_tcp, tcp, sizeof tcp), 0);
+  ASSERT_EQ(memcmp(g.rgb, f.rgb, (size_t)f.cam.w * (size_t)f.cam.h * 6), 0);
+  fg_frame_clear(&g);
+  ASSERT_OK(fg_frame_load_header(path, &g));
+  ASSERT(g.capture == 7 && g.has_robot_pose && g.T_world_tcp[3] == 0.40);
+  fg_frame_clear(&g);
+
+  /* the header's new fields are under the CRC */
+  char *raw;
+  size_t raw_len;
+  ASSERT_OK(fg_read_file(path, 1u << 26, &raw, &raw_len));
+  ASSERT_EQ(raw_len, FG_FRAME_HEADER_SIZE + (size_t)f.cam.w * (size_t)f.cam.h * 6 + 4);
+  char *bad = tmp_path("capture-bad.fgf");
+  raw[496] ^= 0x02; /* capture 7 -> 5 */
+  write_bytes(bad, raw, raw_len);
+  ASSERT_ERR(fg_frame_load(bad, &g), FG_EFORMAT, "CRC");
+  raw[496] ^= 0x02;
+  /* a version 2 file of the same frame: capture 1, no robot pose, same pixels */
+  size_t old_len = downgrade(raw, raw_len, 2);
+  write_bytes(bad, raw, old_len);
+  ASSERT_OK(fg_frame_load(bad, &g));
+  ASSERT_EQ(g.capture, 1);
+  ASSERT_EQ(g.has_robot_pose, 0);
+  ASSERT_EQ(memcmp(g.rgb, f.rgb, (size_t)f.cam.w * (size_t)f.cam.h * 6), 0);
+  fg_frame_clear(&g);
+  /* a version 2 header that claims the version 3 size is refused */
+  raw[8] = 2;
+  raw[13] = 4; /* header_size 1024 */
+  write_bytes(bad, raw, old_len);
+  ASSERT_ERR(fg_frame_load_header(bad, &g), FG_EFORMAT, "version 2");
+  free(raw);
+
+  /* refused: a negative capture, a robot pose that is not a rigid motion */
+  f.capture = -1;
+  ASSERT_ERR(fg_frame_save(&f, path), FG_EINVAL, "capture");
+  f.capture = 7;
+  f.T_world_tcp[0] = 2.0;
+  ASSERT_ERR(fg_frame_save(&f, path), FG_EINVAL, "robot pose");
+  f.has_robot_pose = 0; /* without the flag the pose is not written */
+  ASSERT_OK(fg_frame_save(&f, path));
+  ASSERT_OK(fg_frame_load_header(path, &g));
+  ASSERT(g.has_robot_pose == 0 && g.T_world_tcp[0] == 0.0);
+  fg_frame_clear(&g);
+  fg_frame_clear(&f);
+  free(path);
+  free(bad);
+  free(png);
+}
+
 int main(void) {
   snprintf(tmpdir, sizeof tmpdir, "/tmp/fg_test_frame_XXXXXX");
   ASSERT(mkdtemp(tmpdir) != NULL);
@@ -591,6 +677,7 @@ int main(void) {
   test_prepare_opencv();
   test_depth();
   test_depth_opencv();
+  test_capture_robot_pose();
   ASSERT_OK(fg_rmtree(tmpdir));
   printf("frame: ok\n");
   return 0;
