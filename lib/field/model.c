@@ -3,6 +3,7 @@
 #include <cblas.h>
 #include <math.h>
 #include <omp.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -69,6 +70,37 @@ int fg_field_config_check(const fg_field_config *cfg) {
   if (!(cfg->dt > 1e-6f && cfg->dt < 0.5f))
     return fg_fail(FG_EINVAL, "dt must be in (1e-6, 0.5) cube units, got %g", (double)cfg->dt);
   return 0;
+}
+
+static int grid_same(const fg_hashgrid_config *a, const fg_hashgrid_config *b) {
+  return a->n_levels == b->n_levels && a->n_features == b->n_features &&
+         a->log2_table_size == b->log2_table_size && a->base_resolution == b->base_resolution &&
+         a->finest_resolution == b->finest_resolution;
+}
+
+int fg_field_config_same(const fg_field_config *a, const fg_field_config *b, char *why,
+                         size_t why_len) {
+  char buf[256];
+  buf[0] = '\0';
+  double d = fabs(a->box_size - b->box_size);
+  for (int k = 0; k < 3; k++) d = fmax(d, fabs(a->box_min[k] - b->box_min[k]));
+  if (d > 1e-6)
+    snprintf(buf, sizeof buf, "its box is a cube of %.4f m from (%.4f, %.4f, %.4f), not of "
+             "%.4f m from (%.4f, %.4f, %.4f)", a->box_size, a->box_min[0], a->box_min[1],
+             a->box_min[2], b->box_size, b->box_min[0], b->box_min[1], b->box_min[2]);
+  else if (a->feature_dim != b->feature_dim)
+    snprintf(buf, sizeof buf, "its features have %d dimensions, not %d", a->feature_dim,
+             b->feature_dim);
+  else if (!grid_same(&a->grid, &b->grid) ||
+           (a->feature_dim > 0 && !grid_same(&a->feat_grid, &b->feat_grid)))
+    snprintf(buf, sizeof buf, "its hash grids differ");
+  else if (a->learn_background != b->learn_background)
+    snprintf(buf, sizeof buf, "it %s a background",
+             a->learn_background ? "learns" : "does not learn");
+  else if (a->occ_resolution != b->occ_resolution || a->dt != b->dt)
+    snprintf(buf, sizeof buf, "its occupancy grid or marching step differs");
+  if (why && why_len) snprintf(why, why_len, "%s", buf);
+  return buf[0] == '\0';
 }
 
 static void *alloc_huge(size_t bytes) {

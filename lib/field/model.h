@@ -64,6 +64,12 @@ int fg_field_config_for_workspace(fg_field_config *cfg, const double ws_min[3],
 /* Checks every field of cfg. 0 or FG_EINVAL with a detail naming it. */
 int fg_field_config_check(const fg_field_config *cfg);
 
+/* 1 when a and b describe the same box (within a micrometre) and the same networks, so that
+ * parameters trained for one can go on training as the other; else 0, with what differs
+ * (the first difference, in words) in why[0..why_len) when why is not NULL. */
+int fg_field_config_same(const fg_field_config *a, const fg_field_config *b, char *why,
+                         size_t why_len);
+
 enum fg_field_param_group {
   FG_FIELD_GRID = 0,   /* density hash tables */
   FG_FIELD_DENSITY,    /* density MLP */

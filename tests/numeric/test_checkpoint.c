@@ -193,6 +193,54 @@ static void test_roundtrip(int feature_dim, int learn_background) {
   free(p2);
 }
 
+/* A field loaded back has the configuration that its workspace gives (what an update checks
+ * before it goes on from the field), and each difference is named. */
+static void test_config_same(void) {
+  fg_field_config cfg;
+  ASSERT_OK(fg_field_config_for_workspace(&cfg, WS_MIN, WS_MAX, 2.0, 8));
+  fg_field *f;
+  ASSERT_OK(fg_field_new(&f, &cfg, 3));
+  char *p = tmp_path("same.fgc");
+  ASSERT_OK(fg_checkpoint_save(f, p, 1));
+  fg_field *g;
+  ASSERT_OK(fg_checkpoint_load(p, &g));
+  char why[256] = "x";
+  ASSERT_EQ(fg_field_config_same(&g->cfg, &cfg, why, sizeof why), 1);
+  ASSERT_STREQ(why, "");
+  struct {
+    fg_field_config c;
+    const char *says;
+  } differ[6];
+  for (int i = 0; i < 6; i++) differ[i].c = cfg;
+  differ[0].c.box_min[2] += 2e-6;
+  differ[0].says = "box";
+  differ[1].c.box_size *= 1.5;
+  differ[1].says = "box";
+  differ[2].c.feature_dim = 512;
+  differ[2].says = "512";
+  differ[3].c.feat_grid.finest_resolution = 256;
+  differ[3].says = "hash grids";
+  differ[4].c.learn_background = 1;
+  differ[4].says = "background";
+  differ[5].c.occ_resolution = 64;
+  differ[5].says = "occupancy";
+  for (int i = 0; i < 6; i++) {
+    ASSERT_EQ(fg_field_config_same(&g->cfg, &differ[i].c, why, sizeof why), 0);
+    if (!strstr(why, differ[i].says)) FG_TEST_FAIL("difference %d: \"%s\"", i, why);
+  }
+  /* within a micrometre is the same box; without features the feature grid does not count */
+  fg_field_config near = cfg;
+  near.box_min[0] += 5e-7;
+  ASSERT_EQ(fg_field_config_same(&cfg, &near, NULL, 0), 1);
+  fg_field_config a = cfg, b = cfg;
+  a.feature_dim = b.feature_dim = 0;
+  b.feat_grid.n_levels = 3;
+  ASSERT_EQ(fg_field_config_same(&a, &b, NULL, 0), 1);
+  fg_field_free(g);
+  fg_field_free(f);
+  free(p);
+}
+
 /* half_tables = 1: smaller, tables rounded to float16, everything else exact. */
 static void test_half_tables(void) {
   fg_field *f = small_field(8, 1, 7);
@@ -361,6 +409,7 @@ int main(void) {
   test_roundtrip(0, 1);
   test_half_tables();
   test_corruption();
+  test_config_same();
   const long long d512 = default_size(512, 0);
   default_size(512, 1);
   default_size(0, 0);
