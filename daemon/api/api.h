@@ -26,6 +26,8 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp);
 int fg_api_frames_list(fg_req *req, fg_resp *resp);
 int fg_api_frame_image(fg_req *req, fg_resp *resp);
 int fg_api_scene_import(fg_req *req, fg_resp *resp);
+int fg_api_captures_list(fg_req *req, fg_resp *resp);
+int fg_api_capture_delete(fg_req *req, fg_resp *resp);
 int fg_api_train_start(fg_req *req, fg_resp *resp);
 int fg_api_jobs_list(fg_req *req, fg_resp *resp);
 int fg_api_job_get(fg_req *req, fg_resp *resp);

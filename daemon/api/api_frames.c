@@ -5,6 +5,7 @@
 #include "api_views.h"
 #include "cell/frames.h"
 #include "state/ingest.h"
+#include "state/jobs.h"
 #include "state/json.h"
 
 #include "core/error.h"
@@ -26,9 +27,32 @@ static void reply_added(fg_resp *resp, int status, const fg_frame *f, int index)
   json_t *depth = f->depth_w ? json_pack("{s:i,s:i,s:f}", "w", f->depth_w, "h", f->depth_h,
                                          "valid_fraction", f->depth_valid)
                              : json_null();
-  fg_resp_json(resp, status, json_pack("{s:i,s:{s:i,s:i},s:o,s:o}", "frame", index, "image", "w",
+  fg_resp_json(resp, status, json_pack("{s:i,s:I,s:{s:i,s:i},s:o,s:o}", "frame", index,
+                                       "capture", (json_int_t)f->capture, "image", "w",
                                        f->cam.w, "h", f->cam.h, "features", features, "depth",
                                        depth));
+}
+
+/* "capture" of an upload's meta or an import's body: absent, null or "latest" (0: the
+ * newest), "new" (a new one of scene s), or a number from 1 to FG_CAPTURE_MAX. 0, or -1
+ * after answering 400. */
+static int parse_capture(json_t *obj, fg_scene *s, int64_t *out, fg_resp *resp) {
+  json_t *v = json_object_get(obj, "capture");
+  const char *str = json_string_value(v);
+  *out = 0;
+  if (!v || json_is_null(v) || (str && strcmp(str, "latest") == 0)) return 0;
+  if (str && strcmp(str, "new") == 0) {
+    *out = fg_scene_new_capture(s);
+    return 0;
+  }
+  if (json_is_integer(v) && json_integer_value(v) >= 1 &&
+      json_integer_value(v) <= FG_CAPTURE_MAX) {
+    *out = json_integer_value(v);
+    return 0;
+  }
+  return fg_resp_error(resp, 400, "invalid_request", "\"capture\" must be \"latest\" (the "
+                       "default: the scene's newest capture), \"new\" or a capture number from "
+                       "1 to %lld", (long long)FG_CAPTURE_MAX), -1;
 }
 
 /* ---------------------------------------------------------------- upload */
@@ -164,7 +188,8 @@ int fg_api_frames_upload(fg_req *req, fg_resp *resp) {
   double T_base_tcp[16];
   if (parse_upload(req, &meta, &feats, &in, resp) == 0 &&
       (!json_is_string(json_object_get(meta, "camera")) ||
-       parse_robot_frame(req, meta, &cam, &has_pose, T_base_tcp, resp) == 0)) {
+       parse_robot_frame(req, meta, &cam, &has_pose, T_base_tcp, resp) == 0) &&
+      parse_capture(meta, s, &in.capture, resp) == 0) {
     fg_frame frame;
     int index;
     const int rc = cam ? fg_cell_frame_upload(req->app, req->conf, s, &in, cam,
@@ -260,10 +285,11 @@ static json_t *imported_json(const fg_import_result *r) {
                                              "file_path", k->file_path, "reason", k->reason));
   }
   for (size_t i = 0; i < r->imported; i++) json_array_append_new(ids, json_integer(r->first + (int)i));
-  return json_pack("{s:I,s:I,s:o,s:o,s:I,s:I,s:o}", "imported", (json_int_t)r->imported,
+  return json_pack("{s:I,s:I,s:o,s:o,s:I,s:I,s:o,s:o}", "imported", (json_int_t)r->imported,
                    "skipped", (json_int_t)r->n_skipped, "skipped_files", files, "skipped_frames",
                    skipped, "with_depth", (json_int_t)r->with_depth, "depth_missing",
-                   (json_int_t)r->depth_missing, "frames", ids);
+                   (json_int_t)r->depth_missing, "frames", ids, "capture",
+                   r->imported ? json_integer((json_int_t)r->capture) : json_null());
 }
 
 int fg_api_scene_import(fg_req *req, fg_resp *resp) {
@@ -271,13 +297,15 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
   if (!s) return 0;
   json_t *body = fg_api_body_object(req, resp);
   const char *path = NULL, *tname = "transforms.json";
+  int64_t capture = 0;
   if (body && (fg_json_string(body, "path", &path) <= 0 ||
                fg_json_string(body, "transforms", &tname) < 0)) {
     fg_resp_error(resp, 400, "invalid_request", "the body needs \"path\": the data set's "
-                  "folder, and optionally \"transforms\": the file name inside it");
-  } else if (body) {
+                  "folder, and optionally \"transforms\": the file name inside it, and "
+                  "\"capture\"");
+  } else if (body && parse_capture(body, s, &capture, resp) == 0) {
     fg_import_result r;
-    const int rc = fg_ingest_import(req->app, req->conf, s, path, tname, &r);
+    const int rc = fg_ingest_import(req->app, req->conf, s, path, tname, capture, &r);
     if (rc != 0)
       fg_api_fail(resp, rc);
     else
@@ -285,6 +313,65 @@ int fg_api_scene_import(fg_req *req, fg_resp *resp) {
     fg_import_result_release(&r);
   }
   json_decref(body);
+  fg_scene_unref(s);
+  return 0;
+}
+
+/* ---------------------------------------------------------------- captures */
+
+static json_t *capture_json(const fg_scene_capture_info *c, int64_t latest) {
+  char first[32], last[32];
+  fg_iso8601(c->first_ms, first);
+  fg_iso8601(c->last_ms, last);
+  return json_pack("{s:I,s:I,s:I,s:I,s:[i,i],s:s,s:s,s:b}", "capture", (json_int_t)c->capture,
+                   "frames", (json_int_t)c->n_frames, "with_depth", (json_int_t)c->n_depth,
+                   "with_robot_pose", (json_int_t)c->n_robot_pose, "frame_range",
+                   c->first_frame, c->last_frame, "first_created", first, "last_created", last,
+                   "latest", c->capture == latest);
+}
+
+int fg_api_captures_list(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  fg_scene_capture_info *v;
+  size_t n;
+  const int rc = fg_scene_list_captures(s, &v, &n);
+  fg_scene_unref(s);
+  if (rc != 0) return fg_api_fail(resp, rc);
+  json_t *arr = json_array();
+  /* the newest that holds frames: what a training takes by default */
+  const int64_t latest = n ? v[n - 1].capture : 0;
+  for (size_t i = 0; arr && i < n; i++) json_array_append_new(arr, capture_json(&v[i], latest));
+  free(v);
+  fg_resp_json(resp, 200, json_pack("{s:o}", "captures", arr));
+  return 0;
+}
+
+int fg_api_capture_delete(fg_req *req, fg_resp *resp) {
+  const char *num = req->params[1];
+  char *end;
+  errno = 0;
+  const long long capture = strtoll(num, &end, 10);
+  if (num[0] < '1' || num[0] > '9' || *end || errno == ERANGE || capture > FG_CAPTURE_MAX)
+    return fg_resp_error(resp, 400, "invalid_request", "the capture must be a number from 1 as "
+                         "GET /v1/scenes/%s/captures lists them, got \"%.40s\"", req->params[0],
+                         num);
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  size_t removed = 0;
+  /* a training reads the frames as it starts: none is taken from under one */
+  int rc = fg_jobs_scene_idle(req->app->jobs, fg_scene_name(s));
+  if (rc == 0) rc = fg_scene_delete_capture(s, capture, &removed);
+  if (rc == FG_ENOENT)
+    fg_resp_error(resp, 404, "capture_not_found", "scene '%s' has no capture %lld; GET "
+                  "/v1/scenes/%s/captures lists them", fg_scene_name(s), capture,
+                  fg_scene_name(s));
+  else if (rc != 0)
+    fg_api_fail(resp, rc);
+  else
+    fg_resp_json(resp, 200, json_pack("{s:I,s:I,s:I}", "deleted", (json_int_t)capture,
+                                      "frames", (json_int_t)removed, "latest_capture",
+                                      (json_int_t)fg_scene_latest_capture(s)));
   fg_scene_unref(s);
   return 0;
 }

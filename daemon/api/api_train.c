@@ -62,15 +62,58 @@ static int json_loss_weight(json_t *obj, const char *key, double *out) {
   return 0;
 }
 
+/* "captures": "latest" (the default), "all", or an array of 1..FG_JOB_MAX_CAPTURES distinct
+ * capture numbers. */
+static int json_captures(json_t *obj, fg_job_params *p) {
+  json_t *v = json_object_get(obj, "captures");
+  if (!v || json_is_null(v)) return 0;
+  if (json_is_string(v) && strcmp(json_string_value(v), "latest") == 0) return 0;
+  if (json_is_string(v) && strcmp(json_string_value(v), "all") == 0) {
+    p->all_captures = 1;
+    return 0;
+  }
+  const size_t n = json_is_array(v) ? json_array_size(v) : 0;
+  int ok = n >= 1 && n <= FG_JOB_MAX_CAPTURES;
+  for (size_t i = 0; ok && i < n; i++) {
+    json_t *c = json_array_get(v, i);
+    ok = json_is_integer(c) && json_integer_value(c) >= 1 &&
+         json_integer_value(c) <= FG_CAPTURE_MAX;
+    for (size_t k = 0; ok && k < i; k++) ok = p->captures[k] != json_integer_value(c);
+    if (ok) p->captures[i] = json_integer_value(c);
+  }
+  if (!ok)
+    return fg_fail(FG_EINVAL, "\"captures\" must be \"latest\", \"all\" or a list of 1 to %d "
+                   "different capture numbers (GET .../captures lists them)",
+                   FG_JOB_MAX_CAPTURES);
+  p->n_captures = (int)n;
+  return 0;
+}
+
+/* "init": "random" (the default) or "current". */
+static int json_init(json_t *obj, fg_job_params *p) {
+  json_t *v = json_object_get(obj, "init");
+  if (!v || json_is_null(v)) return 0;
+  const char *s = json_string_value(v);
+  if (s && strcmp(s, "random") == 0) return 0;
+  if (s && strcmp(s, "current") == 0) {
+    p->init_current = 1;
+    return 0;
+  }
+  return fg_fail(FG_EINVAL, "\"init\" must be \"random\" (a new field) or \"current\" (go on "
+                 "from the scene's field)");
+}
+
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
 static int train_params(json_t *body, const fg_conf *conf, fg_job_params *p) {
   static const char *const keys[] = {"steps",        "seed",
                                      "max_seconds",  "holdout_every",
-                                     "depth_weight", "distortion_weight", NULL};
+                                     "depth_weight", "distortion_weight",
+                                     "captures",     "init",
+                                     NULL};
   const char *key = fg_json_unknown_key(body, keys);
   if (key)
     return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds, "
-                   "holdout_every, depth_weight and distortion_weight", key);
+                   "holdout_every, depth_weight, distortion_weight, captures and init", key);
   memset(p, 0, sizeof *p);
   p->steps = conf->train_steps;
   long long x = 0;
@@ -92,6 +135,8 @@ static int train_params(json_t *body, const fg_conf *conf, fg_job_params *p) {
   p->distortion_weight = conf->distortion_weight;
   FG_TRY(json_loss_weight(body, "depth_weight", &p->depth_weight));
   FG_TRY(json_loss_weight(body, "distortion_weight", &p->distortion_weight));
+  FG_TRY(json_captures(body, p));
+  FG_TRY(json_init(body, p));
   return 0;
 }
 
@@ -109,26 +154,9 @@ int fg_api_train_start(fg_req *req, fg_resp *resp) {
   if (!body) goto out;
   fg_job_params p;
   if (fg_api_parse_train(body, req->conf, &p, resp) != 0) goto out;
-  fg_scene_info info;
-  fg_scene_get_info(s, &info);
-  if (info.n_frames == 0) {
-    fg_resp_error(resp, 409, "no_frames", "scene '%s' has no frames to train on; add them with "
-                  "POST /v1/scenes/%s/frames or POST /v1/scenes/%s/import first", info.name,
-                  info.name, info.name);
-    goto out;
-  }
-  if (p.holdout_every > 0) {
-    size_t k = (size_t)p.holdout_every;
-    size_t held = (info.n_frames + k - 1) / k;
-    if (held >= info.n_frames) {
-      fg_resp_error(resp, 400, "invalid_request", "holdout_every %d holds out all %zu frames "
-                    "of scene '%s'; use a larger value (or 0) so that some frames train",
-                    p.holdout_every, info.n_frames, info.name);
-      goto out;
-    }
-  }
   fg_job_info job;
-  int rc = fg_jobs_submit(req->app->jobs, FG_JOB_KIND_TRAIN, s, &p, NULL, &job);
+  int rc = fg_train_check(req->app, s, &p);
+  if (rc == 0) rc = fg_jobs_submit(req->app->jobs, FG_JOB_KIND_TRAIN, s, &p, NULL, &job);
   if (rc != 0) {
     fg_api_fail(resp, rc);
   } else {

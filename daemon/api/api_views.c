@@ -21,6 +21,10 @@ json_t *fg_json_scene(const fg_scene_info *info) {
                         "trained", info->trained, "last_job", last_job, "created", created,
                         "declared_in_config", info->declared_in_config);
   if (!o) return NULL;
+  json_object_set_new(o, "captures", json_integer((json_int_t)info->n_captures));
+  json_object_set_new(o, "latest_capture", info->latest_capture
+                                             ? json_integer((json_int_t)info->latest_capture)
+                                             : json_null());
   json_object_set_new(o, "trained_steps", json_integer(info->trained_steps));
   json_object_set_new(o, "checkpoint_bytes", json_integer(info->checkpoint_bytes));
   json_object_set_new(o, "partial", json_boolean(info->partial));
@@ -52,11 +56,19 @@ json_t *fg_json_frame(const fg_frame *f, int index) {
   json_t *depth = f->depth_w ? json_pack("{s:i,s:i,s:f}", "w", f->depth_w, "h", f->depth_h,
                                          "valid_fraction", f->depth_valid)
                              : json_null();
-  return json_pack("{s:i,s:s,s:o,s:s,s:{s:f,s:f,s:f,s:f,s:i,s:i,s:s},s:[i,i],s:b,s:o,s:o,s:s}",
-                   "frame", index, "source", f->source, "transform_matrix",
-                   fg_json_from_matrix4(f->T_world_cam), "convention", "opengl", "camera", "fl_x",
-                   f->cam.fl_x, "fl_y", f->cam.fl_y, "cx", f->cam.cx, "cy", f->cam.cy, "w",
-                   f->cam.w, "h", f->cam.h, "camera_model", fg_camera_model_name(f->cam.model),
-                   "source_size", f->src_w, f->src_h, "undistorted", f->undistorted, "features",
-                   features, "depth", depth, "created", created);
+  json_t *o = json_pack("{s:i,s:s,s:o,s:s,s:{s:f,s:f,s:f,s:f,s:i,s:i,s:s},s:[i,i],s:b,s:o,s:o,"
+                        "s:s}",
+                        "frame", index, "source", f->source, "transform_matrix",
+                        fg_json_from_matrix4(f->T_world_cam), "convention", "opengl", "camera",
+                        "fl_x", f->cam.fl_x, "fl_y", f->cam.fl_y, "cx", f->cam.cx, "cy",
+                        f->cam.cy, "w", f->cam.w, "h", f->cam.h, "camera_model",
+                        fg_camera_model_name(f->cam.model), "source_size", f->src_w, f->src_h,
+                        "undistorted", f->undistorted, "features", features, "depth", depth,
+                        "created", created);
+  if (o) {
+    json_object_set_new(o, "capture", json_integer((json_int_t)f->capture));
+    json_object_set_new(o, "robot_pose",
+                        f->has_robot_pose ? fg_json_pose(f->T_world_tcp) : json_null());
+  }
+  return o;
 }

@@ -43,6 +43,8 @@ int fg_cell_frame_upload(fg_app *app, const fg_conf *conf, fg_scene *s, fg_inges
       T_base_tcp = T_now;
     }
     fg_pose_compose(T_base_tcp, cal.T_mount, T_base_cam);
+    in->has_robot_pose = 1;
+    memcpy(in->T_world_tcp, T_base_tcp, sizeof in->T_world_tcp);
   }
   fg_cell_frame_camera(&cal, T_base_cam, in);
   return fg_ingest_upload(app, conf, s, in, index, out);

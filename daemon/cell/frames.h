@@ -12,10 +12,11 @@
 void fg_cell_frame_camera(const fg_camera_calib *calib, const double T_base_cam[16],
                           fg_ingest_input *in);
 
-/* Ingests in (its image, features, depth) into scene s as a frame of camera cam at the TCP
- * pose T_base_tcp, or at the TCP pose read now when T_base_tcp is NULL (a hand camera; a fixed
- * camera needs none). Failures: not_calibrated, invalid_request (a robot pose for a fixed
- * camera), the robot's (fg_robot_tcp_read), and fg_ingest_upload's. */
+/* Ingests in (its image, features, depth, capture) into scene s as a frame of camera cam at
+ * the TCP pose T_base_tcp, or at the TCP pose read now when T_base_tcp is NULL (a hand camera,
+ * whose frame keeps that pose as its robot pose; a fixed camera needs none). Failures:
+ * not_calibrated, invalid_request (a robot pose for a fixed camera), the robot's
+ * (fg_robot_tcp_read), and fg_ingest_upload's. */
 int fg_cell_frame_upload(fg_app *app, const fg_conf *conf, fg_scene *s, fg_ingest_input *in,
                          const fg_conf_camera *cam, const double *T_base_tcp, int *index,
                          fg_frame *out);

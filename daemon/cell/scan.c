@@ -84,9 +84,11 @@ static void params_free(void *p) {
   free(r);
 }
 
-/* Captures at the viewpoint and stores the frame. 0, or the failure. */
+/* Captures at the viewpoint and stores the frame, with the TCP pose read back, into the
+ * scan's capture. 0, or the failure. */
 static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
-                         const fg_conf_camera *cam, const char *job_id, int i, int *stored) {
+                         const fg_conf_camera *cam, const char *job_id, int64_t capture, int i,
+                         int *stored) {
   fg_capture cap;
   FG_TRY(fg_camera_capture(app->cameras, app->robot, cam, 0, &cap));
   char source[96];
@@ -94,7 +96,9 @@ static int capture_store(fg_app *app, const fg_conf *conf, fg_scene *s,
   fg_npy features;
   fg_ingest_input fi = {.image = cap.image, .image_len = cap.image_len, .depth = cap.depth,
                         .depth_len = cap.depth_len, .depth_scale = cam->depth_scale,
-                        .source = source};
+                        .source = source, .capture = capture,
+                        .has_robot_pose = cap.has_robot_pose};
+  if (cap.has_robot_pose) memcpy(fi.T_world_tcp, cap.T_base_tcp, sizeof fi.T_world_tcp);
   if (cap.features && fg_npy_parse(cap.features, cap.features_len, &features) == 0)
     fi.features = &features;
   fg_cell_frame_camera(&cap.calib, cap.T_base_cam, &fi);
@@ -116,11 +120,12 @@ typedef struct scan_ctx {
   fg_scene *scene;
   const fg_conf_camera *cam;
   const char *job_id;
+  int64_t capture; /* the scan's own, taken as it starts */
 } scan_ctx;
 
 static int scan_visit(void *ctx, int i, int *stored) {
   const scan_ctx *c = ctx;
-  return capture_store(c->app, c->conf, c->scene, c->cam, c->job_id, i, stored);
+  return capture_store(c->app, c->conf, c->scene, c->cam, c->job_id, c->capture, i, stored);
 }
 
 static void scan_run(fg_job *job, fg_app *app, void *params) {
@@ -134,7 +139,8 @@ static void scan_run(fg_job *job, fg_app *app, void *params) {
   if (!cam) {
     rc = fg_fail(FG_ENOENT, "camera %s is no longer configured", p->camera);
   } else {
-    scan_ctx c = {app, conf, fg_job_scene(job), cam, fg_job_id(job)};
+    scan_ctx c = {app, conf, fg_job_scene(job), cam, fg_job_id(job),
+                  fg_scene_new_capture(fg_job_scene(job))};
     rc = fg_cell_visit(app, job, route, p->T_base_tcp, p->n, p->settle_ms, scan_visit, &c,
                        &stored, &skipped, &at);
   }
@@ -184,6 +190,7 @@ int fg_scan_submit(fg_app *app, const fg_conf *conf, fg_scene *s, fg_scan_reques
                        req->n, req->radius_m, req->el_min_deg, req->el_max_deg,
                        req->T_base_tcp);
   }
+  if (req->train) FG_TRY(fg_train_check_init(app, s, &req->train_params));
   const fg_job_params jp = req->train ? req->train_params : (fg_job_params){.steps = req->n};
   fg_scan_request *own = malloc(sizeof *own);
   if (!own) return fg_fail(FG_ENOMEM, "a scan");

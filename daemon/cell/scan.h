@@ -2,10 +2,12 @@
  * moves a calibrated camera on the tool through viewpoints around the scene's workspace,
  * through the one gate to the robot (fg_robot_execute: limits, latch, audit), lets it settle,
  * captures with the TCP pose read around it, and stores each frame with its pose in the base
- * frame. A viewpoint the robot refuses (outside the limits, or it answers failed: out of
- * reach) is skipped and counted; a scan that reaches none fails. A scan may go on to train the
- * scene in the same job (the "train" kind's run, job_train.h): the job then shows the
- * training's params, phases and steps, and ends when the training does. */
+ * frame and that TCP pose, all in a new capture of the scene (store.h). A viewpoint the
+ * robot refuses (outside the limits, or it answers failed: out of reach) is skipped and
+ * counted; a scan that reaches none fails. A scan may go on to train the scene in the same
+ * job (the "train" kind's run, job_train.h): the job then shows the training's params,
+ * phases and steps, and ends when the training does. That training's default captures,
+ * "latest", are the scan's own. */
 #ifndef FG_DAEMON_CELL_SCAN_H
 #define FG_DAEMON_CELL_SCAN_H
 

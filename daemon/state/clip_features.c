@@ -49,16 +49,21 @@ static int parse_cache_name(const char *name, int *index, char fp[FG_SHA256_HEX 
   return 1;
 }
 
-static int has_index(const int *indices, size_t n, int index) {
-  for (size_t i = 0; i < n; i++)
-    if (indices[i] == index) return 1;
-  return 0;
+/* 1 when the scene in scene_dir still has frame number index (a training may use only
+ * some of its frames: the others' features stay cached). */
+static int frame_exists(const char *scene_dir, int index) {
+  char name[48];
+  snprintf(name, sizeof name, "frames/%06d.fgf", index);
+  char *p = fg_path_join(scene_dir, name);
+  const int yes = p && access(p, F_OK) == 0;
+  free(p);
+  return yes;
 }
 
 /* Removes what the current model and frames have no use for: files of other fingerprints,
  * of frames that are gone, and temp files of a writer that was killed. Only the training
  * worker writes here, one job at a time, so nothing in the folder is being written now. */
-static void sweep(const char *dir, const char *fingerprint, const int *indices, size_t n) {
+static void sweep(const char *scene_dir, const char *dir, const char *fingerprint) {
   DIR *d = opendir(dir);
   if (!d) return;
   struct dirent *e;
@@ -68,7 +73,7 @@ static void sweep(const char *dir, const char *fingerprint, const int *indices, 
     int index;
     char fp[FG_SHA256_HEX + 1];
     int keep = !strstr(e->d_name, ".tmp.") && parse_cache_name(e->d_name, &index, fp) &&
-               strcmp(fp, fingerprint) == 0 && has_index(indices, n, index);
+               strcmp(fp, fingerprint) == 0 && frame_exists(scene_dir, index);
     if (keep) continue;
     char *p = fg_path_join(dir, e->d_name);
     if (p && unlink(p) == 0) removed++;
@@ -192,7 +197,7 @@ int fg_clip_features_attach(fg_clip_model *m, const char *scene_dir, fg_frame *f
   char *dir = fg_path_join(scene_dir, "clip");
   if (!dir) return fg_fail(FG_ENOMEM, "out of memory");
   int rc = fg_mkdir_p(dir);
-  if (rc == 0) sweep(dir, info->fingerprint, indices, n);
+  if (rc == 0) sweep(scene_dir, dir, info->fingerprint);
   for (size_t i = 0; rc == 0 && i < n; i++) {
     fg_frame *f = &frames[i];
     if (f->feat_d) continue;

@@ -8,11 +8,13 @@
  *                                           beyond float16's range), written atomically
  * so that the next training of the scene reads instead of computing them. The fingerprint
  * (fg_clip_info: the SHA-256 of the weights file) changes with the file's bytes, so new
- * weights never meet old features: at the start of every features phase, files of another fingerprint and of frames
- * the scene no longer has are removed. A cache file that does not read back as the expected
- * grid is logged and computed again. The folder goes with its scene. Files named by the
- * 16-digit checksum fingerprint of earlier versions count as another model's: the first
- * training after the upgrade computes them again and removes them. */
+ * weights never meet old features: at the start of every features phase, files of another
+ * fingerprint and of frames the scene no longer has are removed (a capture's deletion
+ * removes its frames' files at once, so that a frame number used again never meets them).
+ * A cache file that does not read back as the expected grid is logged and computed again.
+ * The folder goes with its scene. Files named by the 16-digit checksum fingerprint of
+ * earlier versions count as another model's: the first training after the upgrade computes
+ * them again and removes them. */
 #ifndef FG_DAEMON_CLIP_FEATURES_H
 #define FG_DAEMON_CLIP_FEATURES_H
 

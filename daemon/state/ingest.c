@@ -82,11 +82,14 @@ static int ingest_one(fg_app *app, const fg_ingest_input *in, const fg_scene_par
     return fg_fail_as(rc, rc == FG_ENOMEM ? "internal_error" : "invalid_request", "%s",
                       fg_error_detail());
   snprintf(out->source, sizeof out->source, "%s", in->source);
+  out->capture = in->capture;
+  out->has_robot_pose = in->has_robot_pose;
+  if (in->has_robot_pose) memcpy(out->T_world_tcp, in->T_world_tcp, sizeof out->T_world_tcp);
   return 0;
 }
 
 /* Stores frames (n) in scene s. */
-static int add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *first) {
+static int add_frames(fg_scene *s, fg_frame *frames, size_t n, int *first) {
   const int rc = fg_scene_add_frames(s, frames, n, first);
   if (rc == FG_EINVAL) return fg_fail_as(rc, "invalid_features", "%s", fg_error_detail());
   if (rc == FG_ENOENT) return fg_fail_as(rc, "scene_not_found", "%s", fg_error_detail());
@@ -308,7 +311,7 @@ static int read_frames(fg_app *app, const fg_conf *conf, const fg_scene_params *
 }
 
 int fg_ingest_import(fg_app *app, const fg_conf *conf, fg_scene *s, const char *path,
-                     const char *transforms, fg_import_result *out) {
+                     const char *transforms, int64_t capture, fg_import_result *out) {
   memset(out, 0, sizeof *out);
   char where[PATH_MAX];
   int rc = load_transforms(conf, path, transforms, &out->t, where);
@@ -321,7 +324,9 @@ int fg_ingest_import(fg_app *app, const fg_conf *conf, fg_scene *s, const char *
   if (rc == 0) rc = read_frames(app, conf, &info.params, out, frames, errs);
   if (rc == 0) rc = same_dim(&out->t, frames, info.feature_dim);
   if (rc == 0) rc = pack(&out->t, frames, errs, out);
+  for (size_t i = 0; rc == 0 && i < out->imported; i++) frames[i].capture = capture;
   if (rc == 0 && out->imported) rc = add_frames(s, frames, out->imported, &out->first);
+  if (rc == 0 && out->imported) out->capture = frames[0].capture;
   for (size_t i = 0; frames && i < out->t.n_frames; i++) fg_frame_clear(&frames[i]);
   free(frames);
   free(errs);

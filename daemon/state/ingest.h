@@ -33,11 +33,14 @@ typedef struct fg_ingest_input {
   size_t depth_len;
   double depth_scale;           /* metres per unit of an integer depth image */
   const char *source;           /* the frame's name: its file */
+  int64_t capture;              /* the capture it joins (store.h); 0: the newest */
+  int has_robot_pose;           /* 1: T_world_tcp is the robot's TCP pose at the frame */
+  double T_world_tcp[16];
 } fg_ingest_input;
 
 /* Ingests one uploaded frame into scene s; *index gets its number and *out the frame as stored
- * (fg_frame_clear). When the fault is the frame's depth map, the message starts with
- * "frame '<source>': depth: ". */
+ * (fg_frame_clear; out->capture is the capture it joined). When the fault is the frame's
+ * depth map, the message starts with "frame '<source>': depth: ". */
 int fg_ingest_upload(fg_app *app, const fg_conf *conf, fg_scene *s, const fg_ingest_input *in,
                      int *index, fg_frame *out);
 
@@ -51,18 +54,19 @@ typedef struct fg_import_skip {
 typedef struct fg_import_result {
   size_t imported, with_depth, depth_missing;
   int first;              /* the number of the first frame imported */
+  int64_t capture;        /* the capture the frames joined */
   fg_import_skip *skipped; /* (n_skipped) in file order */
   size_t n_skipped;
   fg_transforms t;        /* the data set as read (file paths of the skipped frames) */
 } fg_import_result;
 
 /* Imports the data set in folder `path` (absolute, or relative to the first import folder
- * that has it; inside [state] import_dirs) described by its file `transforms` into scene s.
- * A frame whose image is missing or whose depth map cannot be used is skipped, with the
- * reason; any other failure of a frame fails the import ("frame i (file): ...; nothing was
- * imported"). *out: fg_import_result_release. */
+ * that has it; inside [state] import_dirs) described by its file `transforms` into scene s,
+ * its frames into `capture` (0: the newest). A frame whose image is missing or whose depth
+ * map cannot be used is skipped, with the reason; any other failure of a frame fails the
+ * import ("frame i (file): ...; nothing was imported"). *out: fg_import_result_release. */
 int fg_ingest_import(fg_app *app, const fg_conf *conf, fg_scene *s, const char *path,
-                     const char *transforms, fg_import_result *out);
+                     const char *transforms, int64_t capture, fg_import_result *out);
 
 /* Accepts a zeroed struct. */
 void fg_import_result_release(fg_import_result *r);

@@ -72,22 +72,135 @@ static double heldout_pixels(const fg_frame *frames, size_t n_frames, int every)
   return pixels;
 }
 
+/* ---------------------------------------------------------------- the checks */
+
+/* The captures a training uses, as fg_scene_load_frames takes them. Used in place: captures
+ * may point at latest. */
+typedef struct capture_choice {
+  const int64_t *captures; /* NULL: every capture */
+  size_t n;
+  int64_t latest;   /* "latest": the newest capture that holds frames */
+  size_t n_frames;  /* frames in the captures chosen */
+} capture_choice;
+
+static int choose_captures(fg_scene *s, const fg_job_params *p, capture_choice *c) {
+  memset(c, 0, sizeof *c);
+  fg_scene_capture_info *v;
+  size_t n;
+  FG_TRY(fg_scene_list_captures(s, &v, &n));
+  int rc = 0;
+  if (p->all_captures) {
+    for (size_t i = 0; i < n; i++) c->n_frames += v[i].n_frames;
+  } else if (p->n_captures == 0) {
+    c->captures = &c->latest;
+    if (n) {
+      c->latest = v[n - 1].capture;
+      c->n = 1;
+      c->n_frames = v[n - 1].n_frames;
+    }
+  } else {
+    c->captures = p->captures;
+    c->n = (size_t)p->n_captures;
+    for (int k = 0; k < p->n_captures && rc == 0; k++) {
+      size_t i = 0;
+      while (i < n && v[i].capture != p->captures[k]) i++;
+      if (i < n)
+        c->n_frames += v[i].n_frames;
+      else
+        rc = fg_fail_as(FG_ENOENT, "capture_not_found", "scene '%s' has no capture %lld; GET "
+                        "/v1/scenes/%s/captures lists them", fg_scene_name(s),
+                        (long long)p->captures[k], fg_scene_name(s));
+    }
+  }
+  free(v);
+  return rc;
+}
+
+static int no_frames(fg_scene *s) {
+  const char *name = fg_scene_name(s);
+  return fg_fail_as(FG_EINVAL, "no_frames", "scene '%s' has no frames to train on; add them "
+                    "with POST /v1/scenes/%s/frames or POST /v1/scenes/%s/import first", name,
+                    name, name);
+}
+
+/* The feature dimension a training of s would give its field: the frames' uploaded one,
+ * else CLIP's when [clip] is configured, else 0. */
+static int expected_feature_dim(fg_app *app, const fg_scene_info *info) {
+  if (info->feature_dim > 0) return info->feature_dim;
+  fg_clip_model *m = app->clip ? fg_clip_svc_acquire(app->clip) : NULL;
+  const int E = m ? fg_clip_model_info(m)->embed_dim : 0;
+  fg_clip_model_release(m);
+  return E;
+}
+
+/* FG_EINVAL (field_mismatch or feature_dim_mismatch) when the configuration of `have`, the
+ * scene's field, is not `want`. */
+static int same_config(fg_scene *s, const fg_field_config *have, const fg_field_config *want) {
+  char why[256];
+  if (fg_field_config_same(have, want, why, sizeof why)) return 0;
+  return fg_fail_as(FG_EINVAL, have->feature_dim != want->feature_dim ? "feature_dim_mismatch"
+                                                                      : "field_mismatch",
+                    "scene '%s': its field cannot go on training on these frames (\"init\": "
+                    "\"current\"): %s; train it anew with \"init\": \"random\"",
+                    fg_scene_name(s), why);
+}
+
+static int field_config(const fg_scene_info *info, int feature_dim, fg_field_config *cfg) {
+  if (fg_field_config_for_workspace(cfg, info->params.workspace_min,
+                                    info->params.workspace_max, FIELD_SCALE, feature_dim) != 0)
+    return fg_fail_as(FG_EINVAL, "invalid_request", "cannot set up the field: %s",
+                      fg_error_detail());
+  return 0;
+}
+
+int fg_train_check_init(fg_app *app, fg_scene *s, const fg_job_params *p) {
+  if (!p->init_current) return 0;
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  fg_field_config want;
+  FG_TRY(field_config(&info, expected_feature_dim(app, &info), &want));
+  fg_field_ref *ref = NULL;
+  FG_TRY(fg_scene_field_acquire(s, &ref));
+  if (!ref)
+    return fg_fail_as(FG_EINVAL, "not_trained", "scene '%s' has no field to go on from "
+                      "(\"init\": \"current\"); train it with \"init\": \"random\" first",
+                      info.name);
+  const int rc = same_config(s, &fg_field_ref_field(ref)->cfg, &want);
+  fg_field_ref_release(ref);
+  return rc;
+}
+
+int fg_train_check(fg_app *app, fg_scene *s, const fg_job_params *p) {
+  capture_choice c;
+  FG_TRY(choose_captures(s, p, &c));
+  if (c.n_frames == 0) return no_frames(s);
+  if (p->holdout_every > 0) {
+    const size_t k = (size_t)p->holdout_every, held = (c.n_frames + k - 1) / k;
+    if (held >= c.n_frames)
+      return fg_fail_as(FG_EINVAL, "invalid_request", "holdout_every %d holds out all %zu "
+                        "frames the training would use in scene '%s'; use a larger value (or "
+                        "0) so that some frames train", p->holdout_every, c.n_frames,
+                        fg_scene_name(s));
+  }
+  return fg_train_check_init(app, s, p);
+}
+
 /* ---------------------------------------------------------------- the phases */
 
-/* The scene's frames, every one of them. */
+/* The frames of the captures the job names. */
 static int load_frames(train_run *run) {
   fg_job_set_phase(run->job, "loading");
-  int rc = fg_scene_load_frames(run->scene, &run->frames, &run->frame_numbers, &run->n_frames,
-                                stop_requested, run);
+  capture_choice c;
+  int rc = choose_captures(run->scene, &run->params, &c);
+  if (rc == 0 && c.n_frames == 0) rc = no_frames(run->scene);
+  if (rc == 0)
+    rc = fg_scene_load_frames(run->scene, c.captures, c.n, &run->frames, &run->frame_numbers,
+                              &run->n_frames, stop_requested, run);
   if (rc == FG_ECANCELED) return rc;
+  if (rc == 0 && run->n_frames == 0) rc = no_frames(run->scene); /* deleted meanwhile */
   if (rc != 0) {
     fg_job_fail(run->job, "cannot load the scene's frames: %s", fg_error_detail());
     return rc;
-  }
-  if (run->n_frames == 0) {
-    fg_job_fail(run->job, "the scene has no frames; add some with POST /v1/scenes/%s/frames "
-                "or .../import", fg_scene_name(run->scene));
-    return FG_EINVAL;
   }
   return 0;
 }
@@ -122,7 +235,25 @@ static int attach_clip_features(train_run *run) {
   return 0;
 }
 
-/* A new field over the scene's workspace and its trainer over the frames. */
+/* The scene's field, copied into run->field to go on training: its parameters, a fully
+ * occupied grid, no steps yet. */
+static int copy_current_field(train_run *run, const fg_field_config *cfg) {
+  fg_field_ref *ref = NULL;
+  int rc = fg_scene_field_acquire(run->scene, &ref);
+  if (rc == 0 && !ref)
+    rc = fg_fail(FG_EINVAL, "the scene has no field to go on from (\"init\": \"current\")");
+  if (rc == 0) rc = same_config(run->scene, &fg_field_ref_field(ref)->cfg, cfg);
+  if (rc == 0) rc = fg_field_alloc(&run->field, cfg);
+  if (rc == 0) {
+    const fg_field *cur = fg_field_ref_field(ref);
+    memcpy(run->field->params, cur->params, cur->n_params * sizeof *cur->params);
+  }
+  fg_field_ref_release(ref);
+  return rc;
+}
+
+/* The field over the scene's workspace, new or the scene's (init), and its trainer over the
+ * frames. */
 static int setup_trainer(train_run *run) {
   fg_job_set_phase(run->job, "training");
   int feature_dim = 0; /* the store keeps one D per scene; CLIP's E equals it (checked) */
@@ -130,12 +261,13 @@ static int setup_trainer(train_run *run) {
   fg_scene_info scene_info;
   fg_scene_get_info(run->scene, &scene_info);
   fg_field_config cfg;
-  if (fg_field_config_for_workspace(&cfg, scene_info.params.workspace_min,
-                                    scene_info.params.workspace_max, FIELD_SCALE,
-                                    feature_dim) != 0 ||
-      fg_field_new(&run->field, &cfg, run->params.seed) != 0) {
+  int rc = field_config(&scene_info, feature_dim, &cfg);
+  if (rc == 0)
+    rc = run->params.init_current ? copy_current_field(run, &cfg)
+                                  : fg_field_new(&run->field, &cfg, run->params.seed);
+  if (rc != 0) {
     fg_job_fail(run->job, "cannot set up the field: %s", fg_error_detail());
-    return FG_EINVAL;
+    return rc;
   }
   fg_train_opts opts;
   fg_train_opts_default(&opts);
@@ -145,7 +277,7 @@ static int setup_trainer(train_run *run) {
   opts.depth_weight = (float)run->params.depth_weight;
   opts.distortion_weight = (float)run->params.distortion_weight;
   for (int k = 0; k < 3; k++) opts.background[k] = (float)scene_info.params.background[k];
-  int rc = fg_trainer_new(&run->trainer, run->field, run->frames, run->n_frames, &opts);
+  rc = fg_trainer_new(&run->trainer, run->field, run->frames, run->n_frames, &opts);
   if (rc != 0) {
     fg_job_fail(run->job, "cannot start training: %s", fg_error_detail());
     return rc;
@@ -155,8 +287,9 @@ static int setup_trainer(train_run *run) {
   info->n_frames = (int)run->n_frames;
   info->n_heldout = (int)run->n_heldout;
   fg_job_update_end(run->job);
-  fg_info("job %s: training scene %s on %zu frames (%zu held out), %d threads", run->id,
-          fg_scene_name(run->scene), run->n_frames, run->n_heldout, run->n_threads);
+  fg_info("job %s: training scene %s on %zu frames (%zu held out), %d threads, from %s",
+          run->id, fg_scene_name(run->scene), run->n_frames, run->n_heldout, run->n_threads,
+          run->params.init_current ? "the scene's field" : "random weights");
   return 0;
 }
 

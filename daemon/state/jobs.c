@@ -160,6 +160,18 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   json_object_set_new(o, "holdout_every", json_integer(j->params.holdout_every));
   json_object_set_new(o, "depth_weight", json_real(j->params.depth_weight));
   json_object_set_new(o, "distortion_weight", json_real(j->params.distortion_weight));
+  json_t *captures = NULL;
+  if (j->params.all_captures) {
+    captures = json_string("all");
+  } else if (j->params.n_captures == 0) {
+    captures = json_string("latest");
+  } else {
+    captures = json_array();
+    for (int i = 0; captures && i < j->params.n_captures; i++)
+      json_array_append_new(captures, json_integer((json_int_t)j->params.captures[i]));
+  }
+  json_object_set_new(o, "captures", captures);
+  json_object_set_new(o, "init", json_string(j->params.init_current ? "current" : "random"));
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
   if (strcmp(j->kind, "scan") == 0 || strcmp(j->kind, "calibrate") == 0)
@@ -229,6 +241,16 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   const double dw = jnum(o, "depth_weight"), dd = jnum(o, "distortion_weight");
   j->params.depth_weight = isfinite(dw) ? dw : 0.0; /* jobs recorded before these existed */
   j->params.distortion_weight = isfinite(dd) ? dd : 0.0;
+  json_t *captures = json_object_get(o, "captures"); /* absent before captures: "latest" */
+  j->params.all_captures =
+    json_is_string(captures) && strcmp(json_string_value(captures), "all") == 0;
+  for (size_t i = 0; json_is_array(captures) && i < json_array_size(captures) &&
+                     j->params.n_captures < FG_JOB_MAX_CAPTURES; i++) {
+    json_t *c = json_array_get(captures, i);
+    if (json_is_integer(c)) j->params.captures[j->params.n_captures++] = json_integer_value(c);
+  }
+  const char *init = json_string_value(json_object_get(o, "init"));
+  j->params.init_current = init && strcmp(init, "current") == 0;
   j->n_frames = (int)jint(o, "frames");
   j->n_heldout = (int)jint(o, "heldout_frames");
   const char *phase = json_string_value(json_object_get(o, "phase"));

@@ -51,6 +51,7 @@ const char *fg_job_state_name(fg_job_state s);
 int fg_job_state_finished(fg_job_state s);
 
 #define FG_TRAIN_MAX_STEPS 1000000
+#define FG_JOB_MAX_CAPTURES 16 /* captures one training may name */
 
 /* Kind names: 1..FG_JOB_KIND_MAX - 1 characters of [a-z_]; at most FG_JOBS_MAX_KINDS kinds. */
 #define FG_JOB_KIND_MAX 16
@@ -67,6 +68,12 @@ typedef struct fg_job_params {
                          scene's frames in number order from 0) are held out for PSNR */
   double depth_weight;      /* weight of the depth loss (field/train.h) */
   double distortion_weight; /* weight of the distortion loss */
+  /* The captures (store.h) a training uses: captures[0..n_captures), or every one
+   * (all_captures), or, when both are 0, the newest that holds frames ("latest"). */
+  int64_t captures[FG_JOB_MAX_CAPTURES];
+  int n_captures;
+  int all_captures;
+  int init_current; /* 1: start from the scene's field ("init": "current"), 0: "random" */
 } fg_job_params;
 
 /* A consistent copy of a job. Times in Unix milliseconds, 0 when not yet. */

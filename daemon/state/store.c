@@ -146,6 +146,7 @@ static fg_scene *scene_alloc(fg_store *store, const char *name) {
   s->frames_dir = s->dir ? fg_path_join(s->dir, "frames") : NULL;
   fg_ref_init(&s->ref, 1);
   pthread_mutex_init(&s->lock, NULL);
+  s->next_capture = 1;
   if (!s->frames_dir) {
     scene_free(s);
     return NULL;
@@ -736,6 +737,11 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->declared_in_config = s->declared;
   out->created_ms = s->created_ms;
   out->n_frames = s->n_frames;
+  fg_scene_capture_info *captures = NULL;
+  out->n_captures = 0;
+  if (fg_scene_captures_locked(s, &captures, &out->n_captures) != 0) out->n_captures = 0;
+  out->latest_capture = out->n_captures ? captures[out->n_captures - 1].capture : 0;
+  free(captures);
   out->feature_dim = s->feature_dim;
   out->field_feature_dim = s->trained ? s->field_feature_dim : 0;
   out->trained = s->trained;

@@ -1,7 +1,8 @@
 /* The scene store: every scene and frame the daemon keeps, under the state dir.
  *
  *   <state>/scenes/<name>/scene.json          parameters (atomic rewrite)
- *   <state>/scenes/<name>/frames/000012.fgf   one frame (lib/io/frame.h), never rewritten
+ *   <state>/scenes/<name>/frames/000012.fgf   one frame (lib/io/frame.h), never rewritten;
+ *                                             removed with its capture
  *   <state>/scenes/<name>/field.fgc           the trained field (field/checkpoint.h)
  *   <state>/scenes/<name>/field.next.fgc      a training's checkpoint before it is committed
  *   <state>/scenes/<name>/last_job.json       the scene's last job (jobs.h)
@@ -61,6 +62,8 @@ typedef struct fg_scene_info {
   int declared_in_config;
   int64_t created_ms;
   size_t n_frames;
+  size_t n_captures;      /* captures that hold frames */
+  int64_t latest_capture; /* the newest capture that holds frames (a training's default) */
   int feature_dim; /* D of the frames' uploaded features; 0 while no frame has any */
   int field_feature_dim; /* D of the trained field (uploaded or CLIP features); 0 when
                             untrained or trained on colour only */
@@ -147,26 +150,67 @@ void fg_scene_get_info(fg_scene *scene, fg_scene_info *out);
  * other and with the scene's (FG_EINVAL with a detail otherwise). Frame files are written in
  * parallel outside the scene's lock, then renamed into place under it. On success
  * first_index receives the number of frames[0]; the others follow consecutively. The frames
- * stay owned by the caller. `source` of each frame is stored as given. */
-int fg_scene_add_frames(fg_scene *scene, const fg_frame *frames, size_t n, int *first_index);
+ * stay owned by the caller. `source` of each frame is stored as given; a frame whose
+ * `capture` is 0 is given the newest capture (fg_scene_latest_capture; a new one when the
+ * scene has none) before it is written, which the caller then reads in frames[i].capture.
+ * A capture above every one the scene has makes it the newest. */
+int fg_scene_add_frames(fg_scene *scene, fg_frame *frames, size_t n, int *first_index);
 
 /* Copies the headers of every frame (rgb and feat NULL) and their numbers, sorted by number,
  * into malloc'd arrays the caller frees. */
 int fg_scene_list_frames(fg_scene *scene, fg_frame **frames, int **indices, size_t *n);
 
-/* Loads every frame whole (pixels and features, CRC checked), sorted by number, into a
- * malloc'd array; on success the caller owns it (fg_scene_frames_free) and, when indices is
- * not NULL, the malloc'd array of the frames' numbers in *indices (free). stop, when not
+/* Loads the frames of the captures captures[0..n_captures) whole (pixels and features, CRC
+ * checked; every frame when captures is NULL), sorted by number, into a malloc'd array; on
+ * success the caller owns it (fg_scene_frames_free) and, when indices is not NULL, the
+ * malloc'd array of the frames' numbers in *indices (free). *n may be 0. stop, when not
  * NULL, is asked between frames and ends the load with FG_ECANCELED when it returns
  * nonzero. */
-int fg_scene_load_frames(fg_scene *scene, fg_frame **frames, int **indices, size_t *n,
-                         int (*stop)(void *), void *stop_ud);
+int fg_scene_load_frames(fg_scene *scene, const int64_t *captures, size_t n_captures,
+                         fg_frame **frames, int **indices, size_t *n, int (*stop)(void *),
+                         void *stop_ud);
 void fg_scene_frames_free(fg_frame *frames, size_t n);
 
 /* Loads frame number `number` whole (pixels, features, depth; CRC checked) into *out, which
  * the caller then owns (fg_frame_clear); on failure *out holds nothing. FG_ENOENT when the
  * scene has no frame of that number, else the errors of fg_frame_load, with a detail. */
 int fg_scene_load_frame(fg_scene *scene, int number, fg_frame *out);
+
+/* ---- captures ----
+ * A capture is the scene at one moment: the frames of one scan, or of one upload session.
+ * Every frame belongs to one (fg_frame.capture), numbered from 1 in the order the scene
+ * hands them out; frames stored before captures existed are in capture 1. A capture exists
+ * while it holds frames. */
+
+#define FG_CAPTURE_MAX INT64_C(1000000000) /* the largest capture number a client may give */
+
+typedef struct fg_scene_capture_info {
+  int64_t capture;
+  size_t n_frames;
+  size_t n_depth;              /* of those, frames with a depth map */
+  size_t n_robot_pose;         /* of those, frames with the robot's TCP pose */
+  int first_frame, last_frame; /* the numbers of its first and last frames */
+  int64_t first_ms, last_ms;   /* when its first and last frames were stored */
+} fg_scene_capture_info;
+
+/* The captures that hold frames, by number, in a malloc'd array the caller frees (*n may be
+ * 0). */
+int fg_scene_list_captures(fg_scene *scene, fg_scene_capture_info **out, size_t *n);
+
+/* The newest capture: the highest the scene handed out (fg_scene_new_capture) or stored a
+ * frame with; 0 when there is none. After a restart or a deletion, the highest that holds
+ * frames. */
+int64_t fg_scene_latest_capture(fg_scene *scene);
+
+/* Hands out a new capture, above every one the scene has or handed out, and makes it the
+ * newest (a scan takes one before its first frame). */
+int64_t fg_scene_new_capture(fg_scene *scene);
+
+/* Removes every frame of the capture, and their cached CLIP features, from disk and from the
+ * scene; the newest capture is then the highest left. A crash half way is finished at the
+ * next start (the frames to remove are listed first). *n_removed (may be NULL) receives how
+ * many. FG_ENOENT when the capture holds no frame (or the scene was deleted), FG_EIO. */
+int fg_scene_delete_capture(fg_scene *scene, int64_t capture, size_t *n_removed);
 
 /* ---- the trained field ---- */
 

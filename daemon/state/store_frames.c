@@ -47,9 +47,28 @@ static int scene_reserve(fg_scene *s, size_t extra) {
   return 0;
 }
 
-/* Removes the frames that the batch manifest at path names (a batch cut short, see
- * fg_scene_add_frames), then the manifest. */
-static void scene_undo_batch(fg_scene *s, const char *path) {
+/* Removes the cached CLIP features of frame number index (clip_features.h), of every
+ * model. */
+static void remove_clip_cache(const fg_scene *s, int index) {
+  char *dir = fg_path_join(s->dir, "clip");
+  DIR *d = dir ? opendir(dir) : NULL;
+  char prefix[16];
+  snprintf(prefix, sizeof prefix, "%06d.", index);
+  struct dirent *e;
+  while (d && (e = readdir(d)) != NULL) {
+    if (strncmp(e->d_name, prefix, strlen(prefix)) != 0) continue;
+    char *p = fg_path_join(dir, e->d_name);
+    if (p) unlink(p);
+    free(p);
+  }
+  if (d) closedir(d);
+  free(dir);
+}
+
+/* Removes the frames that the manifest at path names, with their cached CLIP features (the
+ * caller removes the manifest): a batch cut short (fg_scene_add_frames) or a capture's
+ * deletion (fg_scene_delete_capture). Returns how many frame files it removed. */
+static int remove_listed(fg_scene *s, const char *path) {
   FILE *f = fopen(path, "r");
   char line[64];
   int removed = 0;
@@ -60,13 +79,11 @@ static void scene_undo_batch(fg_scene *s, const char *path) {
     char *p = fg_path_join(s->frames_dir, line);
     if (p && unlink(p) == 0) removed++;
     free(p);
+    remove_clip_cache(s, index);
   }
   if (f) fclose(f);
-  if (unlink(path) == 0 || errno == ENOENT) {
-    fg_fsync_dir(s->frames_dir);
-    fg_info("scene %s: removed %d frames of an import the daemon did not finish", s->name,
-            removed);
-  }
+  fg_fsync_dir(s->frames_dir);
+  return removed;
 }
 
 int fg_scene_frames_read(fg_scene *s) {
@@ -74,9 +91,16 @@ int fg_scene_frames_read(fg_scene *s) {
   if (!bd) return fg_fail(FG_EIO, "cannot open %s: %s", s->frames_dir, strerror(errno));
   struct dirent *be;
   while ((be = readdir(bd)) != NULL) {
-    if (strncmp(be->d_name, ".batch-", 7) != 0 || strstr(be->d_name, ".tmp.")) continue;
+    const int batch = strncmp(be->d_name, ".batch-", 7) == 0;
+    const int deletion = strncmp(be->d_name, ".delete-", 8) == 0;
+    if ((!batch && !deletion) || strstr(be->d_name, ".tmp.")) continue;
     char *p = fg_path_join(s->frames_dir, be->d_name);
-    if (p) scene_undo_batch(s, p);
+    const int removed = p ? remove_listed(s, p) : 0;
+    if (p && (unlink(p) == 0 || errno == ENOENT)) {
+      fg_fsync_dir(s->frames_dir);
+      fg_info("scene %s: removed %d frames of %s the daemon did not finish", s->name, removed,
+              batch ? "an import" : "a capture's deletion");
+    }
     free(p);
   }
   closedir(bd);
@@ -126,6 +150,7 @@ int fg_scene_frames_read(fg_scene *s) {
       fg_frame_clear(&f);
     } else {
       if (f.feat_d) s->feature_dim = f.feat_d;
+      if (f.capture > s->latest_capture) s->latest_capture = f.capture;
       s->frames[s->n_frames] = f;
       s->indices[s->n_frames++] = found[i].index;
     }
@@ -133,6 +158,7 @@ int fg_scene_frames_read(fg_scene *s) {
     free(p);
   }
   free(found);
+  s->next_capture = s->latest_capture + 1;
   return rc;
 }
 
@@ -158,11 +184,23 @@ static int write_batch_manifest(const char *path, int first, size_t n) {
   return fg_atomic_file_commit(&af);
 }
 
-int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *first_index) {
+/* The newest capture, a new one when the scene has none. Under s->lock. */
+static int64_t latest_or_new(fg_scene *s) {
+  if (!s->latest_capture) s->latest_capture = s->next_capture++;
+  return s->latest_capture;
+}
+
+int fg_scene_add_frames(fg_scene *s, fg_frame *frames, size_t n, int *first_index) {
   if (n == 0) return fg_fail(FG_EINVAL, "no frames to add");
+  for (size_t i = 0; i < n; i++)
+    if (frames[i].capture < 0 || frames[i].capture > FG_CAPTURE_MAX)
+      return fg_fail(FG_EINVAL, "capture %lld is not a number from 1 to %lld",
+                     (long long)frames[i].capture, (long long)FG_CAPTURE_MAX);
   pthread_mutex_lock(&s->lock);
   int rc = s->deleted ? fg_fail(FG_ENOENT, "scene %s was deleted", s->name)
                       : check_feature_dim(s, frames, n);
+  for (size_t i = 0; rc == 0 && i < n; i++)
+    if (frames[i].capture == 0) frames[i].capture = latest_or_new(s);
   pthread_mutex_unlock(&s->lock);
   if (rc != 0) return rc;
 
@@ -254,6 +292,8 @@ int fg_scene_add_frames(fg_scene *s, const fg_frame *frames, size_t n, int *firs
       s->frames[s->n_frames] = h;
       s->indices[s->n_frames++] = s->next_index + (int)i;
       if (h.feat_d) s->feature_dim = h.feat_d;
+      if (h.capture > s->latest_capture) s->latest_capture = h.capture;
+      if (h.capture >= s->next_capture) s->next_capture = h.capture + 1;
     }
     s->next_index += (int)n;
   }
@@ -318,15 +358,25 @@ int fg_scene_load_frame(fg_scene *s, int number, fg_frame *out) {
   return load_frame_file(s, number, out);
 }
 
-int fg_scene_load_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *n,
-                         int (*stop)(void *), void *stop_ud) {
+/* 1 when capture is one of captures[0..n), or captures is NULL (every capture). */
+static int capture_chosen(int64_t capture, const int64_t *captures, size_t n) {
+  if (!captures) return 1;
+  for (size_t i = 0; i < n; i++)
+    if (captures[i] == capture) return 1;
+  return 0;
+}
+
+int fg_scene_load_frames(fg_scene *s, const int64_t *captures, size_t n_captures,
+                         fg_frame **frames, int **indices, size_t *n, int (*stop)(void *),
+                         void *stop_ud) {
   *frames = NULL;
   if (indices) *indices = NULL;
   *n = 0;
   pthread_mutex_lock(&s->lock);
-  size_t k = s->n_frames;
-  int *ix = malloc((k ? k : 1) * sizeof *ix);
-  if (ix && k) memcpy(ix, s->indices, k * sizeof *ix);
+  size_t k = 0;
+  int *ix = malloc((s->n_frames ? s->n_frames : 1) * sizeof *ix);
+  for (size_t i = 0; ix && i < s->n_frames; i++)
+    if (capture_chosen(s->frames[i].capture, captures, n_captures)) ix[k++] = s->indices[i];
   pthread_mutex_unlock(&s->lock);
   fg_frame *f = calloc(k ? k : 1, sizeof *f);
   if (!ix || !f) {
@@ -352,4 +402,128 @@ int fg_scene_load_frames(fg_scene *s, fg_frame **frames, int **indices, size_t *
   *frames = f;
   *n = k;
   return 0;
+}
+
+/* ---------------------------------------------------------------- captures */
+
+static int capture_info_cmp(const void *a, const void *b) {
+  const int64_t x = ((const fg_scene_capture_info *)a)->capture;
+  const int64_t y = ((const fg_scene_capture_info *)b)->capture;
+  return (x > y) - (x < y);
+}
+
+int fg_scene_captures_locked(const fg_scene *s, fg_scene_capture_info **out, size_t *n) {
+  fg_scene_capture_info *v = calloc(s->n_frames ? s->n_frames : 1, sizeof *v);
+  if (!v) return fg_fail(FG_ENOMEM, "out of memory");
+  size_t k = 0;
+  for (size_t i = 0; i < s->n_frames; i++) { /* frames are sorted by number */
+    const fg_frame *f = &s->frames[i];
+    size_t j = 0;
+    while (j < k && v[j].capture != f->capture) j++;
+    if (j == k) {
+      v[k++] = (fg_scene_capture_info){.capture = f->capture, .first_frame = s->indices[i],
+                                       .first_ms = f->created_ms};
+    }
+    v[j].n_frames++;
+    v[j].n_depth += f->depth_w > 0;
+    v[j].n_robot_pose += f->has_robot_pose != 0;
+    v[j].last_frame = s->indices[i];
+    v[j].last_ms = f->created_ms;
+  }
+  qsort(v, k, sizeof *v, capture_info_cmp);
+  *out = v;
+  *n = k;
+  return 0;
+}
+
+int fg_scene_list_captures(fg_scene *s, fg_scene_capture_info **out, size_t *n) {
+  pthread_mutex_lock(&s->lock);
+  const int rc = fg_scene_captures_locked(s, out, n);
+  pthread_mutex_unlock(&s->lock);
+  return rc;
+}
+
+int64_t fg_scene_latest_capture(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  const int64_t c = s->latest_capture;
+  pthread_mutex_unlock(&s->lock);
+  return c;
+}
+
+int64_t fg_scene_new_capture(fg_scene *s) {
+  pthread_mutex_lock(&s->lock);
+  const int64_t c = s->next_capture++;
+  s->latest_capture = c;
+  pthread_mutex_unlock(&s->lock);
+  return c;
+}
+
+/* Writes the manifest of a deletion: the file names of the frames numbered numbers[0..n),
+ * one a line, written atomically (fsutil). */
+static int write_deletion_manifest(const char *path, const int *numbers, size_t n) {
+  fg_atomic_file af;
+  FG_TRY(fg_atomic_file_open(&af, path));
+  for (size_t i = 0; i < n; i++) fprintf(af.fp, "%06d.fgf\n", numbers[i]);
+  return fg_atomic_file_commit(&af);
+}
+
+int fg_scene_delete_capture(fg_scene *s, int64_t capture, size_t *n_removed) {
+  if (n_removed) *n_removed = 0;
+  pthread_mutex_lock(&s->lock);
+  int rc = 0;
+  int *numbers = NULL;
+  size_t k = 0;
+  char *manifest = NULL;
+  if (s->deleted) {
+    rc = fg_fail(FG_ENOENT, "scene %s was deleted", s->name);
+    goto out;
+  }
+  numbers = malloc((s->n_frames ? s->n_frames : 1) * sizeof *numbers);
+  if (!numbers) {
+    rc = fg_fail(FG_ENOMEM, "out of memory");
+    goto out;
+  }
+  for (size_t i = 0; i < s->n_frames; i++)
+    if (s->frames[i].capture == capture) numbers[k++] = s->indices[i];
+  if (k == 0) {
+    rc = fg_fail(FG_ENOENT, "scene '%s' has no capture %lld", s->name, (long long)capture);
+    goto out;
+  }
+  /* The list first: a crash from here on leaves it, and the next start finishes the job. */
+  char name[64];
+  snprintf(name, sizeof name, ".delete-%ld-%u", (long)getpid(),
+           atomic_fetch_add(&batch_counter, 1));
+  manifest = fg_path_join(s->frames_dir, name);
+  rc = manifest ? write_deletion_manifest(manifest, numbers, k)
+                : fg_fail(FG_ENOMEM, "out of memory");
+  if (rc == 0) rc = fg_fsync_dir(s->frames_dir);
+  if (rc != 0) {
+    if (manifest) unlink(manifest);
+    goto out;
+  }
+  remove_listed(s, manifest);
+  if (unlink(manifest) != 0)
+    fg_warn("scene %s: cannot remove %s (the next start removes it): %s", s->name, manifest,
+            strerror(errno));
+  fg_fsync_dir(s->frames_dir);
+  /* The scene forgets them, and the newest capture is the highest left. */
+  size_t kept = 0;
+  s->latest_capture = 0;
+  s->feature_dim = 0; /* the D of the frames left, if any has features */
+  for (size_t i = 0; i < s->n_frames; i++) {
+    const fg_frame *f = &s->frames[i];
+    if (f->capture == capture) continue;
+    if (f->capture > s->latest_capture) s->latest_capture = f->capture;
+    if (f->feat_d) s->feature_dim = f->feat_d;
+    s->indices[kept] = s->indices[i];
+    s->frames[kept++] = *f;
+  }
+  s->n_frames = kept;
+  if (n_removed) *n_removed = k;
+  fg_info("scene %s: capture %lld deleted (%zu frames)", s->name, (long long)capture, k);
+out:
+  pthread_mutex_unlock(&s->lock);
+  free(manifest);
+  free(numbers);
+  return rc;
 }

@@ -26,6 +26,8 @@ struct fg_scene {
   int *indices;
   size_t n_frames, cap;
   int next_index;
+  int64_t next_capture;   /* above every capture the frames have or the scene handed out */
+  int64_t latest_capture; /* the newest capture (uploads without one join it); 0: none */
   int feature_dim;
   int deleted;
   /* the trained field: in memory (field) or only in field.fgc (trained, field NULL) */
@@ -60,5 +62,9 @@ int fg_frame_file_name(const char *n, int *index);
 /* Reads the headers of a scene's frames into it when the store opens, removing what an
  * interrupted write left behind (unfinished files, the frames of a batch cut short). */
 int fg_scene_frames_read(fg_scene *s);
+
+/* The captures of s's frames into *out (malloc'd, by number; fg_scene_list_captures). Under
+ * s->lock. */
+int fg_scene_captures_locked(const fg_scene *s, fg_scene_capture_info **out, size_t *n);
 
 #endif

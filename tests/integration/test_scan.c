@@ -36,6 +36,18 @@ static h_resp *wait_job(const char *id) {
 
 static h_resp *scan(const char *body) { return h_post_json("/v1/scenes/table/scan", body); }
 
+/* Metres from a frame's robot_pose (the TCP) to its camera's centre. */
+static double tcp_to_camera(json_t *frame) {
+  json_t *m = json_object_get(frame, "transform_matrix");
+  json_t *p = json_object_get(json_object_get(frame, "robot_pose"), "position");
+  if (!p) FG_TEST_FAIL("the frame has no robot_pose");
+  double d2 = 0;
+  for (size_t k = 0; k < 3; k++)
+    d2 += pow(json_number_value(json_array_get(json_array_get(m, k), 3)) -
+                json_number_value(json_array_get(p, k)), 2);
+  return sqrt(d2);
+}
+
 int main(int argc, char **argv) {
   h_init(argc, argv);
   ASSERT(argc >= 3);
@@ -112,6 +124,14 @@ int main(int argc, char **argv) {
           worst_mm, worst_deg);
   ASSERT(worst_mm < 2);
   ASSERT(worst_deg < 0.3);
+  /* all in the scene's first capture, each with the TCP pose it was taken at: the camera
+   * sits the mount's offset from it, |(0.035, 0.01, -0.06)| = 0.070 m */
+  for (size_t i = 0; i < N_VIEWS; i++) {
+    json_t *f = json_array_get(json_object_get(r->json, "frames"), i);
+    ASSERT_EQ(json_integer_value(json_object_get(f, "capture")), 1);
+    const double d = tcp_to_camera(f);
+    if (!(d > 0.065 && d < 0.075)) FG_TEST_FAIL("frame %zu: camera %.4f m from the TCP", i, d);
+  }
   h_resp_free(r);
 
   /* every motion of the scan is in the robot's audit log, as is the request that started it */
@@ -147,15 +167,15 @@ int main(int argc, char **argv) {
   h_resp *rf = h_get("/v1/scenes/table/frames");
   json_t *last = json_array_get(json_object_get(rf->json, "frames"), N_VIEWS);
   ASSERT(last);
-  json_t *m = json_object_get(last, "transform_matrix");
   h_resp *rr = h_get("/v1/robot");
   json_t *tcp = json_object_get(json_object_get(rr->json, "tcp_pose"), "position");
-  /* the camera sits at the TCP plus the mount's offset turned by the tool: within 10 cm */
-  double d2 = 0;
+  /* the frame keeps the TCP pose read as it came in; the camera sits the mount's offset
+   * from it */
+  json_t *kept = json_object_get(json_object_get(last, "robot_pose"), "position");
   for (int k = 0; k < 3; k++)
-    d2 += pow(json_number_value(json_array_get(json_array_get(m, (size_t)k), 3)) -
-                  json_number_value(json_array_get(tcp, (size_t)k)), 2);
-  ASSERT(sqrt(d2) > 0.05 && sqrt(d2) < 0.08); /* |(0.035, 0.01, -0.06)| = 0.070 m */
+    ASSERT_NEAR(json_number_value(json_array_get(kept, (size_t)k)),
+                json_number_value(json_array_get(tcp, (size_t)k)), 1e-4);
+  ASSERT(fabs(tcp_to_camera(last) - 0.070) < 0.005);
   /* the calibration's intrinsics and distortion: undistorted on ingest */
   ASSERT(json_is_true(json_object_get(last, "undistorted")));
   ASSERT_EQ(json_integer_value(json_array_get(json_object_get(last, "source_size"), 0)), 480);
@@ -186,7 +206,8 @@ int main(int argc, char **argv) {
 
   /* a viewpoint outside the motion limits is skipped and counted; then the same job trains
    * the scene on its N_VIEWS + 2 frames */
-  r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, \"train\": {\"steps\": 4}, "
+  r = scan("{\"camera\": \"wrist\", \"settle_ms\": 0, "
+           "\"train\": {\"steps\": 4, \"captures\": \"all\"}, "
            "\"viewpoints\": [{\"position\": [0.45, -0.05, 0.40], \"quaternion\": [0, 1, 0, 0]}, "
            "{\"position\": [1.80, 0, 0.40], \"quaternion\": [0, 1, 0, 0]}]}");
   ASSERT_STATUS(r, 202);
@@ -201,6 +222,10 @@ int main(int argc, char **argv) {
   h_resp_free(r);
   r = h_get("/v1/scenes/table/frames");
   ASSERT_EQ(json_array_size(json_object_get(r->json, "frames")), N_VIEWS + 2);
+  /* the upload joined the scan's capture, the second scan took a new one */
+  json_t *fs = json_object_get(r->json, "frames");
+  ASSERT_EQ(json_integer_value(json_object_get(json_array_get(fs, N_VIEWS), "capture")), 1);
+  ASSERT_EQ(json_integer_value(json_object_get(json_array_get(fs, N_VIEWS + 1), "capture")), 2);
   h_resp_free(r);
   r = h_get("/v1/scenes/table");
   ASSERT(json_is_true(json_object_get(r->json, "trained")));
