@@ -235,19 +235,14 @@ static int attach_clip_features(train_run *run) {
   return 0;
 }
 
-/* The scene's field, copied into run->field to go on training: its parameters, a fully
- * occupied grid, no steps yet. */
+/* The scene's field, copied into run->field to go on training (fg_field_copy_for_update). */
 static int copy_current_field(train_run *run, const fg_field_config *cfg) {
   fg_field_ref *ref = NULL;
   int rc = fg_scene_field_acquire(run->scene, &ref);
   if (rc == 0 && !ref)
     rc = fg_fail(FG_EINVAL, "the scene has no field to go on from (\"init\": \"current\")");
   if (rc == 0) rc = same_config(run->scene, &fg_field_ref_field(ref)->cfg, cfg);
-  if (rc == 0) rc = fg_field_alloc(&run->field, cfg);
-  if (rc == 0) {
-    const fg_field *cur = fg_field_ref_field(ref);
-    memcpy(run->field->params, cur->params, cur->n_params * sizeof *cur->params);
-  }
+  if (rc == 0) rc = fg_field_copy_for_update(fg_field_ref_field(ref), &run->field);
   fg_field_ref_release(ref);
   return rc;
 }

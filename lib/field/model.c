@@ -179,6 +179,12 @@ int fg_field_new(fg_field **out, const fg_field_config *cfg, uint64_t seed) {
   return 0;
 }
 
+int fg_field_copy_for_update(const fg_field *src, fg_field **out) {
+  FG_TRY(fg_field_alloc(out, &src->cfg));
+  memcpy((*out)->params, src->params, src->n_params * sizeof *src->params);
+  return 0;
+}
+
 void fg_field_free(fg_field *f) {
   if (!f) return;
   fg_occgrid_free(f->occ);

@@ -102,6 +102,12 @@ int fg_field_new(fg_field **out, const fg_field_config *cfg, uint64_t seed);
  * FG_EINVAL (with a detail), FG_ENOMEM. */
 int fg_field_alloc(fg_field **out, const fg_field_config *cfg);
 
+/* A field to go on training from src after its scene changed (an update): src's
+ * configuration and parameters, a fully occupied occupancy grid (rebuilt from the new views
+ * as a new field's is) and trained_steps 0, so that a trainer's schedule, occupancy warm-up
+ * and optimiser start again. The caller owns *out (fg_field_free). FG_ENOMEM. */
+int fg_field_copy_for_update(const fg_field *src, fg_field **out);
+
 void fg_field_free(fg_field *f);
 
 /* Group g's parameters, and their count in *n when n is not NULL. */

@@ -241,6 +241,22 @@ static void test_config_same(void) {
   free(p);
 }
 
+/* A copy to update: the parameters and configuration, a fully occupied grid, no steps. */
+static void test_copy_for_update(void) {
+  fg_field *f = small_field(8, 1, 42);
+  fg_field *g;
+  ASSERT_OK(fg_field_copy_for_update(f, &g));
+  assert_same_config(&f->cfg, &g->cfg);
+  ASSERT_EQ(g->n_params, f->n_params);
+  ASSERT(memcmp(f->params, g->params, f->n_params * sizeof(float)) == 0);
+  ASSERT_EQ(g->trained_steps, 0);
+  const int N = fg_occgrid_resolution(g->occ);
+  ASSERT_EQ(fg_occgrid_n_occupied(g->occ), (int64_t)N * N * N);
+  ASSERT(fg_occgrid_n_occupied(f->occ) < (int64_t)N * N * N); /* the source's is untouched */
+  fg_field_free(g);
+  fg_field_free(f);
+}
+
 /* half_tables = 1: smaller, tables rounded to float16, everything else exact. */
 static void test_half_tables(void) {
   fg_field *f = small_field(8, 1, 7);
@@ -410,6 +426,7 @@ int main(void) {
   test_half_tables();
   test_corruption();
   test_config_same();
+  test_copy_for_update();
   const long long d512 = default_size(512, 0);
   default_size(512, 1);
   default_size(0, 0);
