@@ -405,6 +405,7 @@ static int print_cell(FILE *f, const sg_scene *sc, part_list *l) {
         "       gt.json (metres, +z up, table top at z = 0), each object a body at its gt pose\n"
         "       holding convex parts in the object frame (origin at half its height).\n", f);
   for (int k = 0; k < SG_N_OBJECTS; k++) {
+    if (!sc->objects[k].present) continue;
     const sg_cell_material *m = sg_cell_material_of(sc->objects[k].shape.type);
     fprintf(f, "       %s: %s, %.2f kg, friction %.2f\n", sc->objects[k].name, m->what,
             m->mass_kg, m->friction);
@@ -429,7 +430,8 @@ static int print_cell(FILE *f, const sg_scene *sc, part_list *l) {
   print3(f, h);
   fprintf(f, "\" friction=\"%.2f 0.005 0.0001\" rgba=\"0.550 0.400 0.250 1\"/>\n",
           SG_CELL_TABLE_FRICTION);
-  for (int k = 0; k < SG_N_OBJECTS; k++) FG_TRY(print_object(f, &sc->objects[k], l));
+  for (int k = 0; k < SG_N_OBJECTS; k++)
+    if (sc->objects[k].present) FG_TRY(print_object(f, &sc->objects[k], l));
   fputs("  </worldbody>\n", f);
   print_features(f, sc);
   fputs("</mujoco>\n", f);

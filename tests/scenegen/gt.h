@@ -12,7 +12,7 @@
  *             aabb {min, max} (world), shape {type, parameters of shapes.h},
  *             albedo [3] (linear RGB),
  *             grasp {position, quaternion, matrix, width}}],
- *   masks "masks/NNNN.png", mask_values (a sentence: pixel = class index = object index + 2),
+ *   masks "masks/NNNN.png", mask_values (a sentence: pixel = class index, an object's "class"),
  *   and only with depth maps: depth ("png" or "npy", scenegen's --depth), depth_maps
  *   ("depth/NNNN.png" or ".npy"), depth_values (a sentence: the unit and what 0 means).
  * The object's pose is its object frame (shapes.h): origin on its vertical axis at half its

@@ -206,6 +206,41 @@ static void make_grasp(sg_object *ob) {
 #define PLACE_RADIUS_M 0.25
 #define PLACE_GAP_M 0.02
 
+/* Moves the objects by cfg.moved_xy once the layout is placed, their grasps with them; each
+ * moved object must stay on the table and PLACE_GAP_M from every other one present. */
+static int move_objects(sg_scene *sc) {
+  for (int k = 0; k < SG_N_OBJECTS; k++) {
+    const double *d = sc->cfg.moved_xy[k];
+    sg_object *ob = &sc->objects[k];
+    if (d[0] == 0 && d[1] == 0) continue;
+    if (!ob->present)
+      return fg_fail(FG_EINVAL, "the %s is both removed and moved", ob->name);
+    ob->shape.T_world_obj[3] += d[0];
+    ob->shape.T_world_obj[7] += d[1];
+    sg_shape_finish(&ob->shape);
+    make_grasp(ob);
+  }
+  for (int k = 0; k < SG_N_OBJECTS; k++) {
+    const sg_object *ob = &sc->objects[k];
+    if (!ob->present || (sc->cfg.moved_xy[k][0] == 0 && sc->cfg.moved_xy[k][1] == 0)) continue;
+    const double x = ob->shape.T_world_obj[3], y = ob->shape.T_world_obj[7];
+    const double rk = footprint_radius(&ob->shape);
+    if (x - rk < sc->table_min[0] || x + rk > sc->table_max[0] || y - rk < sc->table_min[1] ||
+        y + rk > sc->table_max[1])
+      return fg_fail(FG_EINVAL, "the %s moved to (%.3f, %.3f) would leave the table", ob->name,
+                     x, y);
+    for (int j = 0; j < SG_N_OBJECTS; j++) {
+      const sg_object *o2 = &sc->objects[j];
+      if (j == k || !o2->present) continue;
+      const double dx = o2->shape.T_world_obj[3] - x, dy = o2->shape.T_world_obj[7] - y;
+      if (hypot(dx, dy) < rk + footprint_radius(&o2->shape) + PLACE_GAP_M)
+        return fg_fail(FG_EINVAL, "the %s moved to (%.3f, %.3f) would touch the %s", ob->name,
+                       x, y, o2->name);
+    }
+  }
+  return 0;
+}
+
 static int place_objects(sg_scene *sc) {
   static const sg_shape_type types[SG_N_OBJECTS] = {SG_SHAPE_MUG, SG_SHAPE_BOWL, SG_SHAPE_BOX,
                                                     SG_SHAPE_BALL};
@@ -240,10 +275,11 @@ static int place_objects(sg_scene *sc) {
       sg_object *ob = &sc->objects[k];
       ob->name = sg_class_names[SG_CLASS_MUG + k];
       ob->class_id = SG_CLASS_MUG + k;
+      ob->present = !(sc->cfg.removed & (1u << k));
       memcpy(ob->albedo, albedo[k], sizeof ob->albedo);
       make_grasp(ob);
     }
-    return 0;
+    return move_objects(sc);
   }
   return fg_fail(FG_ERANGE, "could not place the objects without overlap");
 }
@@ -430,7 +466,8 @@ int sg_scene_trace(const sg_scene *sc, const double o[3], const double d[3], dou
     cls = SG_CLASS_TABLE;
   }
   for (int k = 0; k < SG_N_OBJECTS; k++)
-    if (sg_shape_intersect(&sc->objects[k].shape, o, d, t_min, t_max, &h)) {
+    if (sc->objects[k].present &&
+        sg_shape_intersect(&sc->objects[k].shape, o, d, t_min, t_max, &h)) {
       *hit = h;
       t_max = h.t;
       cls = sc->objects[k].class_id;
@@ -493,7 +530,8 @@ static void shade_ray(const sg_scene *sc, const double o[3], const double d[3], 
     double q[3] = {p[0] + 1e-6 * n[0], p[1] + 1e-6 * n[1], p[2] + 1e-6 * n[2]};
     sg_hit sh;
     for (int k = 0; k < SG_N_OBJECTS; k++)
-      if (sg_shape_intersect(&sc->objects[k].shape, q, L, 1e-6, INFINITY, &sh)) {
+      if (sc->objects[k].present &&
+          sg_shape_intersect(&sc->objects[k].shape, q, L, 1e-6, INFINITY, &sh)) {
         diffuse = 0;
         break;
       }

@@ -45,6 +45,11 @@ typedef struct sg_config {
   double noise; /* expected norm of the noise added to a unit class embedding */
   int holdout;  /* view i goes to transforms_test.json when i % holdout == 0; 0: none */
   sg_depth_format depth; /* depth maps to write; SG_DEPTH_NONE by default */
+  /* The same layout after the scene changed: objects left out (bit k: object k, of class
+   * SG_CLASS_MUG + k; --remove) and moved along the table (metres in x and y; --move). The
+   * others keep their poses, the cameras theirs. */
+  unsigned removed;
+  double moved_xy[SG_N_OBJECTS][2];
 } sg_config;
 
 /* Defaults of the command line. */
@@ -52,6 +57,7 @@ void sg_config_default(sg_config *cfg);
 
 typedef struct sg_object {
   const char *name; /* static: "mug", "bowl", "box", "ball" */
+  int present;      /* 0: left out of the scene (sg_config.removed) */
   int class_id;
   sg_shape shape;
   double albedo[3];           /* linear RGB */

@@ -3,8 +3,8 @@
  *
  *   DIR/images/NNNN.png      8-bit RGB, sRGB-encoded
  *   DIR/masks/NNNN.png       8-bit grey, pixel = class index of the ray through its centre
- *                            (0 background, 1 table, 2 mug, 3 bowl, 4 box, 5 ball; object k of
- *                            gt.json has value k + 2)
+ *                            (0 background, 1 table, 2 mug, 3 bowl, 4 box, 5 ball: an
+ *                            object's "class" in gt.json)
  *   DIR/features/NNNN.npy    float16 [ceil(H/P), ceil(W/P), D], unit vectors
  *   DIR/depth/NNNN.png       with --depth png: 16-bit grey, z-depth of the pixel centre's ray
  *                            in millimetres (rounded), 0 where it hits nothing
@@ -42,7 +42,8 @@ static void usage(FILE *f) {
           "usage: fieldgrip-scenegen --out DIR [--seed N] [--embedding-seed N] [--views N]\n"
           "                          [--width W] [--height H]\n"
           "                          [--dim D] [--patch P] [--noise S] [--holdout K]\n"
-          "                          [--depth none|png|npy]\n"
+          "                          [--depth none|png|npy] [--remove NAME]\n"
+          "                          [--move NAME,DX,DY]\n"
           "  --out DIR     data set folder (created; existing files are replaced)\n"
           "  --seed N      object layout, cameras' start, embeddings, noise (default 0)\n"
           "  --embedding-seed N  class embeddings from N instead of --seed, so that\n"
@@ -57,7 +58,12 @@ static void usage(FILE *f) {
           "                (default 10)\n"
           "  --depth F     depth maps as an RGB-D camera gives them (z along the optical\n"
           "                axis): none, png (16-bit millimetres) or npy (float32 metres)\n"
-          "                in DIR/depth (default none)\n",
+          "                in DIR/depth (default none)\n"
+          "  --remove NAME the same layout without the object NAME (mug, bowl, box, ball);\n"
+          "                may be given again\n"
+          "  --move NAME,DX,DY  the same layout with NAME moved DX, DY metres along the\n"
+          "                table (world x and y); it must stay on the table and apart\n"
+          "                from the others. The cameras stay\n",
           SG_N_CLASSES);
 }
 
@@ -79,6 +85,15 @@ static int parse_int(const char *opt, const char *s, int lo, int hi, int *out) {
   return 0;
 }
 
+/* The index k of the object named by name[0..len) (class SG_CLASS_MUG + k), or -1. */
+static int object_index(const char *name, size_t len) {
+  for (int k = 0; k < SG_N_OBJECTS; k++) {
+    const char *n = sg_class_names[SG_CLASS_MUG + k];
+    if (strlen(n) == len && strncmp(n, name, len) == 0) return k;
+  }
+  return -1;
+}
+
 static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_dir) {
   static const struct option opts[] = {
       {"out", required_argument, NULL, 'o'},     {"seed", required_argument, NULL, 's'},
@@ -88,6 +103,7 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
       {"holdout", required_argument, NULL, 'k'}, {"help", no_argument, NULL, 'h'},
       {"embedding-seed", required_argument, NULL, 'E'},
       {"depth", required_argument, NULL, 'Z'},
+      {"remove", required_argument, NULL, 'R'},  {"move", required_argument, NULL, 'M'},
       {NULL, 0, NULL, 0},
   };
   sg_config_default(cfg);
@@ -161,6 +177,31 @@ static int parse_args(int argc, char **argv, sg_config *cfg, const char **out_di
         return -1;
       }
       cfg->depth = (sg_depth_format)k;
+      break;
+    }
+    case 'R': {
+      const int k = object_index(optarg, strlen(optarg));
+      if (k < 0) {
+        fprintf(stderr, "fieldgrip-scenegen: --remove wants mug, bowl, box or ball, got \"%s\"\n",
+                optarg);
+        return -1;
+      }
+      cfg->removed |= 1u << k;
+      break;
+    }
+    case 'M': {
+      const char *comma = strchr(optarg, ',');
+      const int k = comma ? object_index(optarg, (size_t)(comma - optarg)) : -1;
+      double dx = 0, dy = 0;
+      char tail;
+      if (k < 0 || sscanf(comma + 1, "%lf,%lf%c", &dx, &dy, &tail) != 2 || !isfinite(dx) ||
+          !isfinite(dy) || fabs(dx) > 1 || fabs(dy) > 1) {
+        fprintf(stderr, "fieldgrip-scenegen: --move wants NAME,DX,DY (an object and metres "
+                "up to 1 in x and y), got \"%s\"\n", optarg);
+        return -1;
+      }
+      cfg->moved_xy[k][0] = dx;
+      cfg->moved_xy[k][1] = dy;
       break;
     }
     case 'h': usage(stdout); exit(0);
@@ -382,6 +423,7 @@ static json_t *gt_json(const sg_scene *sc) {
   json_t *objects = json_array();
   for (int k = 0; k < SG_N_OBJECTS; k++) {
     const sg_object *ob = &sc->objects[k];
+    if (!ob->present) continue;
     json_t *o = json_object();
     json_object_set_new(o, "name", json_string(ob->name));
     json_object_set_new(o, "class", json_integer(ob->class_id));
@@ -406,8 +448,8 @@ static json_t *gt_json(const sg_scene *sc) {
   json_object_set_new(root, "masks", json_string("masks/NNNN.png"));
   json_object_set_new(root, "mask_values",
                       json_string("pixel = class index (0 background, 1 table, 2 mug, 3 bowl, "
-                                  "4 box, 5 ball) of the ray through the pixel's centre; object "
-                                  "k of \"objects\" has value k + 2"));
+                                  "4 box, 5 ball) of the ray through the pixel's centre; an "
+                                  "object's value is its \"class\""));
   if (cfg->depth == SG_DEPTH_PNG) {
     json_object_set_new(root, "depth_maps", json_string("depth/NNNN.png"));
     json_object_set_new(root, "depth_values",
