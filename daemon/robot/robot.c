@@ -206,22 +206,34 @@ int fg_robot_svc_has_gripper(const fg_robot_svc *svc) { return svc->gripper != N
 
 /* ---------------------------------------------------------------- execution */
 
-/* Ends r with an outcome (under no lock); wakes the waiters. */
+/* Ends r with an outcome (under no lock); wakes the waiters. The end goes to on_finish (the
+ * audit log, and the answer a retry of the command's Idempotency-Key gets) before anyone can
+ * see it: a client that saw the command end and then retried its key got the answer of its
+ * acknowledgement once (a stressed CI run caught it in robot_faults). */
 static void finish(rec *r, fg_cmd_state state, const char *code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 static void finish(rec *r, fg_cmd_state state, const char *code, const char *fmt, ...) {
   fg_robot_svc *svc = r->svc;
   pthread_mutex_lock(&svc->lock);
-  r->v.state = state;
-  snprintf(r->v.code, sizeof r->v.code, "%s", code ? code : "");
+  fg_robot_cmd_view end = r->v;
+  pthread_mutex_unlock(&svc->lock);
+  end.state = state;
+  snprintf(end.code, sizeof end.code, "%s", code ? code : "");
   if (fmt) {
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(r->v.message, sizeof r->v.message, fmt, ap);
+    vsnprintf(end.message, sizeof end.message, fmt, ap);
     va_end(ap);
   }
-  r->v.finished_s = fg_real_s();
-  r->v.stage = "finished";
+  end.finished_s = fg_real_s();
+  end.stage = "finished";
+  if (svc->on_finish) svc->on_finish(svc->on_finish_ctx, &end);
+  pthread_mutex_lock(&svc->lock);
+  r->v.state = end.state;
+  memcpy(r->v.code, end.code, sizeof r->v.code);
+  memcpy(r->v.message, end.message, sizeof r->v.message);
+  r->v.finished_s = end.finished_s;
+  r->v.stage = end.stage;
   svc->by_state[state]++;
   const int latch = state == FG_CMD_UNKNOWN;
   if (latch) {
@@ -235,10 +247,9 @@ static void finish(rec *r, fg_cmd_state state, const char *code, const char *fmt
   pthread_cond_broadcast(&svc->cond);
   pthread_mutex_unlock(&svc->lock);
   if (state != FG_CMD_DONE)
-    fg_warn("robot: command %llu (%s, seq %u) ended %s: %s", (unsigned long long)r->v.id,
-            command_names[r->v.command], r->v.seq, state_names[state], r->v.message);
-  if (svc->on_finish) svc->on_finish(svc->on_finish_ctx, &r->v);
-  if (latch) robot_latch_persist(svc); /* held in memory already: the answer goes first */
+    fg_warn("robot: command %llu (%s, seq %u) ended %s: %s", (unsigned long long)end.id,
+            command_names[end.command], end.seq, state_names[state], end.message);
+  if (latch) robot_latch_persist(svc); /* held in memory already: the answer went first */
 }
 
 static void set_stage(rec *r, const char *stage) {
