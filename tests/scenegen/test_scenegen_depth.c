@@ -170,6 +170,7 @@ static void scene_from_gt(const sg_gt *gt, sg_scene *sc) {
   for (int k = 0; k < SG_N_OBJECTS; k++) {
     sc->objects[k].shape = gt->objects[k].shape;
     sc->objects[k].class_id = gt->objects[k].class_id;
+    sc->objects[k].present = 1;
   }
 }
 
