@@ -4,9 +4,10 @@
 # Usage: tests/bench/run.sh BUILD_DIR [import] [health] [memory] [train] [throughput]
 #                           [busy] [clip] [heatmap] [robot] [grasp] [grasp_physics]
 #                           [geometry] [depth_throughput] [fox] [http_idle] [load] [soak]
-#                           [viewer] [calibration] [scan]
-#   (no names: all of them but fox and grasp_physics; train takes about 6 minutes, throughput
-#   about 3; grasp several, most of them in the PyTorch peer; grasp_physics about 30)
+#                           [viewer] [calibration] [scan] [update] [first_grasp]
+#   (no names: all of them but fox, grasp_physics and update; train takes about 6 minutes,
+#   throughput about 3; grasp several, most of them in the PyTorch peer; grasp_physics about
+#   30)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
 #           RGBA PNG, downscaled to 400 px) through HTTP, fresh daemon and state dir
 #           (target <= 3 s)
@@ -125,6 +126,16 @@
 #           request to the job's end:
 #           seconds, per viewpoint, frames stored and skipped, and the worst frame pose error
 #           against the simulator's truth (targets: per view <= 1 s, <= 2 mm, <= 0.3 deg)
+#   update  a changed scene (bench_update): the same scenegen layout with the mug taken away
+#           and the box moved 10 cm, its field updated from the old one against trained from
+#           scratch, looked at every 50 steps, with and without depth: steps and seconds to
+#           the update test's quality (the mug's voxels >= 95 % free, the box's heatmap IoU
+#           within 0.05 of the scratch field's at 1500 steps) and their ratios (target: the
+#           update meets it in fewer steps). About 25 minutes
+#   first_grasp  time to first grasp after a 30-view RGB-D scan in the simulator
+#           (bench_first_grasp, BENCH_FIRST_GRASP_STEPS steps, default 500): scan, load,
+#           training, save, the first grasp (voxel cache, grasp field, search) and a second
+#           search, seconds each (target: from the last frame to the first grasp <= 60 s)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
 #           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
@@ -145,7 +156,7 @@ fi
 build=$(realpath "$1")
 shift
 benches=("$@")
-[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer calibration scan)
+[ ${#benches[@]} -gt 0 ] || benches=(import health memory train throughput busy clip heatmap robot grasp geometry depth_throughput http_idle load soak viewer calibration scan first_grasp)
 
 src=$(cd "$(dirname "$0")/../.." && pwd)
 daemon=$build/daemon/fieldgripd
@@ -682,6 +693,30 @@ bench_scan() {
     "${BENCH_SCAN_VIEWPOINTS:-30}"
 }
 
+bench_update() {
+  local bin=$build/tests/bench/bench_update out rc=0 line
+  if [ ! -x "$bin" ]; then
+    echo "bench=update error=not_built hint=meson_compile_bench_update pass=no"
+    failed=1; return
+  fi
+  out=$("$bin" --scenegen "$build/tests/scenegen/fieldgrip-scenegen") || rc=$?
+  printf '%s\n' "$out" | grep -E '^bench=update_look ' || true
+  if ! printf '%s\n' "$out" | grep -q '^bench=update '; then
+    echo "bench=update error=bench_update_exit_$rc pass=no"
+    failed=1; return
+  fi
+  while read -r line; do  # one line with depth maps, one without
+    echo "$line"
+    [ "$(field pass "$line")" = yes ] || failed=1
+  done < <(printf '%s\n' "$out" | grep '^bench=update ')
+}
+
+bench_first_grasp() {
+  FG_SOURCE_DIR=$src FG_BUILD_DIR=$build run_self_checked first_grasp none first_grasp \
+    "$daemon" "$build/tests/scenegen/fieldgrip-scenegen" "$build/sim/fieldgrip-sim" \
+    "${BENCH_FIRST_GRASP_STEPS:-500}"
+}
+
 bench_fox() {
   local fox=${FG_FOX_DIR:-} v out line psnr pass
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
@@ -723,7 +758,9 @@ for b in "${benches[@]}"; do
     viewer) bench_viewer ;;
     calibration) bench_calibration ;;
     scan) bench_scan ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration, scan)" >&2; exit 2 ;;
+    update) bench_update ;;
+    first_grasp) bench_first_grasp ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration, scan, update, first_grasp)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"

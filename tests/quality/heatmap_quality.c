@@ -253,3 +253,33 @@ void heatmap_quality_check(const sg_layout *L) {
   free(owner);
   free(cavity);
 }
+
+double heatmap_iou(const sg_layout *L, int k) {
+  const sg_gt *gt = &L->gt;
+  const int D = gt->feature_dim, cls = gt->objects[k].class_id;
+  const fg_voxel_grid g = *fg_voxel_features_grid(L->vf);
+  const size_t N = fg_voxel_grid_count(&g);
+  signed char *owner = malloc(N), *cavity = malloc(N);
+  float *neg = malloc((size_t)gt->n_classes * D * sizeof *neg);
+  ASSERT(owner && cavity && neg);
+  sg_gt_voxelise(gt, &g, owner, cavity);
+  int nn = 0;
+  for (int c = 0; c < gt->n_classes; c++)
+    if (c != cls) memcpy(neg + (size_t)nn++ * D, gt->embeddings + (size_t)c * D, D * 4);
+  fg_query q;
+  ASSERT_OK(fg_query_init(&q, D, gt->embeddings + (size_t)cls * D, 1, neg, nn, 0.1f));
+  fg_heatmap h;
+  ASSERT_OK(fg_heatmap_compute(L->vf, &q, NULL, &h));
+  size_t inter = 0, uni = 0;
+  for (size_t i = 0; i < N; i++) {
+    const int a = !isnan(h.dense[i]) && h.dense[i] >= 0.5f, b = owner[i] == k;
+    inter += a && b;
+    uni += a || b;
+  }
+  fg_heatmap_release(&h);
+  fg_query_release(&q);
+  free(neg);
+  free(owner);
+  free(cavity);
+  return uni ? (double)inter / (double)uni : 0.0;
+}

@@ -31,6 +31,10 @@ typedef struct sg_layout_spec {
   int holdout_every;          /* the trainer's: 10 holds views 0, 10 and 20 out; 0 none */
   int steps;                  /* training steps; 0: SG_LAYOUT_STEPS (a benchmark's budget) */
   int threads;                /* training and voxel threads; 0: SG_LAYOUT_THREADS */
+  const char *const *edit;    /* scenegen's --remove and --move (NULL-terminated; NULL for
+                                 none): the layout after the scene changed */
+  const fg_field *init;       /* NULL: a new field; else go on from it (an update:
+                                 fg_field_copy_for_update) */
 } sg_layout_spec;
 
 typedef struct sg_layout {
@@ -42,13 +46,23 @@ typedef struct sg_layout {
   fg_field *field;
   float background[3];      /* the trainer's background colour */
   fg_voxel_features *vf;    /* 1 cm voxels over the workspace */
-  double train_s;           /* the training's wall time, seconds */
+  double train_s;           /* the training's wall time so far, seconds */
+  fg_trainer *trainer;      /* between sg_layout_prepare and the end of sg_layout_train */
+  int steps_done;
+  float loss;               /* the last step's */
 } sg_layout;
 
 /* Generates the layout of spec with fieldgrip-scenegen (the program's path), trains it and
  * builds its voxel features; prints the training's time and loss. The data set's folder
  * (L->dir) holds scenegen's cell.xml too. */
 void sg_layout_train(const char *scenegen, const sg_layout_spec *spec, sg_layout *L);
+
+/* sg_layout_train in parts, for a benchmark that looks at the field as it trains: the data
+ * set, its frames and the field with its trainer; n more steps (timed into train_s); the
+ * voxel features of the field as it is now (built again at each call). */
+void sg_layout_prepare(const char *scenegen, const sg_layout_spec *spec, sg_layout *L);
+void sg_layout_steps(sg_layout *L, int n);
+void sg_layout_voxels(sg_layout *L);
 
 /* Releases everything and removes the data set's folder. */
 void sg_layout_free(sg_layout *L);
