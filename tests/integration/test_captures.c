@@ -189,7 +189,7 @@ static void test_training_captures(void) {
   expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "no_frames");
   for (int i = 0; i < 3; i++) upload("plain", NULL, 0);
   expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "not_trained");
-  train_done("plain", "{\"steps\": 3}");
+  json_decref(train_done("plain", "{\"steps\": 3}"));
   json_decref(train_done("plain", "{\"steps\": 3, \"init\": \"current\"}"));
   ASSERT_EQ(upload("plain", "\"new\"", 8), 2); /* features of D = 8; the field has none */
   expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409,
