@@ -228,15 +228,23 @@ int fg_api_frames_list(fg_req *req, fg_resp *resp) {
 
 /* ---------------------------------------------------------------- image */
 
+/* A number in a path: decimal digits only, from lo to hi. 0 with *out, or -1. */
+static int path_number(const char *s, long long lo, long long hi, long long *out) {
+  char *end;
+  errno = 0;
+  const long long v = strtoll(s, &end, 10);
+  if (s[0] < '0' || s[0] > '9' || *end || errno == ERANGE || v < lo || v > hi) return -1;
+  *out = v;
+  return 0;
+}
+
 /* GET /v1/scenes/{s}/frames/{i}/image: the frame's stored image (undistorted and downscaled
  * as training sees it, sRGB) as an 8-bit RGB PNG, encoded in a decoder child like renders,
  * so that a viewer can show a photo beside the field's render from the same camera. */
 int fg_api_frame_image(fg_req *req, fg_resp *resp) {
   const char *num = req->params[1];
-  char *end;
-  errno = 0;
-  const long number = strtol(num, &end, 10);
-  if (num[0] < '0' || num[0] > '9' || *end || errno == ERANGE || number > INT_MAX)
+  long long number;
+  if (path_number(num, 0, INT_MAX, &number) != 0)
     return fg_resp_error(resp, 400, "invalid_request", "the frame number must be a "
                          "non-negative integer as GET /v1/scenes/%s/frames lists them, got "
                          "\"%.40s\"", req->params[0], num);
@@ -245,7 +253,7 @@ int fg_api_frame_image(fg_req *req, fg_resp *resp) {
   fg_frame f;
   int rc = fg_scene_load_frame(s, (int)number, &f);
   if (rc == FG_ENOENT) {
-    fg_resp_error(resp, 404, "frame_not_found", "scene '%s' has no frame %ld; GET "
+    fg_resp_error(resp, 404, "frame_not_found", "scene '%s' has no frame %lld; GET "
                   "/v1/scenes/%s/frames lists them", fg_scene_name(s), number, fg_scene_name(s));
     fg_scene_unref(s);
     return 0;
@@ -349,10 +357,8 @@ int fg_api_captures_list(fg_req *req, fg_resp *resp) {
 
 int fg_api_capture_delete(fg_req *req, fg_resp *resp) {
   const char *num = req->params[1];
-  char *end;
-  errno = 0;
-  const long long capture = strtoll(num, &end, 10);
-  if (num[0] < '1' || num[0] > '9' || *end || errno == ERANGE || capture > FG_CAPTURE_MAX)
+  long long capture;
+  if (path_number(num, 1, FG_CAPTURE_MAX, &capture) != 0)
     return fg_resp_error(resp, 400, "invalid_request", "the capture must be a number from 1 as "
                          "GET /v1/scenes/%s/captures lists them, got \"%.40s\"", req->params[0],
                          num);
