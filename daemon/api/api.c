@@ -29,6 +29,7 @@ const fg_route fg_api_routes[] = {
   {"GET", "/v1/scenes", "/v1/scenes", fg_api_scenes_list, 0},
   {"POST", "/v1/scenes", "/v1/scenes", fg_api_scenes_create, 0},
   {"GET", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_get, 0},
+  {"PATCH", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_patch, 0},
   {"DELETE", "/v1/scenes/{}", "/v1/scenes/{s}", fg_api_scene_delete, 0},
   {"GET", "/v1/scenes/{}/frames", "/v1/scenes/{s}/frames", fg_api_frames_list, 0},
   {"GET", "/v1/scenes/{}/frames/{}/image", "/v1/scenes/{s}/frames/{i}/image",

@@ -21,6 +21,7 @@ int fg_api_metrics(fg_req *req, fg_resp *resp);
 int fg_api_scenes_list(fg_req *req, fg_resp *resp);
 int fg_api_scenes_create(fg_req *req, fg_resp *resp);
 int fg_api_scene_get(fg_req *req, fg_resp *resp);
+int fg_api_scene_patch(fg_req *req, fg_resp *resp);
 int fg_api_scene_delete(fg_req *req, fg_resp *resp);
 int fg_api_frames_upload(fg_req *req, fg_resp *resp);
 int fg_api_frames_list(fg_req *req, fg_resp *resp);

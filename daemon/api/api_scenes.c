@@ -7,6 +7,8 @@
 
 #include "core/error.h"
 
+#include <limits.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -30,7 +32,8 @@ int fg_api_scenes_list(fg_req *req, fg_resp *resp) {
 static int scene_params(json_t *body, fg_scene_params *p) {
   static const fg_scene_params defaults = {
     .workspace_min = {0.10, -0.45, 0.005}, .workspace_max = {0.80, 0.45, 0.35},
-    .voxel_size = 0.01, .background = {1, 1, 1}};
+    .voxel_size = 0.01, .background = {1, 1, 1}, .field_scale = FG_FIELD_SCALE_AUTO,
+    .learn_background = FG_LEARN_BACKGROUND_AUTO};
   *p = defaults;
   json_t *ws = json_object_get(body, "workspace");
   if (ws && !json_is_null(ws)) {
@@ -43,6 +46,7 @@ static int scene_params(json_t *body, fg_scene_params *p) {
   FG_TRY(fg_json_number(body, "voxel_size", &p->voxel_size));
   json_t *bg = json_object_get(body, "background");
   if (bg && !json_is_null(bg)) FG_TRY(fg_json_vec(bg, p->background, 3, "background"));
+  FG_TRY(fg_json_read_field_settings(body, &p->field_scale, &p->learn_background));
   return fg_scene_params_validate(p);
 }
 
@@ -85,6 +89,43 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
 int fg_api_scene_get(fg_req *req, fg_resp *resp) {
   fg_scene *s = fg_api_scene_param(req, resp);
   if (!s) return 0;
+  fg_scene_info info;
+  fg_scene_get_info(s, &info);
+  fg_scene_unref(s);
+  fg_api_scene_info_refresh(req->app, &info);
+  fg_resp_json(resp, 200, fg_json_scene(&info));
+  return 0;
+}
+
+/* PATCH /v1/scenes/{s}: the field settings, the only ones a scene's data does not depend on
+ * (its frames were composited on the background and its voxels are the workspace's). */
+int fg_api_scene_patch(fg_req *req, fg_resp *resp) {
+  json_t *body = fg_api_body_object(req, resp);
+  if (!body) return 0;
+  const char *key;
+  json_t *v;
+  json_object_foreach(body, key, v) {
+    if (strcmp(key, "field_scale") != 0 && strcmp(key, "learn_background") != 0) {
+      fg_resp_error(resp, 400, "invalid_request", "\"%.40s\" cannot change: a scene's "
+                    "field_scale and learn_background can; the workspace, voxel_size and "
+                    "background are fixed when it is created", key);
+      json_decref(body);
+      return 0;
+    }
+  }
+  double scale = NAN;
+  int learn_bg = INT_MIN;
+  int rc = fg_json_read_field_settings(body, &scale, &learn_bg);
+  json_decref(body);
+  fg_scene *s = rc == 0 ? fg_api_scene_param(req, resp) : NULL;
+  if (rc != 0) return fg_api_fail(resp, rc);
+  if (!s) return 0;
+  rc = fg_scene_set_field_settings(s, isnan(scale) ? NULL : &scale,
+                                   learn_bg == INT_MIN ? NULL : &learn_bg);
+  if (rc != 0) {
+    fg_scene_unref(s);
+    return fg_api_fail(resp, rc);
+  }
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   fg_scene_unref(s);

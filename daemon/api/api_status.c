@@ -27,6 +27,7 @@ static const code_status table[] = {
   {"task_unreadable", 409},
   {"no_matching_task", 409},     {"query_points_mismatch", 409}, {"kind_mismatch", 409},
   {"too_many_demos", 409},     {"grasp_stale", 409},         {"scene_exists", 409},
+  {"declared_in_config", 409},
   {"training_in_progress", 409}, {"job_in_progress", 409},     {"no_frames", 409},           {"job_finished", 409},           {"robot_busy", 409},
   {"robot_stopped", 409},        {"robot_moved", 409},         {"not_calibrated", 409},
   {"too_many_views", 409},       {"calibration_rejected", 422},  {"board_not_found", 422},        {"gripper_holding", 409},     {"gripper_not_activated", 409},

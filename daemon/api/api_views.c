@@ -3,6 +3,17 @@
 
 #include "state/json.h"
 
+/* The trained field's cube and background: what the settings gave it. */
+static json_t *json_field(const fg_scene_info *info) {
+  double extent = 0;
+  for (int i = 0; i < 3; i++)
+    if (info->params.workspace_max[i] - info->params.workspace_min[i] > extent)
+      extent = info->params.workspace_max[i] - info->params.workspace_min[i];
+  return json_pack("{s:o,s:f,s:f,s:b}", "box_min", fg_json_from_vec(info->field_box_min, 3),
+                   "box_size", info->field_box_size, "scale", info->field_box_size / extent,
+                   "learn_background", info->field_learn_background);
+}
+
 json_t *fg_json_scene(const fg_scene_info *info) {
   char created[32];
   fg_iso8601(info->created_ms, created);
@@ -25,6 +36,10 @@ json_t *fg_json_scene(const fg_scene_info *info) {
   json_object_set_new(o, "latest_capture", info->latest_capture
                                              ? json_integer((json_int_t)info->latest_capture)
                                              : json_null());
+  json_object_set_new(o, "field_scale", fg_json_field_scale(info->params.field_scale));
+  json_object_set_new(o, "learn_background",
+                      fg_json_learn_background(info->params.learn_background));
+  json_object_set_new(o, "field", info->trained ? json_field(info) : json_null());
   json_object_set_new(o, "trained_steps", json_integer(info->trained_steps));
   json_object_set_new(o, "checkpoint_bytes", json_integer(info->checkpoint_bytes));
   json_object_set_new(o, "partial", json_boolean(info->partial));

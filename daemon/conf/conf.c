@@ -64,7 +64,8 @@ enum {
   K_MAX_FORCE_N, K_MAX_SPEED_MPS, K_SPEED_MPS, K_APPROACH_M, K_RETREAT_M,
   K_AUDIT_MAX_MB, K_AUDIT_KEEP, K_LOCK_DIR, K_TCP_POSE_BASE
 };
-enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND };
+enum { K_WORKSPACE_MIN, K_WORKSPACE_MAX, K_VOXEL_SIZE, K_BACKGROUND, K_FIELD_SCALE,
+       K_LEARN_BACKGROUND };
 
 
 static const char *const http_keys[] = {"listen",           "token",
@@ -95,7 +96,8 @@ static const char *const gripper_modbus_keys[] = {"transport", "host",   "port",
                                                   "baud",      "parity", "unit_id", "timeout_ms",
                                                   "motion_timeout_ms", NULL};
 static const char *const scene_keys[] = {"workspace_min", "workspace_max", "voxel_size",
-                                         "background", NULL};
+                                         "background",    "field_scale",   "learn_background",
+                                         NULL};
 
 static const char *const *const section_keys[SEC_COUNT] = {
     [SEC_HTTP] = http_keys,       [SEC_STATE] = state_keys,   [SEC_CLIP] = clip_keys,
@@ -372,6 +374,24 @@ static int set_scene(conf_parse *st, fg_conf_scene *s, int k, const char *name, 
                             "expected 3 numbers from 0 to 1 (R G B), got '%s'", v);
     }
     return 1;
+  case K_FIELD_SCALE:
+    if (strcmp(v, "auto") == 0) {
+      s->field_scale = 0;
+      return 1;
+    }
+    if (!conf_parse_double(st, name, v, &s->field_scale)) return 0;
+    if (!(s->field_scale >= 1 && s->field_scale <= 64))
+      return conf_fail_at(st, st->line, st->sec_text, name,
+                          "expected auto or a number from 1 to 64 (the field's cube over the "
+                          "workspace's largest extent), got '%s'", v);
+    return 1;
+  case K_LEARN_BACKGROUND: {
+    static const char *const names[] = {"false", "true", "auto", NULL};
+    int i;
+    if (!conf_parse_enum(st, name, v, names, &i)) return 0;
+    s->learn_background = i == 2 ? -1 : i;
+    return 1;
+  }
   }
   return 1;
 }

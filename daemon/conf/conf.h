@@ -70,6 +70,8 @@ typedef struct fg_conf_scene {
   double workspace_min[3], workspace_max[3]; /* metres, world frame; min < max per axis */
   double voxel_size;                         /* metres, > 0 */
   double background[3];                      /* key "background", RGB in [0,1], default 1 1 1 */
+  double field_scale;   /* 1..64; 0 for "auto", the default (as fg_scene_params) */
+  int learn_background; /* "yes" 1, "no" 0, "auto" -1, the default (as fg_scene_params) */
 } fg_conf_scene;
 
 /* [camera NAME] (SPEC.md "The cell around the field"): a source fieldgripd captures from. */

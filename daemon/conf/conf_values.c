@@ -208,6 +208,7 @@ void fg_conf_scene_defaults(fg_conf_scene *s) {
   s->workspace_max[2] = 0.35;
   s->voxel_size = 0.01;
   s->background[0] = s->background[1] = s->background[2] = 1.0;
+  s->learn_background = -1;
 }
 
 /* Fills a Modbus peer's defaults; 0 on allocation failure. */

@@ -16,6 +16,7 @@
 #include "core/fsutil.h"
 #include "core/log.h"
 #include "field/checkpoint.h"
+#include "field/extent.h"
 #include "field/model.h"
 #include "field/train.h"
 
@@ -23,9 +24,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
-
-/* The field's cube: twice the workspace's largest extent (model.h). */
-#define FIELD_SCALE 2.0
 
 /* One training, from its start to its end. Owns everything it points to but job and app. */
 typedef struct train_run {
@@ -145,11 +143,41 @@ static int same_config(fg_scene *s, const fg_field_config *have, const fg_field_
                     fg_scene_name(s), why);
 }
 
-static int field_config(const fg_scene_info *info, int feature_dim, fg_field_config *cfg) {
-  if (fg_field_config_for_workspace(cfg, info->params.workspace_min,
-                                    info->params.workspace_max, FIELD_SCALE, feature_dim) != 0)
+static double largest_extent(const fg_scene_params *p) {
+  double extent = 0;
+  for (int k = 0; k < 3; k++) extent = fmax(extent, p->workspace_max[k] - p->workspace_min[k]);
+  return extent;
+}
+
+/* The configuration of the field a training makes over the scene's workspace, and what chose
+ * its cube and background: the scene's settings where they are not "auto"; where they are,
+ * the field an update goes on from (current, NULL for a new field) keeps its own, and a new
+ * field takes what the frames call for (field/extent.h). */
+static int field_config(const fg_scene_info *info, const fg_field *current,
+                        const fg_frame *frames, size_t n_frames, int feature_dim,
+                        fg_field_config *cfg, const char **chosen_by) {
+  const fg_scene_params *p = &info->params;
+  double scale = p->field_scale;
+  int learn_bg = p->learn_background;
+  *chosen_by = "settings";
+  if (scale == FG_FIELD_SCALE_AUTO || learn_bg == FG_LEARN_BACKGROUND_AUTO) {
+    fg_field_extent e;
+    if (current) {
+      e.field_scale = current->cfg.box_size / largest_extent(p);
+      e.learn_background = current->cfg.learn_background;
+      *chosen_by = "current field";
+    } else {
+      fg_field_extent_choose(p->workspace_min, p->workspace_max, frames, n_frames, &e);
+      *chosen_by = e.from_depth ? "depth" : "cameras";
+    }
+    if (scale == FG_FIELD_SCALE_AUTO) scale = e.field_scale;
+    if (learn_bg == FG_LEARN_BACKGROUND_AUTO) learn_bg = e.learn_background;
+  }
+  if (fg_field_config_for_workspace(cfg, p->workspace_min, p->workspace_max,
+                                    fmin(fmax(scale, 1.0), 64.0), feature_dim) != 0)
     return fg_fail_as(FG_EINVAL, "invalid_request", "cannot set up the field: %s",
                       fg_error_detail());
+  cfg->learn_background = learn_bg;
   return 0;
 }
 
@@ -157,15 +185,18 @@ int fg_train_check_init(fg_app *app, fg_scene *s, const fg_job_params *p) {
   if (!p->init_current) return 0;
   fg_scene_info info;
   fg_scene_get_info(s, &info);
-  fg_field_config want;
-  FG_TRY(field_config(&info, expected_feature_dim(app, &info), &want));
   fg_field_ref *ref = NULL;
   FG_TRY(fg_scene_field_acquire(s, &ref));
   if (!ref)
     return fg_fail_as(FG_EINVAL, "not_trained", "scene '%s' has no field to go on from "
                       "(\"init\": \"current\"); train it with \"init\": \"random\" first",
                       info.name);
-  const int rc = same_config(s, &fg_field_ref_field(ref)->cfg, &want);
+  const fg_field *have = fg_field_ref_field(ref);
+  fg_field_config want;
+  const char *chosen_by;
+  int rc = field_config(&info, have, NULL, 0, expected_feature_dim(app, &info), &want,
+                        &chosen_by);
+  if (rc == 0) rc = same_config(s, &have->cfg, &want);
   fg_field_ref_release(ref);
   return rc;
 }
@@ -235,31 +266,43 @@ static int attach_clip_features(train_run *run) {
   return 0;
 }
 
-/* The scene's field, copied into run->field to go on training (fg_field_copy_for_update). */
-static int copy_current_field(train_run *run, const fg_field_config *cfg) {
+/* The field over the scene's workspace in run->field: the scene's, copied to go on training
+ * (init "current": fg_field_copy_for_update), or a new one. */
+static int make_field(train_run *run, const fg_scene_info *info, int feature_dim) {
   fg_field_ref *ref = NULL;
-  int rc = fg_scene_field_acquire(run->scene, &ref);
-  if (rc == 0 && !ref)
+  int rc = run->params.init_current ? fg_scene_field_acquire(run->scene, &ref) : 0;
+  if (rc == 0 && run->params.init_current && !ref)
     rc = fg_fail(FG_EINVAL, "the scene has no field to go on from (\"init\": \"current\")");
-  if (rc == 0) rc = same_config(run->scene, &fg_field_ref_field(ref)->cfg, cfg);
-  if (rc == 0) rc = fg_field_copy_for_update(fg_field_ref_field(ref), &run->field);
+  const fg_field *current = ref ? fg_field_ref_field(ref) : NULL;
+  fg_field_config cfg;
+  const char *chosen_by = "";
+  if (rc == 0)
+    rc = field_config(info, current, run->frames, run->n_frames, feature_dim, &cfg, &chosen_by);
+  if (rc == 0 && current) rc = same_config(run->scene, &current->cfg, &cfg);
+  if (rc == 0)
+    rc = current ? fg_field_copy_for_update(current, &run->field)
+                 : fg_field_new(&run->field, &cfg, run->params.seed);
   fg_field_ref_release(ref);
-  return rc;
+  if (rc != 0) return rc;
+  fg_job_info *ji = fg_job_update_begin(run->job);
+  ji->field_scale = cfg.box_size / largest_extent(&info->params);
+  ji->field_learn_background = cfg.learn_background;
+  snprintf(ji->field_chosen_by, sizeof ji->field_chosen_by, "%s", chosen_by);
+  fg_job_update_end(run->job);
+  fg_info("job %s: the field's cube is %g m (%g times the workspace), %s background, chosen "
+          "by the %s", run->id, cfg.box_size, cfg.box_size / largest_extent(&info->params),
+          cfg.learn_background ? "a learned" : "the scene's", chosen_by);
+  return 0;
 }
 
-/* The field over the scene's workspace, new or the scene's (init), and its trainer over the
- * frames. */
+/* The field, new or the scene's (init), and its trainer over the frames. */
 static int setup_trainer(train_run *run) {
   fg_job_set_phase(run->job, "training");
   int feature_dim = 0; /* the store keeps one D per scene; CLIP's E equals it (checked) */
   for (size_t i = 0; i < run->n_frames && !feature_dim; i++) feature_dim = run->frames[i].feat_d;
   fg_scene_info scene_info;
   fg_scene_get_info(run->scene, &scene_info);
-  fg_field_config cfg;
-  int rc = field_config(&scene_info, feature_dim, &cfg);
-  if (rc == 0)
-    rc = run->params.init_current ? copy_current_field(run, &cfg)
-                                  : fg_field_new(&run->field, &cfg, run->params.seed);
+  int rc = make_field(run, &scene_info, feature_dim);
   if (rc != 0) {
     fg_job_fail(run->job, "cannot set up the field: %s", fg_error_detail());
     return rc;

@@ -182,6 +182,11 @@ json_t *fg_job_info_json(const fg_job_info *j) {
                         ? json_pack("{s:i,s:i,s:i}", "total", j->features_total, "done",
                                     j->features_done, "cached", j->features_cached)
                         : json_null());
+  json_object_set_new(o, "field", j->field_chosen_by[0]
+                                    ? json_pack("{s:f,s:b,s:s}", "scale", j->field_scale,
+                                                "learn_background", j->field_learn_background,
+                                                "chosen_by", j->field_chosen_by)
+                                    : json_null());
   json_object_set_new(o, "created", fg_json_time_ms(j->created_ms));
   json_object_set_new(o, "started", fg_json_time_ms(j->started_ms));
   json_object_set_new(o, "finished", fg_json_time_ms(j->finished_ms));
@@ -259,6 +264,13 @@ static int info_from_json(json_t *o, fg_job_info *j) {
   j->features_total = (int)jint(feats, "total");
   j->features_done = (int)jint(feats, "done");
   j->features_cached = (int)jint(feats, "cached");
+  json_t *field = json_object_get(o, "field");
+  const char *by = json_string_value(json_object_get(field, "chosen_by"));
+  if (by && isfinite(jnum(field, "scale"))) {
+    j->field_scale = jnum(field, "scale");
+    j->field_learn_background = json_is_true(json_object_get(field, "learn_background"));
+    snprintf(j->field_chosen_by, sizeof j->field_chosen_by, "%s", by);
+  }
   j->created_ms = jint(o, "created_ms");
   j->started_ms = jint(o, "started_ms");
   j->finished_ms = jint(o, "finished_ms");

@@ -100,6 +100,10 @@ typedef struct fg_job_info {
   int features_total;    /* frames that need CLIP features; 0 when there was no such phase */
   int features_done;     /* of those, the ones that have them */
   int features_cached;   /* of done, the ones read from the scene's cache */
+  double field_scale;    /* a training's field: its cube over the workspace's extent ... */
+  int field_learn_background; /* ... its background ... */
+  char field_chosen_by[16]; /* ... and what chose them: "settings", "depth", "cameras",
+                               "current field"; "" until the field is set up */
   char error[512];       /* "" unless failed */
   uint64_t version;      /* +1 for every change */
 } fg_job_info;

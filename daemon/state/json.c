@@ -1,4 +1,5 @@
 #include "json.h"
+#include "store.h"
 
 #include "core/error.h"
 #include "core/pose.h"
@@ -28,6 +29,35 @@ int fg_json_number(json_t *obj, const char *key, double *out) {
   if (!isfinite(d)) return fg_fail(FG_EINVAL, "\"%s\" must be a finite number", key);
   *out = d;
   return 1;
+}
+
+static int is_auto(json_t *v) {
+  return json_is_string(v) && strcmp(json_string_value(v), "auto") == 0;
+}
+
+int fg_json_read_field_settings(json_t *obj, double *field_scale, int *learn_background) {
+  json_t *v = json_object_get(obj, "field_scale");
+  if (is_auto(v)) *field_scale = FG_FIELD_SCALE_AUTO;
+  else if (v && !json_is_null(v) &&
+           (!json_is_number(v) || !(json_number_value(v) >= 1 && json_number_value(v) <= 64)))
+    return fg_fail(FG_EINVAL, "\"field_scale\" must be \"auto\" or a number from 1 to 64 "
+                   "(the field's cube over the workspace's largest extent)");
+  else if (v && !json_is_null(v)) *field_scale = json_number_value(v);
+  v = json_object_get(obj, "learn_background");
+  if (is_auto(v)) *learn_background = FG_LEARN_BACKGROUND_AUTO;
+  else if (v && !json_is_null(v) && !json_is_boolean(v))
+    return fg_fail(FG_EINVAL, "\"learn_background\" must be \"auto\", true or false");
+  else if (v && !json_is_null(v)) *learn_background = json_is_true(v);
+  return 0;
+}
+
+json_t *fg_json_field_scale(double field_scale) {
+  return field_scale == FG_FIELD_SCALE_AUTO ? json_string("auto") : json_real(field_scale);
+}
+
+json_t *fg_json_learn_background(int learn_background) {
+  return learn_background == FG_LEARN_BACKGROUND_AUTO ? json_string("auto")
+                                                      : json_boolean(learn_background);
 }
 
 int fg_json_string(json_t *obj, const char *key, const char **out) {

@@ -32,6 +32,14 @@ int fg_json_vec(json_t *v, double *out, size_t n, const char *what);
  * not an integer in range. No error detail: the caller says what the number means. */
 int fg_json_int_range(json_t *obj, const char *key, long long lo, long long hi, long long *out);
 
+/* A scene's field settings (fg_scene_params): "field_scale" ("auto" or a number) and
+ * "learn_background" ("auto" or a boolean) of obj, each left as it is when absent or null.
+ * 0, or FG_EINVAL naming the key. Their views:
+ * new references, NULL on allocation failure. */
+int fg_json_read_field_settings(json_t *obj, double *field_scale, int *learn_background);
+json_t *fg_json_field_scale(double field_scale);
+json_t *fg_json_learn_background(int learn_background);
+
 /* A 4x4 row-major nested array of numbers (not validated as rigid). */
 int fg_json_matrix4(json_t *v, double T[16], const char *what);
 

@@ -2,6 +2,7 @@
 #include "store_priv.h"
 
 #include "conf/conf.h"
+#include "json.h"
 #include "voxcache.h"
 
 #include "core/clock.h"
@@ -52,6 +53,12 @@ int fg_scene_params_validate(const fg_scene_params *p) {
   if (!(p->voxel_size > 0) || !isfinite(p->voxel_size) || p->voxel_size > smallest)
     return fg_fail(FG_EINVAL, "voxel_size must be a positive length in metres no larger than the "
                    "workspace's smallest side (%g), got %g", smallest, p->voxel_size);
+  if (p->field_scale != FG_FIELD_SCALE_AUTO && !(p->field_scale >= 1 && p->field_scale <= 64))
+    return fg_fail(FG_EINVAL, "field_scale must be \"auto\" or a number from 1 to 64 (the "
+                   "field's cube over the workspace's largest extent), got %g", p->field_scale);
+  if (p->learn_background != FG_LEARN_BACKGROUND_AUTO && p->learn_background != 0 &&
+      p->learn_background != 1)
+    return fg_fail(FG_EINVAL, "learn_background must be \"auto\", true or false");
   return 0;
 }
 
@@ -60,7 +67,8 @@ static int params_equal(const fg_scene_params *a, const fg_scene_params *b) {
     if (a->workspace_min[i] != b->workspace_min[i] || a->workspace_max[i] != b->workspace_max[i] ||
         a->background[i] != b->background[i])
       return 0;
-  return a->voxel_size == b->voxel_size;
+  return a->voxel_size == b->voxel_size && a->field_scale == b->field_scale &&
+         a->learn_background == b->learn_background;
 }
 
 /* ---------------------------------------------------------------- scene.json */
@@ -72,6 +80,11 @@ static int write_scene_json(const fg_scene *s) {
     s->params.workspace_max[0], s->params.workspace_max[1], s->params.workspace_max[2],
     "voxel_size", s->params.voxel_size, "background", s->params.background[0],
     s->params.background[1], s->params.background[2], "created_ms", (json_int_t)s->created_ms);
+  if (o) {
+    json_object_set_new(o, "field_scale", fg_json_field_scale(s->params.field_scale));
+    json_object_set_new(o, "learn_background",
+                        fg_json_learn_background(s->params.learn_background));
+  }
   char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) : NULL;
   json_decref(o);
   if (!text) return fg_fail(FG_ENOMEM, "out of memory");
@@ -107,13 +120,46 @@ static int read_scene_json(fg_scene *s) {
              !json_is_number(json_object_get(o, "voxel_size"))) {
     rc = fg_fail(FG_EFORMAT, "%s: missing or malformed workspace, voxel_size or background", path);
   } else {
+    s->params.field_scale = FG_FIELD_SCALE_AUTO;
+    s->params.learn_background = FG_LEARN_BACKGROUND_AUTO;
     s->params.voxel_size = json_number_value(json_object_get(o, "voxel_size"));
     s->created_ms = json_integer_value(json_object_get(o, "created_ms"));
-    if (fg_scene_params_validate(&s->params) != 0)
+    /* absent in scenes made before the settings existed: auto */
+    if (fg_json_read_field_settings(o, &s->params.field_scale, &s->params.learn_background))
+      rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
+    else if (fg_scene_params_validate(&s->params) != 0)
       rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
   }
   json_decref(o);
   free(path);
+  return rc;
+}
+
+int fg_scene_set_field_settings(fg_scene *s, const double *field_scale,
+                                const int *learn_background) {
+  pthread_mutex_lock(&s->lock);
+  fg_scene_params p = s->params;
+  if (field_scale) p.field_scale = *field_scale;
+  if (learn_background) p.learn_background = *learn_background;
+  int rc = 0;
+  if (s->deleted)
+    rc = fg_fail_as(FG_ENOENT, "scene_not_found", "scene '%s' was deleted", s->name);
+  else if (s->declared)
+    rc = fg_fail_as(FG_EPERM, "declared_in_config", "scene '%s' is declared in the "
+                    "configuration file: set field_scale and learn_background in its [scene %s] "
+                    "section and reload", s->name, s->name);
+  else if (fg_scene_params_validate(&p) != 0)
+    rc = FG_EINVAL;
+  else if (!params_equal(&p, &s->params)) {
+    const fg_scene_params old = s->params;
+    s->params = p;
+    rc = write_scene_json(s);
+    if (rc != 0) {
+      s->params = old;
+      rc = fg_state_write_failed(rc, "the scene's settings");
+    }
+  }
+  pthread_mutex_unlock(&s->lock);
   return rc;
 }
 
@@ -198,6 +244,9 @@ static void scene_note_field(fg_scene *s, const fg_field *f) {
   s->trained = 1;
   s->field_feature_dim = f->cfg.feature_dim;
   s->trained_steps = f->trained_steps;
+  memcpy(s->field_box_min, f->cfg.box_min, sizeof s->field_box_min);
+  s->field_box_size = f->cfg.box_size;
+  s->field_learn_background = f->cfg.learn_background;
 }
 
 /* Puts the scene's field last in the eviction order. Under the scene's lock. */
@@ -748,6 +797,15 @@ void fg_scene_get_info(fg_scene *s, fg_scene_info *out) {
   out->loaded = s->field != NULL;
   out->partial = s->trained && s->partial;
   out->trained_steps = s->trained ? s->trained_steps : 0;
+  if (s->trained) {
+    memcpy(out->field_box_min, s->field_box_min, sizeof out->field_box_min);
+    out->field_box_size = s->field_box_size;
+    out->field_learn_background = s->field_learn_background;
+  } else {
+    memset(out->field_box_min, 0, sizeof out->field_box_min);
+    out->field_box_size = 0;
+    out->field_learn_background = 0;
+  }
   out->checkpoint_bytes = s->trained ? s->checkpoint_bytes : 0;
   fg_voxcache_describe(s->field ? s->field->voxels : NULL, &out->voxel_cache);
   snprintf(out->checkpoint_error, sizeof out->checkpoint_error, "%s",
@@ -830,6 +888,8 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
     memcpy(p.workspace_max, cs->workspace_max, sizeof p.workspace_max);
     memcpy(p.background, cs->background, sizeof p.background);
     p.voxel_size = cs->voxel_size;
+    p.field_scale = cs->field_scale;
+    p.learn_background = cs->learn_background;
     fg_scene *s = fg_store_get(st, cs->name);
     int rc = 0;
     if (!s) {
@@ -843,8 +903,8 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
         s->params = p;
         rc = write_scene_json(s);
         if (rc != 0) s->params = old;
-        else fg_info("scene %s: workspace, voxel size and background updated from the "
-                     "configuration file", cs->name);
+        else fg_info("scene %s: workspace, voxel size, background and field settings updated "
+                     "from the configuration file", cs->name);
       }
       pthread_mutex_unlock(&s->lock);
       fg_scene_unref(s);

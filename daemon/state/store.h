@@ -49,10 +49,18 @@ typedef struct fg_store_limits {
 
 #define FG_JOB_ID_MAX 40
 
+/* The settings of the field a training makes (field/model.h): its cube is field_scale times
+ * the workspace's largest extent, and it learns a background colour or not; "auto" asks the
+ * training's frames (field/extent.h). */
+#define FG_FIELD_SCALE_AUTO 0.0
+#define FG_LEARN_BACKGROUND_AUTO (-1)
+
 typedef struct fg_scene_params {
   double workspace_min[3], workspace_max[3]; /* metres, world frame */
   double voxel_size;                         /* metres */
   double background[3];                      /* RGB in [0,1] */
+  double field_scale;   /* 1..64, or FG_FIELD_SCALE_AUTO */
+  int learn_background; /* 0, 1 or FG_LEARN_BACKGROUND_AUTO */
 } fg_scene_params;
 
 /* A consistent copy of a scene's description, taken under its lock. */
@@ -71,6 +79,8 @@ typedef struct fg_scene_info {
   int loaded;      /* that field is in memory now (else it is loaded at its next use) */
   int partial;     /* that field is the checkpoint of an interrupted training */
   int64_t trained_steps;
+  double field_box_min[3], field_box_size; /* the trained field's cube (metres) ... */
+  int field_learn_background;              /* ... and background; zero when untrained */
   int64_t checkpoint_bytes;        /* size of the field's checkpoint file; 0 when untrained */
   char checkpoint_error[512];      /* why the checkpoint did not load; "" when it did */
   fg_voxcache_info voxel_cache;    /* the field's voxel features (all zero when untrained) */
@@ -96,8 +106,8 @@ void fg_store_close(fg_store *store);
  * acquired. */
 void fg_store_set_limits(fg_store *store, const fg_store_limits *limits);
 
-/* Checks scene parameters: finite, min < max per axis, 0 < voxel_size, background in [0,1].
- * FG_EINVAL with a detail. */
+/* Checks scene parameters: finite, min < max per axis, 0 < voxel_size, background in [0,1],
+ * field_scale auto or in [1, 64], learn_background auto, 0 or 1. FG_EINVAL with a detail. */
 int fg_scene_params_validate(const fg_scene_params *p);
 
 /* Creates a scene. FG_EEXIST if the name is taken, FG_EINVAL for a bad name or parameters,
@@ -117,6 +127,15 @@ fg_scene *fg_store_get(fg_store *store, const char *name);
 /* Takes another reference to a scene the caller holds one of. */
 void fg_scene_ref(fg_scene *scene);
 void fg_scene_unref(fg_scene *scene);
+
+/* Sets the scene's field settings (fg_scene_params.field_scale and learn_background; NULL
+ * keeps one as it is) and writes scene.json; trainings that start afterwards use them.
+ * FG_ENOENT when the scene was deleted; FG_EINVAL (with a detail) for
+ * values fg_scene_params_validate refuses; FG_EPERM declared_in_config for a scene of the
+ * configuration file (its settings are the file's: a reload would undo them); the state
+ * dir's write errors (fg_state_write_failed), the settings then unchanged. */
+int fg_scene_set_field_settings(fg_scene *s, const double *field_scale,
+                                const int *learn_background);
 
 /* Removes a scene and its data. FG_ENOENT if absent. Requests still holding the scene finish
  * against a deleted scene and their writes fail with FG_ENOENT. */

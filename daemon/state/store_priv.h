@@ -35,6 +35,8 @@ struct fg_scene {
   int trained;
   int field_feature_dim;   /* the trained field's D and steps, known while it is not loaded */
   int64_t trained_steps;
+  double field_box_min[3], field_box_size; /* ... its cube and background likewise */
+  int field_learn_background;
   uint64_t field_used;     /* the store's field_clock at the field's last acquire: LRU order */
   int partial;
   int64_t checkpoint_bytes;

@@ -220,8 +220,8 @@ static void test_methods(void) {
   expect_405("DELETE", "/v1/scenes", "GET,POST");
   expect_405("POST", "/v1/health", "GET");
   expect_405("DELETE", "/v1/health", "GET");
-  expect_405("POST", "/v1/scenes/tabletop", "DELETE,GET");
-  expect_405("PATCH", "/v1/scenes/tabletop", "DELETE,GET");
+  expect_405("POST", "/v1/scenes/tabletop", "DELETE,GET,PATCH");
+  expect_405("PUT", "/v1/scenes/tabletop", "DELETE,GET,PATCH");
   expect_405("PUT", "/v1/scenes/tabletop/frames", "GET,POST");
   expect_405("GET", "/v1/scenes/tabletop/import", "POST");
   expect_405("POST", "/metrics", "GET");

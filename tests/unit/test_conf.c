@@ -144,6 +144,8 @@ static void check_scene_defaults(const fg_conf_scene *s) {
   ASSERT_NEAR(s->workspace_max[2], 0.35, 1e-12);
   ASSERT_NEAR(s->voxel_size, 0.01, 1e-12);
   for (int i = 0; i < 3; i++) ASSERT_NEAR(s->background[i], 1.0, 0);
+  ASSERT(s->field_scale == 0);       /* auto */
+  ASSERT_EQ(s->learn_background, -1); /* auto */
 }
 
 /* ---------------------------------------------------------------- the SPEC example */
@@ -290,7 +292,9 @@ static void test_values(void) {
       "workspace_min = -1 -2 -3\n"
       "workspace_max = 1e0 2.5 +3\n"
       "voxel_size = 2\n"
-      "background = 0 0.5 1\n");
+      "background = 0 0.5 1\n"
+      "field_scale = 4\n"
+      "learn_background = true\n");
   ASSERT_STREQ(c->listen, "[::1]:0");
   ASSERT_STREQ(c->token, "s3cret;not-a-comment");
   ASSERT_EQ(c->max_upload_bytes, (size_t)4096 << 20);
@@ -327,6 +331,8 @@ static void test_values(void) {
   ASSERT_NEAR(s->background[0], 0, 0);
   ASSERT_NEAR(s->background[1], 0.5, 0);
   ASSERT_NEAR(s->background[2], 1, 0);
+  ASSERT_NEAR(s->field_scale, 4, 0);
+  ASSERT_EQ(s->learn_background, 1);
   fg_conf_free(c);
 
   /* the connection and body limits of [http], each at a value other than its default */
@@ -792,6 +798,11 @@ static void test_errors(void) {
   EXPECT_ERROR("[scene t]\nvoxel_size = 0.01m\n", 2, "[scene t] voxel_size:", "got '0.01m'");
   EXPECT_ERROR("[scene t]\nvoxel_size = 0\n", 2, "[scene t] voxel_size:", "positive");
   EXPECT_ERROR("[scene t]\nvoxel_size = -0.01\n", 2, "[scene t] voxel_size:", "positive");
+  EXPECT_ERROR("[scene t]\nfield_scale = 0.5\n", 2, "[scene t] field_scale:", "auto or a number from 1 to 64");
+  EXPECT_ERROR("[scene t]\nfield_scale = 65\n", 2, "[scene t] field_scale:", "got '65'");
+  EXPECT_ERROR("[scene t]\nfield_scale = big\n", 2, "[scene t] field_scale:", "got 'big'");
+  EXPECT_ERROR("[scene t]\nlearn_background = yes\n", 2, "[scene t] learn_background:",
+               "expected false, true or auto");
   EXPECT_ERROR("[scene t]\nworkspace_min = 0 0\n", 2, "[scene t] workspace_min:", "3");
   EXPECT_ERROR("[scene t]\nworkspace_max = 1 1 1 1\n", 2, "[scene t] workspace_max:",
                "exactly 3 numbers");
