@@ -803,6 +803,33 @@
     changed(false);
   }
 
+  /* The scene's field settings in their selects (a value set through the API that the list
+   * lacks gets an option); a scene of the configuration file keeps the file's. */
+  function showFieldSettings(s) {
+    const scale = $('field-scale'), bg = $('learn-background');
+    const v = String(s.field_scale);
+    if (![...scale.options].some((o) => o.value === v)) scale.add(new Option(v, v));
+    scale.value = v;
+    bg.value = String(s.learn_background);
+    for (const el of [scale, bg]) {
+      el.disabled = s.declared_in_config;
+      el.title = s.declared_in_config ? 'set in the configuration file\'s [scene] section' : '';
+    }
+  }
+
+  async function patchFieldSettings(body) {
+    const r = await api('PATCH', scenePath(), body);
+    state.scene = await r.json();
+    showFieldSettings(state.scene);
+  }
+
+  $('field-scale').onchange = (e) => run(() => patchFieldSettings({
+    field_scale: e.target.value === 'auto' ? 'auto' : Number(e.target.value) }))
+    .then(() => showFieldSettings(state.scene));
+  $('learn-background').onchange = (e) => run(() => patchFieldSettings({
+    learn_background: e.target.value === 'auto' ? 'auto' : e.target.value === 'true' }))
+    .then(() => showFieldSettings(state.scene));
+
   $('train').onclick = () => run(async () => {
     if (!state.scene) throw new Error('open a scene first');
     const steps = Math.floor(Number($('train-steps').value));
@@ -838,7 +865,10 @@
     const s = state.scene;
     $('scene-info').textContent = `${s.frames} frames, ` + (s.trained
       ? `trained ${s.trained_steps} steps` : 'not trained yet: train it below') +
-      (s.feature_dim ? `, features D = ${s.feature_dim}` : ', no features');
+      (s.feature_dim ? `, features D = ${s.feature_dim}` : ', no features') +
+      (s.field ? `, field ${+s.field.scale.toFixed(3)} \u00d7 the workspace` +
+        (s.field.learn_background ? ' with a learned background' : '') : '');
+    showFieldSettings(s);
     if (s.trained) {
       await loadPoints();
       if (state.query) await runHeatmap(state.query);

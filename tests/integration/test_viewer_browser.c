@@ -279,6 +279,40 @@ static void test_training(void) {
   json_decref(s);
 }
 
+/* Chooses value in the page's select id (its change handler runs at once) and waits until
+ * the page is idle again. */
+static void choose(const char *id, const char *value) {
+  char *js = h_fmt("const e = document.getElementById('%s'); e.value = '%s';"
+                   "e.dispatchEvent(new Event('change'))", id, value);
+  run_js(js);
+  free(js);
+  json_decref(wait_page("s.busy === 0", 60));
+}
+
+/* The field settings from the page: the trained field in the scene's line, a choice changes
+ * the scene's settings (PATCH), a refused one leaves them and the select as they were. */
+static void test_field_settings(void) {
+  json_t *info = eval("document.getElementById('scene-info').textContent", 30);
+  printf("scene info: %s\n", json_string_value(info));
+  ASSERT(strstr(json_string_value(info), "field 2 \u00d7 the workspace") != NULL);
+  json_decref(info);
+  choose("field-scale", "4");
+  choose("learn-background", "true");
+  json_t *sc = t_scene_json("new");
+  ASSERT_NEAR(JNUM(sc, "field_scale"), 4, 0);
+  ASSERT(json_is_true(JGET(sc, "learn_background")));
+  json_decref(sc);
+  choose("field-scale", "auto");
+  choose("learn-background", "auto");
+  sc = t_scene_json("new");
+  ASSERT_STREQ(JSTR(sc, "field_scale"), "auto");
+  ASSERT_STREQ(JSTR(sc, "learn_background"), "auto");
+  json_decref(sc);
+  json_t *s = wait_page("s.busy === 0", 30);
+  ASSERT(json_is_null(JGET(s, "banner")));
+  json_decref(s);
+}
+
 /* The deep link's query: best voxel and hot pixels on the mug. */
 static void test_heatmap_pixels(json_t *s) {
   json_t *mug = g_object("mug");
@@ -545,6 +579,7 @@ int main(int argc, char **argv) {
   cdp_navigate(g_session, g_train_url, 60);
   test_token();
   test_training();
+  test_field_settings();
   json_t *s = test_deep_link();
   test_heatmap_pixels(s);
   test_frames(s);
