@@ -137,10 +137,12 @@
 #           training, save, the first grasp (voxel cache, grasp field, search) and a second
 #           search, seconds each (target: from the last frame to the first grasp <= 60 s)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
-#           repository's data/nerf/fox; not shipped here): 400 px, every 10th photo held
-#           out, 3000 steps (BENCH_FOX_STEPS), learned background, without and with the
-#           distortion loss (BENCH_FOX_DISTORTION, default 0.002): held-out PSNR (target
-#           >= 23 dB)
+#           repository's data/nerf/fox; not shipped here), through the daemon's API as a
+#           user would: a scene of +-1.5 m with its field settings on auto, the import,
+#           trainings of 3000 steps (BENCH_FOX_STEPS) at [train] max_image_side 400 with
+#           every 10th photo held out, without and with the distortion loss
+#           (BENCH_FOX_DISTORTION, default 0.002): held-out PSNR (target >= 23 dB) and the
+#           field the settings chose
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -717,23 +719,50 @@ bench_first_grasp() {
     "${BENCH_FIRST_GRASP_STEPS:-500}"
 }
 
+# json_str KEY < JSON, json_num KEY < JSON: the first string or number value of "KEY".
+json_str() { sed -n "s/.*\"$1\"[[:space:]]*:[[:space:]]*\"\([^\"]*\)\".*/\1/p" | head -n 1; }
+json_num() { sed -n "s/.*\"$1\"[[:space:]]*:[[:space:]]*\([-0-9.eE+]*\).*/\1/p" | head -n 1; }
+
+# The fox as a user gets it: imported and trained through the daemon's API with the scene's
+# field settings on "auto" (which must find the cube of 4 and the learned background that
+# instant-ngp's aabb_scale 4 asks for).
 bench_fox() {
-  local fox=${FG_FOX_DIR:-} v out line psnr pass
+  local fox=${FG_FOX_DIR:-} v out job state psnr pass t0 t1 seconds
   if [ -z "$fox" ] || [ ! -f "$fox/transforms.json" ]; then
     echo "bench=fox error=no_data_set hint=set_FG_FOX_DIR_to_instant-ngp's_data/nerf/fox pass=no"
     failed=1; return
   fi
+  cp -r "$(realpath "$fox")" "$tmp/fox" # import_dirs holds $tmp; a link out of it is refused
+  start_daemon fox "$(printf '[train]\nthreads = 2\nmax_image_side = 400')"
+  curl -sf -X POST "$base/v1/scenes" -H 'Content-Type: application/json' \
+    -d '{"name":"fox","workspace":{"min":[-1.5,-1.5,-1.5],"max":[1.5,1.5,1.5]}}' >/dev/null
+  curl -sf -X POST "$base/v1/scenes/fox/import" -H 'Content-Type: application/json' \
+    -d "{\"path\":\"$tmp/fox\",\"transforms\":\"transforms.json\"}" >/dev/null
   for v in 0 "${BENCH_FOX_DISTORTION:-0.002}"; do
-    out=$("$build/tests/bench/bench_train" --data "$fox/transforms.json" --threads 2 \
-      --max-side 400 --holdout 10 --steps "${BENCH_FOX_STEPS:-3000}" --seconds 100000 \
-      --eval-at 100000 --workspace -1.5 -1.5 -1.5 1.5 1.5 1.5 --field-scale 4 \
-      --learned-background --no-features --distortion-weight "$v")
-    line=$(printf '%s\n' "$out" | grep '^bench=train ')
-    psnr=$(field psnr "$line")
-    pass=$(awk -v p="$psnr" 'BEGIN { print (p >= 23) ? "yes" : "no" }')
+    t0=$(now)
+    job=$(curl -sf -X POST "$base/v1/scenes/fox/train" -H 'Content-Type: application/json' \
+      -d "{\"steps\":${BENCH_FOX_STEPS:-3000},\"holdout_every\":10,\"distortion_weight\":$v}" |
+      json_str id)
+    state=queued
+    while [ "$state" = queued ] || [ "$state" = running ]; do
+      sleep 2
+      out=$(curl -sf "$base/v1/jobs/$job")
+      state=$(printf '%s' "$out" | json_str state)
+    done
+    t1=$(now)
+    psnr=$(printf '%s' "$out" | json_num psnr)
+    seconds=$(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }')
+    pass=$(awk -v p="$psnr" -v s="$state" 'BEGIN { print (s == "done" && p >= 23) ? "yes" : "no" }')
     [ "$pass" = yes ] || failed=1
-    echo "bench=fox $(printf '%s' "$line" | sed 's/^bench=train //') target_min_psnr=23 pass=$pass"
+    echo "bench=fox state=$state steps=$(printf '%s' "$out" | json_int step) psnr=$psnr" \
+      "frames=$(printf '%s' "$out" | json_int frames)" \
+      "heldout=$(printf '%s' "$out" | json_int heldout_frames) distortion_weight=$v" \
+      "field_scale=$(printf '%s' "$out" | json_num scale)" \
+      "learn_background=$(printf '%s' "$out" | sed -n 's/.*"learn_background":\([a-z]*\).*/\1/p')" \
+      "chosen_by=$(printf '%s' "$out" | json_str chosen_by | tr ' ' _) seconds=$seconds" \
+      "target_min_psnr=23 pass=$pass"
   done
+  stop_daemon
 }
 
 for b in "${benches[@]}"; do
