@@ -3,6 +3,7 @@
 #include "hand.h"
 
 #include "core/pose.h"
+#include "core/strbuf.h"
 
 #include <math.h>
 #include <mujoco/mujoco.h>
@@ -138,8 +139,43 @@ static void errf(char *err, size_t errsz, const char *fmt, ...) {
 
 /* Loads the wrapper from memory as a file beside the scene, so that the scene's own relative
  * paths (meshes, includes) resolve against its folder. */
+/* The bin of cfg (cell.h) added to the wrapper's text: a worldbody of its own, which MuJoCo
+ * merges with the others. NULL when out of memory (xml is freed either way). */
+static char *with_bin(char *xml, const sim_cell_config *cfg) {
+  if (!xml || !cfg->has_bin) return xml;
+  char *end = strstr(xml, "</mujoco>");
+  if (!end) return xml;
+  *end = 0;
+  fg_strbuf b = {0};
+  fg_strbuf_printf(&b, "%s  <worldbody>\n    <body name=\"fg_bin\" pos=\"%.6f %.6f 0\">\n"
+                   "      <geom name=\"fg_bin/floor\" type=\"box\" size=\"%.6f %.6f %.6f\" "
+                   "pos=\"0 0 %.6f\" rgba=\"0.35 0.35 0.38 1\"/>\n",
+                   xml, cfg->bin_xy[0], cfg->bin_xy[1], 0.5 * SIM_BIN_INNER_M + SIM_BIN_WALL_M,
+                   0.5 * SIM_BIN_INNER_M + SIM_BIN_WALL_M, 0.5 * SIM_BIN_WALL_M,
+                   0.5 * SIM_BIN_WALL_M);
+  const double h = 0.5 * SIM_BIN_HEIGHT_M, off = 0.5 * (SIM_BIN_INNER_M + SIM_BIN_WALL_M);
+  for (int k = 0; k < 4; k++) {
+    const int along_x = k < 2; /* walls 0, 1 at -y and +y; 2, 3 at -x and +x */
+    const double s = k % 2 ? 1 : -1;
+    fg_strbuf_printf(&b, "      <geom name=\"fg_bin/wall%d\" type=\"box\" size=\"%.6f %.6f %.6f\" "
+                     "pos=\"%.6f %.6f %.6f\" rgba=\"0.35 0.35 0.38 1\"/>\n", k,
+                     along_x ? off + 0.5 * SIM_BIN_WALL_M : 0.5 * SIM_BIN_WALL_M,
+                     along_x ? 0.5 * SIM_BIN_WALL_M : off + 0.5 * SIM_BIN_WALL_M, h,
+                     along_x ? 0 : s * off, along_x ? s * off : 0, h);
+  }
+  fg_strbuf_printf(&b, "    </body>\n  </worldbody>\n</mujoco>\n");
+  free(xml);
+  return fg_strbuf_take(&b, NULL);
+}
+
+/* 1 when the object whose centre is p lies in the bin: within its walls, below their top. */
+static int in_bin(const sim_cell *c, const double p[3]) {
+  return c->cfg.has_bin && fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
+         fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M && p[2] < SIM_BIN_HEIGHT_M;
+}
+
 static mjModel *load(const char *scene_path, fg_gripper_model model, const hand_drive *dr,
-                     char *err, size_t errsz) {
+                     const sim_cell_config *cfg, char *err, size_t errsz) {
   const char *slash = strrchr(scene_path, '/');
   const char *base = slash ? slash + 1 : scene_path;
   char wrapper_path[4096];
@@ -158,7 +194,7 @@ static mjModel *load(const char *scene_path, fg_gripper_model model, const hand_
     return NULL;
   }
   fclose(probe);
-  char *xml = sim_hand_xml(base, model, dr->mass_kg, dr->force_max_n);
+  char *xml = with_bin(sim_hand_xml(base, model, dr->mass_kg, dr->force_max_n), cfg);
   mjVFS *vfs = xml ? malloc(sizeof *vfs) : NULL;
   if (!vfs) {
     free(xml);
@@ -674,10 +710,12 @@ static void report_command(sim_cell *c, const char *outcome, const char *why) {
     const double *p = obj_pos(c, i);
     fprintf(f, "%s{\"name\":\"%s\",\"position\":[%.4f,%.4f,%.4f],\"held\":%s,\"lifted\":%s,"
                "\"dz_m\":%.4f,\"moved_m\":%.4f,\"turned_deg\":%.1f,\"tilt_deg\":%.1f,"
-               "\"moved\":%s,\"knocked_over\":%s,\"touched\":%s,\"collided\":%s}",
+               "\"moved\":%s,\"knocked_over\":%s,\"touched\":%s,\"collided\":%s",
             i ? "," : "", c->obj[i].name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
             oc[i].dz, oc[i].distance, oc[i].turned, oc[i].tilt, tf(oc[i].moved),
             tf(oc[i].knocked_over), tf(c->touched[i]), tf(c->collided[i]));
+    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, p)));
+    fputc('}', f);
   }
   fputs("]}\n", f);
   fflush(f);
@@ -814,7 +852,7 @@ sim_cell *sim_cell_open(const sim_cell_config *cfg, char *err, size_t errsz) {
   c->cfg = *cfg;
   c->spec = spec;
   c->drive = &drives[cfg->gripper];
-  c->m = load(cfg->scene_path, cfg->gripper, c->drive, err, errsz);
+  c->m = load(cfg->scene_path, cfg->gripper, c->drive, cfg, err, errsz);
   if (!c->m) goto fail;
   c->m->opt.timestep = CELL_TIMESTEP;
   c->m->opt.cone = mjCONE_ELLIPTIC;

@@ -32,10 +32,20 @@ typedef struct sim_cell_config {
   double reach_m;           /* poses farther than this from the base origin are refused */
   double time_scale;        /* simulated seconds take this many seconds (0: as fast as it can) */
   FILE *report;             /* JSON lines, one per command's outcome; NULL: none */
+  int has_bin;              /* a bin stands on the table (SIM_BIN_*) ... */
+  double bin_xy[2];         /* ... its floor's centre there (world x, y on z = 0) */
 } sim_cell_config;
 
+/* The bin (--bin): an open box of SIM_BIN_INNER_M square inside, walls SIM_BIN_WALL_M thick
+ * and SIM_BIN_HEIGHT_M high, standing on the table plane, its geoms fg_bin/floor and
+ * fg_bin/wall0..3 (static: not an object). A place over it drops what the gripper holds into
+ * it, as a robot clears a table; the report says of each object whether it lies inside. */
+#define SIM_BIN_INNER_M 0.24
+#define SIM_BIN_WALL_M 0.01
+#define SIM_BIN_HEIGHT_M 0.10
+
 /* Defaults of the command line: robotiq-2f85, approach 0.10 m, lift 0.10 m, reach 0.85 m,
- * time scale 1. */
+ * time scale 1, no bin. */
 void sim_cell_config_default(sim_cell_config *cfg);
 
 /* Loads the scene with the gripper at its home pose (0.30, 0, 0.40), pointing down and open,

@@ -114,6 +114,9 @@ static void usage(FILE *f) {
           "                         (default 0.10)\n"
           "  --lift-m M             pick without a retreat lifts this far (default 0.10)\n"
           "  --reach-m M            refuse poses farther from the base (default 0.85)\n"
+          "  --bin X,Y              an open bin 0.24 m square inside, 0.10 m high, on the table\n"
+          "                         at X,Y: a place over it drops what the gripper holds; the\n"
+          "                         report says of each object whether it lies in the bin\n"
           "  --camera-listen H:P    serve GET /rgb.png and /depth.png (16-bit mm) of the cell\n"
           "                         as a camera on the tool sees it from the current TCP pose\n"
           "  --camera-port-file F   write the camera's bound port + newline to F\n"
@@ -258,6 +261,7 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
       {"camera-fixed", required_argument, NULL, 1011},
       {"board-on-tool", required_argument, NULL, 1012},
       {"camera-patch", required_argument, NULL, 1013},
+      {"bin", required_argument, NULL, 1014},
       {"help", no_argument, NULL, 'h'},
       {NULL, 0, NULL, 0},
   };
@@ -337,6 +341,18 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
     case 1001: rc = parse_metres("--approach-m", optarg, 0, 1, &cfg->cell.approach_m); break;
     case 1002: rc = parse_metres("--lift-m", optarg, 0, 1, &cfg->cell.lift_m); break;
     case 1003: rc = parse_metres("--reach-m", optarg, 0.1, 5, &cfg->cell.reach_m); break;
+    case 1014: {
+      char tail;
+      if (sscanf(optarg, "%lf,%lf%c", &cfg->cell.bin_xy[0], &cfg->cell.bin_xy[1], &tail) != 2 ||
+          !isfinite(cfg->cell.bin_xy[0]) || !isfinite(cfg->cell.bin_xy[1]) ||
+          fabs(cfg->cell.bin_xy[0]) > 5 || fabs(cfg->cell.bin_xy[1]) > 5) {
+        fprintf(stderr, "fieldgrip-sim: --bin wants X,Y in metres (within 5 m of the base), "
+                "got \"%s\"\n", optarg);
+        rc = -1;
+      }
+      cfg->cell.has_bin = 1;
+      break;
+    }
     case 1004:
       if (strcmp(optarg, "none") == 0)
         cfg->tcp_base = -1;
@@ -408,6 +424,10 @@ static int parse_args(int argc, char **argv, sim_config *cfg) {
   }
   if (!cfg->cell.scene_path && cfg->report_path) {
     fprintf(stderr, "fieldgrip-sim: --report needs --scene (the physics mode)\n");
+    return -1;
+  }
+  if (!cfg->cell.scene_path && cfg->cell.has_bin) {
+    fprintf(stderr, "fieldgrip-sim: --bin needs --scene (the physics mode)\n");
     return -1;
   }
   cfg->cell.time_scale = cfg->time_scale;

@@ -135,6 +135,46 @@ static void test_pick_in_empty_space(void) {
   cellproc_stop(&c);
 }
 
+/* With a bin (--bin 0.45,0.55: beside the tower, clear of the table's objects), a pick and a
+ * place over it clear the block off the table: the report says where each object lies. A
+ * place beside the bin leaves the block on the table. */
+static void test_place_in_bin(void) {
+  for (int over = 1; over >= 0; over--) {
+    cell c;
+    char path[2 * PATH_MAX];
+    snprintf(path, sizeof path, "%s/blocks.xml", g_cells);
+    const char *const extra[] = {"--bin", "0.45,0.55", NULL};
+    cellproc_start(&c, path, "int16", g_dir, extra);
+    ASSERT_EQ(command(&c, 1, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
+    json_t *r = cellproc_report(&c, 1);
+    ASSERT(cellproc_flag(cellproc_object(r, "block"), "lifted"));
+    ASSERT(!cellproc_flag(cellproc_object(r, "block"), "in_bin"));
+    ASSERT(!cellproc_flag(cellproc_object(r, "tower"), "in_bin"));
+    json_decref(r);
+    /* over the bin's middle, or 25 cm short of it (on the table, away from the tower) */
+    ASSERT_EQ(command(&c, 2, 2, over ? 0.45 : 0.20, over ? 0.55 : 0.30, 0.20, 0.085, 0.10,
+                      0.10), 2);
+    r = cellproc_report(&c, 2);
+    json_t *block = cellproc_object(r, "block");
+    printf("place %s the bin: the block at z %.3f, in_bin %d\n", over ? "over" : "beside",
+           json_number_value(json_array_get(json_object_get(block, "position"), 2)),
+           cellproc_flag(block, "in_bin"));
+    ASSERT(!cellproc_flag(block, "held"));
+    ASSERT_EQ(cellproc_flag(block, "in_bin"), over);
+    ASSERT(!cellproc_flag(cellproc_object(r, "tower"), "in_bin"));
+    json_decref(r);
+    cellproc_stop(&c);
+  }
+  /* without --bin, no object says anything of one */
+  cell c;
+  cell_start(&c, "blocks.xml", "int16");
+  ASSERT_EQ(command(&c, 1, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
+  json_t *r = cellproc_report(&c, 1);
+  ASSERT(json_object_get(cellproc_object(r, "block"), "in_bin") == NULL);
+  json_decref(r);
+  cellproc_stop(&c);
+}
+
 static int grip_obj(modbus_t *g, int *po) {
   uint16_t in[3];
   ASSERT_EQ(modbus_read_input_registers(g, 0x07D0, 3, in), 3);
@@ -313,6 +353,7 @@ int main(int argc, char **argv) {
       {"refused_scenes", test_refused_scenes},
       {"deterministic", test_deterministic},
       {"tcp_pose_registers", test_tcp_pose_registers},
+      {"place_in_bin", test_place_in_bin},
   };
   const char *only = argc > 3 ? argv[3] : NULL;
   for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
