@@ -168,12 +168,6 @@ static char *with_bin(char *xml, const sim_cell_config *cfg) {
   return fg_strbuf_take(&b, NULL);
 }
 
-/* 1 when the object whose centre is p lies in the bin: within its walls, below their top. */
-static int in_bin(const sim_cell *c, const double p[3]) {
-  return c->cfg.has_bin && fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
-         fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M && p[2] < SIM_BIN_HEIGHT_M;
-}
-
 static mjModel *load(const char *scene_path, fg_gripper_model model, const hand_drive *dr,
                      const sim_cell_config *cfg, char *err, size_t errsz) {
   const char *slash = strrchr(scene_path, '/');
@@ -612,6 +606,15 @@ void sim_cell_fingers_status(const sim_cell *c, int *position, int *moving, int 
 
 /* ---------------------------------------------------------------- the report */
 
+/* 1 when object i lies in the bin: its centre within the walls (on the floor or on what lies
+ * there already) and the gripper not holding it. */
+static int in_bin(const sim_cell *c, int i) {
+  const double *p = obj_pos(c, i);
+  return c->cfg.has_bin && !held(c, i) &&
+         fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
+         fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M;
+}
+
 /* What became of object i during the command that ends. */
 typedef struct {
   int held, lifted, moved, knocked_over;
@@ -714,7 +717,7 @@ static void report_command(sim_cell *c, const char *outcome, const char *why) {
             i ? "," : "", c->obj[i].name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
             oc[i].dz, oc[i].distance, oc[i].turned, oc[i].tilt, tf(oc[i].moved),
             tf(oc[i].knocked_over), tf(c->touched[i]), tf(c->collided[i]));
-    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, p)));
+    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, i)));
     fputc('}', f);
   }
   fputs("]}\n", f);

@@ -40,7 +40,7 @@ typedef struct sim_cell_config {
  * and SIM_BIN_HEIGHT_M high, standing on the table plane, its geoms fg_bin/floor and
  * fg_bin/wall0..3 (static: not an object). A place over it drops what the gripper holds into
  * it, as a robot clears a table; the report says of each object whether it lies inside. */
-#define SIM_BIN_INNER_M 0.24
+#define SIM_BIN_INNER_M 0.34
 #define SIM_BIN_WALL_M 0.01
 #define SIM_BIN_HEIGHT_M 0.10
 

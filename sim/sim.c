@@ -114,7 +114,7 @@ static void usage(FILE *f) {
           "                         (default 0.10)\n"
           "  --lift-m M             pick without a retreat lifts this far (default 0.10)\n"
           "  --reach-m M            refuse poses farther from the base (default 0.85)\n"
-          "  --bin X,Y              an open bin 0.24 m square inside, 0.10 m high, on the table\n"
+          "  --bin X,Y              an open bin 0.34 m square inside, 0.10 m high, on the table\n"
           "                         at X,Y: a place over it drops what the gripper holds; the\n"
           "                         report says of each object whether it lies in the bin\n"
           "  --camera-listen H:P    serve GET /rgb.png and /depth.png (16-bit mm) of the cell\n"

@@ -135,7 +135,7 @@ static void test_pick_in_empty_space(void) {
   cellproc_stop(&c);
 }
 
-/* With a bin (--bin 0.45,0.55: beside the tower, clear of the table's objects), a pick and a
+/* With a bin (--bin 0.45,0.62: beyond the tower, clear of the table's objects), a pick and a
  * place over it clear the block off the table: the report says where each object lies. A
  * place beside the bin leaves the block on the table. */
 static void test_place_in_bin(void) {
@@ -143,7 +143,7 @@ static void test_place_in_bin(void) {
     cell c;
     char path[2 * PATH_MAX];
     snprintf(path, sizeof path, "%s/blocks.xml", g_cells);
-    const char *const extra[] = {"--bin", "0.45,0.55", NULL};
+    const char *const extra[] = {"--bin", "0.45,0.62", NULL};
     cellproc_start(&c, path, "int16", g_dir, extra);
     ASSERT_EQ(command(&c, 1, 1, 0.45, 0, 0.05, 0.085, 0.10, 0), 2);
     json_t *r = cellproc_report(&c, 1);
@@ -152,7 +152,7 @@ static void test_place_in_bin(void) {
     ASSERT(!cellproc_flag(cellproc_object(r, "tower"), "in_bin"));
     json_decref(r);
     /* over the bin's middle, or 25 cm short of it (on the table, away from the tower) */
-    ASSERT_EQ(command(&c, 2, 2, over ? 0.45 : 0.20, over ? 0.55 : 0.30, 0.20, 0.085, 0.10,
+    ASSERT_EQ(command(&c, 2, 2, over ? 0.45 : 0.20, over ? 0.62 : 0.30, 0.20, 0.085, 0.10,
                       0.10), 2);
     r = cellproc_report(&c, 2);
     json_t *block = cellproc_object(r, "block");
