@@ -24,8 +24,19 @@
 # vectors its features were made of), which is what a feature extractor without a text
 # encoder leaves you with.
 #
+# With --clear-table, step 3 ends differently: "pick up everything", as a robot stack drives
+# it. A bin stands on the table beside the workspace; for each object, asked for by its
+# question: a grasp, the pick, a place over the bin (physics drops what was lifted into it),
+# a new scan of the changed cell (a new capture: what physics left, objects pushed or tilted
+# included) and an update of the field from the current one (--update-steps, default 200),
+# then the next question; two tries an object. It ends with the objects cleared, the grasps
+# per object, the failures by kind and the time per object, and a line
+# "clear_table: layout=N objects=4 cleared=K ..." for scripts.
+#
 # Options: --exit (stop both processes after the loop and exit 0 if it ran through: the
-# tests run it so), --steps N (training steps per scan, default 300), --config FILE
+# tests run it so), --steps N (training steps per scan, default 300), --clear-table,
+# --update-steps N, --layout N (the cell's scenegen seed, default 0; not 1, the demos'),
+# --config FILE
 # (default config/demo.conf; the daemon's address is its [http] listen, the simulator's its
 # [robot] host and port, its camera's [camera wrist] source's), --out DIR (default
 # demo-out: scans, heatmaps, logs), --build DIR (take the programs from that meson build folder as they are, instead of building build/).
@@ -37,6 +48,9 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
 
 steps=300
+clear=0
+update_steps=200
+layout_seed=0
 config=config/demo.conf
 out=demo-out
 build=
@@ -48,7 +62,10 @@ while [ $# -gt 0 ]; do
     --config) config=${2:?--config needs a file}; shift ;;
     --out) out=${2:?--out needs a folder}; shift ;;
     --build) build=${2:?--build needs a folder}; shift ;;
-    -h|--help) sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --clear-table) clear=1 ;;
+    --update-steps) update_steps=${2:?--update-steps needs a number}; shift ;;
+    --layout) layout_seed=${2:?--layout needs a seed}; shift ;;
+    -h|--help) sed -n '2,38p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
@@ -181,9 +198,14 @@ expect() { # STATUS...: the last request answered one of them, else stop with it
 
 say "Rendering two tabletop scans (fieldgrip-scenegen)"
 # One feature space (--embedding-seed) for both, as frames of one feature extractor share it;
-# the objects stand elsewhere in the second (seed 0) than in the first (seed 1).
+# the objects stand elsewhere in the second (seed 0, or --layout's: scan0, the cell's) than
+# in the first (seed 1: scan1, the demos').
+[[ "$layout_seed" =~ ^[0-9]+$ ]] && [ "$layout_seed" != 1 ] ||
+  die "--layout wants a seed other than 1 (the demos' layout), got '$layout_seed'"
 for layout in 1 0; do
-  args=(--out "$out/scan$layout" --seed "$layout" --embedding-seed 7 --views 30 --width 160
+  seed=$layout
+  [ "$layout" = 1 ] || seed=$layout_seed
+  args=(--out "$out/scan$layout" --seed "$seed" --embedding-seed 7 --views 30 --width 160
         --height 120 --dim 32 --patch 4 --holdout 0 --depth png)
   echo "${dim}\$ $(quote "$scenegen" "${args[@]}")${reset}"
   "$scenegen" "${args[@]}" >/dev/null
@@ -205,6 +227,10 @@ sim_args=(--listen "$sim_host:$sim_port" --scene "$out/scan0/cell.xml" --report 
           --camera-listen "$camera" --camera "604 602 323.5 236.5 640 480 -0.06 0.02 0.0004 -0.0003"
           --camera-mount "0.03 -0.02 -0.06 0.9990482 0.0436194 0 0"
           --board "7 5 0.03 0.022 DICT_5X5_100 0.15 -0.45 0 0" --camera-patch 16 --time-scale 0.1)
+# clearing the table: the bin beside the workspace (y 0.46 to 0.80 inside), within the
+# robot's reach and [robot] limits
+bin_xy=(0.45 0.63)
+[ "$clear" -eq 0 ] || sim_args+=(--bin "${bin_xy[0]},${bin_xy[1]}")
 echo "${dim}\$ $(quote "$sim" "${sim_args[@]}") &${reset}   (the second scan's table and objects in physics)"
 "$sim" "${sim_args[@]}" >"$out/sim.log" 2>&1 &
 pids+=($!)
@@ -327,12 +353,13 @@ demo() { # TASK OBJECT
   expect 201 200
   jq -c '{demo: {id: .demo.id, scene: .demo.scene}, task: {name: .task.name, kind: .task.kind, n_demos: .task.n_demos}}' <<<"$reply"
 }
-say "Recording demos on tabletop-demos: how to pick up a box, and a ball"
-for task in box ball; do
+tasks=(box ball)
+[ "$clear" -eq 0 ] || tasks=(box ball mug bowl)
+say "Recording demos on tabletop-demos: how to pick up a $(IFS=,; echo "${tasks[*]}" | sed 's/,/, a /g')"
+for task in "${tasks[@]}"; do
   show=0; api_curl DELETE "/v1/tasks/$task"; show=1
 done
-demo box box
-demo ball ball
+for task in "${tasks[@]}"; do demo "$task" "$task"; done
 
 # ---------------------------------------------------------------- the questions
 
@@ -398,6 +425,110 @@ api_json POST /v1/scenes/tabletop/render "{\"camera\": $cam, \"output\": \"heatm
   -o "$out/mug-heatmap.png"
 expect 200
 echo "the view from above with the score's colours over it (PNG): $out/mug-heatmap.png"
+
+# The end: where things are, and the daemon left running unless --exit.
+finish() {
+  say "Done: the loop ran through"
+  echo "scans, heatmaps and logs: $out"
+  # The same in the web viewer: the scan as points, the mug's heatmap, the box task's grasps
+  if [ "$clip" -eq 1 ]; then
+    link_query="text=a+mug"
+  else
+    link_query="embedding=$(jq -r '.classes[] | select(.name == "mug") | .embedding
+        | map(. * 10000 | round / 10000 | tostring) | join(",")' "$out/scan0/gt.json")"
+  fi
+  echo "in a browser: $api/?scene=tabletop&$link_query&task=box${token:+   (it asks for the token)}"
+  if [ "$stay" -eq 0 ]; then
+    exit 0
+  fi
+  echo "fieldgripd keeps running on $api (see README.md, \"Trying the API\"); Ctrl-C stops it and the simulator."
+  wait "$daemon_pid"
+  exit 0
+}
+
+# ---------------------------------------------------------------- clearing the table
+
+# The objects as the last physics report has them: "NAME IN_BIN" lines.
+objects_now() { grep '"command"' "$out/physics.jsonl" | tail -n 1 | jq -r '.objects[] | "\(.name) \(.in_bin)"'; }
+
+clear_table() {
+  local queue=(box ball mug bowl) obj round=0 grasp lifted outcome t0 t1 secs left
+  local -A tries=() failures=()
+  local cleared_list=() grasps=0 total_s=0
+  say "Clearing the table: every object into the bin at (${bin_xy[0]}, ${bin_xy[1]}), a new scan and an update of $update_steps steps after each pick"
+  while [ ${#queue[@]} -gt 0 ]; do
+    obj=${queue[0]}
+    queue=("${queue[@]:1}")
+    round=$((round + 1))
+    tries[$obj]=$((${tries[$obj]:-0} + 1))
+    t0=$(date +%s.%N)
+    say "Round $round: pick up the $obj (try ${tries[$obj]})"
+    api_json POST /v1/scenes/tabletop/grasps "{$(question "$obj"), \"top_k\": 1, \"seed\": 0}"
+    expect 200
+    jq -c '{task, grasp: .grasps[0] | {id, score, position: .pose.position}}' <<<"$reply"
+    grasp=$(jq -r '.grasps[0].id // empty' <<<"$reply")
+    outcome=
+    if [ -z "$grasp" ]; then
+      outcome=no_grasp
+    else
+      grasps=$((grasps + 1))
+      api_curl POST "/v1/scenes/tabletop/grasps/$grasp/execute" -H 'Content-Type: application/json' \
+        -H "Idempotency-Key: clear-$round-$grasp" -d '{"dry_run": false}'
+      if [[ "$status" == 4* ]]; then # refused by the gate (limits, reach): say why, go on
+        echo "the pick was refused: $(jq -c .error <<<"$reply")"
+        outcome=refused
+      elif [ "$status" != 200 ]; then # the robot faulted: an operator must make the cell safe
+        die "the pick failed ($status): $(jq -c .error <<<"$reply")"
+      elif [ "$(jq -r .state <<<"$reply")" != done ]; then
+        outcome=robot_$(jq -r .state <<<"$reply")
+      fi
+      lifted=$(grep '"command"' "$out/physics.jsonl" | tail -n 1 | jq -r '.lifted // empty')
+      echo "physics: $(grep '"command"' "$out/physics.jsonl" | tail -n 1 | jq -c '{command, lifted, lift_m, moved: [.moved[].name]}')"
+      if [ -z "$outcome" ] && [ -z "$lifted" ]; then outcome=missed; fi
+      if [ -n "$lifted" ]; then
+        [ "$lifted" = "$obj" ] || outcome=wrong_object
+        say "Into the bin: a place over it, through the same gate as every motion"
+        api_json POST /v1/robot/commands "{\"command\": \"place\", \"pose\": {\"position\": [${bin_xy[0]}, ${bin_xy[1]}, 0.20],
+          \"quaternion\": [0, 1, 0, 0]}, \"width\": 0.085}" -H "Idempotency-Key: clear-place-$round"
+        expect 200
+        [ "$(jq -r .state <<<"$reply")" = done ] || die "the place ended $(jq -r .state <<<"$reply"): $reply"
+        [ "$(objects_now | awk -v o="$lifted" '$1 == o { print $2 }')" = true ] || outcome=${outcome:-dropped}
+      fi
+    fi
+    cleared_list=($(objects_now | awk '$2 == "true" { print $1 }'))
+    [ -n "$outcome" ] && failures[$outcome]=$((${failures[$outcome]:-0} + 1))
+    # what is still to clear: the queue's objects not in the bin, and this one again after a
+    # failed try (two tries an object)
+    left=()
+    for o in "${queue[@]}"; do [[ " ${cleared_list[*]} " == *" $o "* ]] || left+=("$o"); done
+    if [[ " ${cleared_list[*]} " != *" $obj "* ]] && [ "${tries[$obj]}" -lt 2 ]; then left+=("$obj"); fi
+    queue=("${left[@]}")
+    echo "round $round: the $obj ${outcome:-cleared}; in the bin: ${cleared_list[*]:-nothing}"
+    if [ ${#queue[@]} -gt 0 ]; then
+      say "A new scan of the changed table, and an update of the field from the current one"
+      api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": 30, \"radius_m\": 0.5,
+        \"elevations_deg\": [40, 75], \"settle_ms\": 100, \"train\": {\"steps\": $update_steps, \"seed\": 0, \"init\": \"current\"}}"
+      expect 202
+      follow "the scan and update of tabletop"
+      echo "$data" | jq -c '{state, frames, step, psnr, elapsed_s}'
+    fi
+    t1=$(date +%s.%N)
+    secs=$(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }')
+    total_s=$(awk -v a="$total_s" -v b="$secs" 'BEGIN { printf "%.1f", a + b }')
+  done
+  local n=4 k=${#cleared_list[@]} kinds=
+  for o in "${!failures[@]}"; do kinds+="${kinds:+,}$o:${failures[$o]}"; done
+  say "The table: $k of $n objects in the bin (${cleared_list[*]:-none}), $grasps grasps executed in $round rounds, $total_s s"
+  echo "failures by kind: ${kinds:-none}"
+  echo "clear_table: layout=$layout_seed objects=$n cleared=$k grasps=$grasps rounds=$round" \
+    "failures=${kinds:-none} seconds=$total_s seconds_per_object=$(awk -v s="$total_s" -v n="$n" 'BEGIN { printf "%.1f", s / n }')" \
+    "update_steps=$update_steps steps=$steps"
+}
+
+if [ "$clear" -eq 1 ]; then
+  clear_table
+  finish
+fi
 
 # ---------------------------------------------------------------- the grasp
 
@@ -470,18 +601,4 @@ grasp=$(jq -r '.grasps[0].id // empty' <<<"$reply")
 [ -n "$grasp" ] || die "no grasp of the ball found: $(jq -r '.reason // .' <<<"$reply")"
 execute "$grasp" ball
 
-say "Done: the loop ran through"
-echo "scans, heatmaps and logs: $out"
-# The same in the web viewer: the scan as points, the mug's heatmap, the box task's grasps
-if [ "$clip" -eq 1 ]; then
-  link_query="text=a+mug"
-else
-  link_query="embedding=$(jq -r '.classes[] | select(.name == "mug") | .embedding
-      | map(. * 10000 | round / 10000 | tostring) | join(",")' "$out/scan0/gt.json")"
-fi
-echo "in a browser: $api/?scene=tabletop&$link_query&task=box${token:+   (it asks for the token)}"
-if [ "$stay" -eq 0 ]; then
-  exit 0
-fi
-echo "fieldgripd keeps running on $api (see README.md, \"Trying the API\"); Ctrl-C stops it and the simulator."
-wait "$daemon_pid"
+finish

@@ -5,7 +5,8 @@
 #                           [busy] [clip] [heatmap] [robot] [grasp] [grasp_physics]
 #                           [geometry] [depth_throughput] [fox] [http_idle] [load] [soak]
 #                           [viewer] [calibration] [scan] [update] [first_grasp]
-#   (no names: all of them but fox, grasp_physics and update; train takes about 6 minutes,
+#                           [clear_table]
+#   (no names: all of them but fox, grasp_physics, update and clear_table; train takes about 6 minutes,
 #   throughput about 3; grasp several, most of them in the PyTorch peer; grasp_physics about
 #   30)
 #   import  wall-clock time of POST /v1/scenes/{s}/import of the 100 lego frames (800x800
@@ -143,6 +144,11 @@
 #           every 10th photo held out, without and with the distortion loss
 #           (BENCH_FOX_DISTORTION, default 0.002): held-out PSNR (target >= 23 dB) and the
 #           field the settings chose
+#   clear_table  scripts/demo.sh --clear-table on scenegen layouts the tests never use
+#           (BENCH_CLEAR_SEEDS, default 200 to 209; BENCH_CLEAR_STEPS 300 per scan,
+#           BENCH_CLEAR_UPDATE_STEPS 200 per update): a line per layout, then the share of
+#           objects in the bin (target >= 0.9), grasps per object, the failures by kind and
+#           the seconds per object (a rescan and an update each). Several minutes a layout
 #
 # Output: one line per benchmark of space-separated key=value pairs, e.g.
 #   bench=import frames=100 skipped=0 seconds=1.234 target_max_seconds=3 pass=yes
@@ -765,6 +771,43 @@ bench_fox() {
   stop_daemon
 }
 
+# Clear the table (scripts/demo.sh --clear-table) on layouts the tests never use: the share
+# of objects that ended in the bin, grasps per object, failures by kind, time per object.
+bench_clear_table() {
+  local seeds=${BENCH_CLEAR_SEEDS:-"200 201 202 203 204 205 206 207 208 209"} s line conf
+  local layouts=0 objects=0 cleared=0 grasps=0 seconds=0 kinds= share pass
+  conf=$tmp/clear.conf
+  sed -e "s|^dir = .*|dir = $tmp/clear-state|" \
+      -e "s|^import_dirs = .*|import_dirs = $(realpath "$data")|" "$src/config/demo.conf" > "$conf"
+  for s in $seeds; do
+    line=$("$src/scripts/demo.sh" --exit --clear-table --layout "$s" --config "$conf" \
+             --out "$tmp/clear-$s" --build "$build" --steps "${BENCH_CLEAR_STEPS:-300}" \
+             --update-steps "${BENCH_CLEAR_UPDATE_STEPS:-200}" 2>"$tmp/clear-$s.err" |
+           grep '^clear_table: ' | tail -n 1) || true
+    if [ -z "$line" ]; then
+      echo "bench=clear_table_layout layout=$s error=demo_failed why=$(tail -n 1 "$tmp/clear-$s.err" | tr ' ' _)"
+      failed=1
+      continue
+    fi
+    line=${line#clear_table: }
+    echo "bench=clear_table_layout $line"
+    layouts=$((layouts + 1))
+    objects=$((objects + $(field objects "$line")))
+    cleared=$((cleared + $(field cleared "$line")))
+    grasps=$((grasps + $(field grasps "$line")))
+    seconds=$(awk -v a="$seconds" -v b="$(field seconds "$line")" 'BEGIN { print a + b }')
+    [ "$(field failures "$line")" = none ] || kinds+="${kinds:+,}$(field failures "$line")"
+  done
+  share=$(awk -v c="$cleared" -v n="$objects" 'BEGIN { printf "%.3f", n ? c / n : 0 }')
+  pass=$(awk -v s="$share" -v l="$layouts" 'BEGIN { print (l > 0 && s >= 0.9) ? "yes" : "no" }')
+  [ "$pass" = yes ] || failed=1
+  kinds=$(printf '%s' "$kinds" | tr ',' '\n' | awk -F: 'NF == 2 { n[$1] += $2 } END { for (k in n) printf "%s%s:%d", (i++ ? "," : ""), k, n[k] }')
+  echo "bench=clear_table layouts=$layouts objects=$objects cleared=$cleared share=$share" \
+    "grasps_per_object=$(awk -v g="$grasps" -v n="$objects" 'BEGIN { printf "%.2f", n ? g / n : 0 }')" \
+    "failures=${kinds:-none} seconds_per_object=$(awk -v s="$seconds" -v n="$objects" 'BEGIN { printf "%.1f", n ? s / n : 0 }')" \
+    "target_min_share=0.9 pass=$pass"
+}
+
 for b in "${benches[@]}"; do
   case $b in
     import) bench_import ;;
@@ -781,6 +824,7 @@ for b in "${benches[@]}"; do
     geometry) bench_geometry ;;
     depth_throughput) bench_depth_throughput ;;
     fox) bench_fox ;;
+    clear_table) bench_clear_table ;;
     http_idle) bench_http_idle ;;
     load) bench_load ;;
     soak) bench_soak ;;
@@ -789,7 +833,7 @@ for b in "${benches[@]}"; do
     scan) bench_scan ;;
     update) bench_update ;;
     first_grasp) bench_first_grasp ;;
-    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration, scan, update, first_grasp)" >&2; exit 2 ;;
+    *) echo "error: unknown benchmark '$b' (import, health, memory, train, throughput, busy, clip, heatmap, robot, grasp, grasp_physics, geometry, depth_throughput, fox, http_idle, load, soak, viewer, calibration, scan, update, first_grasp, clear_table)" >&2; exit 2 ;;
   esac
 done
 exit "$failed"
