@@ -29,7 +29,7 @@ int main(int argc, char **argv) {
   const int cam_port = cu_sim_start(&sim, args);
   char conf[1024];
   snprintf(conf, sizeof conf,
-           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 300\n"
+           "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 5000\n"
            "limit_min = -1.5 -1.5 -0.5\nlimit_max = 1.5 1.5 1.5\n"
            "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
            "depth_source = http://127.0.0.1:%d/depth.png\n"

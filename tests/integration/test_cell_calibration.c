@@ -64,7 +64,7 @@ static const char *g_cam = "wrist"; /* the camera the helpers below use */
 /* Starts fieldgripd on the simulator at sim_port with the board of BOARD and the cameras of
  * the text cameras, and waits for the robot. */
 static void start_daemon(int sim_port, const char *cameras) {
-  char *conf = h_fmt("[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 500\n"
+  char *conf = h_fmt("[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 5000\n"
                      "limit_min = -1 -1 0.02\nlimit_max = 1 1 1\napproach_cone_deg = 180\n"
                      "[calibration]\nsquares_x = 7\nsquares_y = 5\nsquare_m = 0.03\n"
                      "marker_m = 0.022\ndictionary = DICT_5X5_100\n%s",
