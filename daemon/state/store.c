@@ -2,7 +2,6 @@
 #include "store_priv.h"
 
 #include "conf/conf.h"
-#include "json.h"
 #include "voxcache.h"
 
 #include "core/clock.h"
@@ -12,7 +11,6 @@
 #include "core/ref.h"
 #include "field/checkpoint.h"
 
-#include <jansson.h>
 
 #include <dirent.h>
 #include <errno.h>
@@ -33,135 +31,6 @@ struct fg_field_ref {
 };
 
 static atomic_uint name_counter;
-
-/* ---------------------------------------------------------------- parameters */
-
-int fg_scene_params_validate(const fg_scene_params *p) {
-  static const char axis[] = "xyz";
-  for (int i = 0; i < 3; i++) {
-    if (!isfinite(p->workspace_min[i]) || !isfinite(p->workspace_max[i]))
-      return fg_fail(FG_EINVAL, "workspace %c bounds must be finite numbers (metres)", axis[i]);
-    if (!(p->workspace_min[i] < p->workspace_max[i]))
-      return fg_fail(FG_EINVAL, "workspace min %c (%g) must be less than max %c (%g)", axis[i],
-                     p->workspace_min[i], axis[i], p->workspace_max[i]);
-    if (!(p->background[i] >= 0 && p->background[i] <= 1))
-      return fg_fail(FG_EINVAL, "background must hold three numbers in [0, 1]");
-  }
-  double smallest = INFINITY;
-  for (int i = 0; i < 3; i++)
-    smallest = fmin(smallest, p->workspace_max[i] - p->workspace_min[i]);
-  if (!(p->voxel_size > 0) || !isfinite(p->voxel_size) || p->voxel_size > smallest)
-    return fg_fail(FG_EINVAL, "voxel_size must be a positive length in metres no larger than the "
-                   "workspace's smallest side (%g), got %g", smallest, p->voxel_size);
-  if (p->field_scale != FG_FIELD_SCALE_AUTO && !(p->field_scale >= 1 && p->field_scale <= 64))
-    return fg_fail(FG_EINVAL, "field_scale must be \"auto\" or a number from 1 to 64 (the "
-                   "field's cube over the workspace's largest extent), got %g", p->field_scale);
-  if (p->learn_background != FG_LEARN_BACKGROUND_AUTO && p->learn_background != 0 &&
-      p->learn_background != 1)
-    return fg_fail(FG_EINVAL, "learn_background must be \"auto\", true or false");
-  return 0;
-}
-
-static int params_equal(const fg_scene_params *a, const fg_scene_params *b) {
-  for (int i = 0; i < 3; i++)
-    if (a->workspace_min[i] != b->workspace_min[i] || a->workspace_max[i] != b->workspace_max[i] ||
-        a->background[i] != b->background[i])
-      return 0;
-  return a->voxel_size == b->voxel_size && a->field_scale == b->field_scale &&
-         a->learn_background == b->learn_background;
-}
-
-/* ---------------------------------------------------------------- scene.json */
-
-static int write_scene_json(const fg_scene *s) {
-  json_t *o = json_pack(
-    "{s:s,s:{s:[f,f,f],s:[f,f,f]},s:f,s:[f,f,f],s:I}", "name", s->name, "workspace", "min",
-    s->params.workspace_min[0], s->params.workspace_min[1], s->params.workspace_min[2], "max",
-    s->params.workspace_max[0], s->params.workspace_max[1], s->params.workspace_max[2],
-    "voxel_size", s->params.voxel_size, "background", s->params.background[0],
-    s->params.background[1], s->params.background[2], "created_ms", (json_int_t)s->created_ms);
-  if (o) {
-    json_object_set_new(o, "field_scale", fg_json_field_scale(s->params.field_scale));
-    json_object_set_new(o, "learn_background",
-                        fg_json_learn_background(s->params.learn_background));
-  }
-  char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) : NULL;
-  json_decref(o);
-  if (!text) return fg_fail(FG_ENOMEM, "out of memory");
-  char *path = fg_path_join(s->dir, "scene.json");
-  int rc = path ? fg_write_file_atomic(path, text, strlen(text)) : fg_fail(FG_ENOMEM, "oom");
-  free(path);
-  free(text);
-  return rc;
-}
-
-static int read_vec3(json_t *a, double out[3]) {
-  if (!json_is_array(a) || json_array_size(a) != 3) return -1;
-  for (int i = 0; i < 3; i++) {
-    json_t *v = json_array_get(a, (size_t)i);
-    if (!json_is_number(v)) return -1;
-    out[i] = json_number_value(v);
-  }
-  return 0;
-}
-
-static int read_scene_json(fg_scene *s) {
-  char *path = fg_path_join(s->dir, "scene.json");
-  if (!path) return fg_fail(FG_ENOMEM, "out of memory");
-  json_error_t jerr;
-  json_t *o = json_load_file(path, 0, &jerr);
-  int rc = 0;
-  json_t *ws = o ? json_object_get(o, "workspace") : NULL;
-  if (!o) {
-    rc = fg_fail(FG_EFORMAT, "%s: %s (line %d)", path, jerr.text, jerr.line);
-  } else if (read_vec3(json_object_get(ws, "min"), s->params.workspace_min) ||
-             read_vec3(json_object_get(ws, "max"), s->params.workspace_max) ||
-             read_vec3(json_object_get(o, "background"), s->params.background) ||
-             !json_is_number(json_object_get(o, "voxel_size"))) {
-    rc = fg_fail(FG_EFORMAT, "%s: missing or malformed workspace, voxel_size or background", path);
-  } else {
-    s->params.field_scale = FG_FIELD_SCALE_AUTO;
-    s->params.learn_background = FG_LEARN_BACKGROUND_AUTO;
-    s->params.voxel_size = json_number_value(json_object_get(o, "voxel_size"));
-    s->created_ms = json_integer_value(json_object_get(o, "created_ms"));
-    /* absent in scenes made before the settings existed: auto */
-    if (fg_json_read_field_settings(o, &s->params.field_scale, &s->params.learn_background))
-      rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
-    else if (fg_scene_params_validate(&s->params) != 0)
-      rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
-  }
-  json_decref(o);
-  free(path);
-  return rc;
-}
-
-int fg_scene_set_field_settings(fg_scene *s, const double *field_scale,
-                                const int *learn_background) {
-  pthread_mutex_lock(&s->lock);
-  fg_scene_params p = s->params;
-  if (field_scale) p.field_scale = *field_scale;
-  if (learn_background) p.learn_background = *learn_background;
-  int rc = 0;
-  if (s->deleted)
-    rc = fg_fail_as(FG_ENOENT, "scene_not_found", "scene '%s' was deleted", s->name);
-  else if (s->declared)
-    rc = fg_fail_as(FG_EPERM, "declared_in_config", "scene '%s' is declared in the "
-                    "configuration file: set field_scale and learn_background in its [scene %s] "
-                    "section and reload", s->name, s->name);
-  else if (fg_scene_params_validate(&p) != 0)
-    rc = FG_EINVAL;
-  else if (!params_equal(&p, &s->params)) {
-    const fg_scene_params old = s->params;
-    s->params = p;
-    rc = write_scene_json(s);
-    if (rc != 0) {
-      s->params = old;
-      rc = fg_state_write_failed(rc, "the scene's settings");
-    }
-  }
-  pthread_mutex_unlock(&s->lock);
-  return rc;
-}
 
 /* ---------------------------------------------------------------- scene objects */
 
@@ -651,7 +520,7 @@ int fg_store_open(fg_store **out, const char *state_dir, const fg_store_limits *
       scene_free(s);
       continue;
     }
-    if (read_scene_json(s) != 0 || fg_scene_frames_read(s) != 0) {
+    if (fg_scene_read_json(s) != 0 || fg_scene_frames_read(s) != 0) {
       fg_error("scene %s is left out: %s", s->name, fg_error_detail());
       scene_free(s);
       continue;
@@ -720,7 +589,7 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   s->declared = declared;
   s->created_ms = fg_real_ms();
   rc = fg_mkdir_p(s->frames_dir);
-  if (rc == 0) rc = write_scene_json(s);
+  if (rc == 0) rc = fg_scene_write_json(s);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
   if (rc == 0) rc = store_insert(st, s);
   if (rc == 0) {
@@ -898,10 +767,10 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
     } else {
       pthread_mutex_lock(&s->lock);
       s->declared = 1;
-      if (!params_equal(&s->params, &p)) {
+      if (!fg_scene_params_equal(&s->params, &p)) {
         fg_scene_params old = s->params;
         s->params = p;
-        rc = write_scene_json(s);
+        rc = fg_scene_write_json(s);
         if (rc != 0) s->params = old;
         else fg_info("scene %s: workspace, voxel size, background and field settings updated "
                      "from the configuration file", cs->name);
