@@ -748,7 +748,7 @@ bench_fox() {
     t0=$(now)
     job=$(curl -sf -X POST "$base/v1/scenes/fox/train" -H 'Content-Type: application/json' \
       -d "{\"steps\":${BENCH_FOX_STEPS:-3000},\"holdout_every\":10,\"distortion_weight\":$v}" |
-      json_str id)
+      json_str job)
     state=queued
     while [ "$state" = queued ] || [ "$state" = running ]; do
       sleep 2
