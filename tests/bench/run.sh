@@ -776,10 +776,11 @@ bench_fox() {
 bench_clear_table() {
   local seeds=${BENCH_CLEAR_SEEDS:-"200 201 202 203 204 205 206 207 208 209"} s line conf
   local layouts=0 objects=0 cleared=0 grasps=0 seconds=0 kinds= share pass
-  conf=$tmp/clear.conf
-  sed -e "s|^dir = .*|dir = $tmp/clear-state|" \
-      -e "s|^import_dirs = .*|import_dirs = $(realpath "$data")|" "$src/config/demo.conf" > "$conf"
   for s in $seeds; do
+    # a state dir of its own: a robot stopped in one layout stays stopped there
+    conf=$tmp/clear-$s.conf
+    sed -e "s|^dir = .*|dir = $tmp/clear-$s-state|" \
+        -e "s|^import_dirs = .*|import_dirs = $(realpath "$data")|" "$src/config/demo.conf" > "$conf"
     line=$("$src/scripts/demo.sh" --exit --clear-table --layout "$s" --config "$conf" \
              --out "$tmp/clear-$s" --build "$build" --steps "${BENCH_CLEAR_STEPS:-300}" \
              --update-steps "${BENCH_CLEAR_UPDATE_STEPS:-200}" 2>"$tmp/clear-$s.err" |
