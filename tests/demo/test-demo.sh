@@ -52,6 +52,7 @@ threads = 2
 [gripper]
 model = robotiq-2f85
 [robot]
+timeout_ms = 5000
 transport = tcp
 host = 127.0.0.1
 port = $modbus_port
@@ -60,6 +61,7 @@ limit_max = 1.00 1.00 1.00
 reach_m = 0.85
 speed_mps = 0.25
 [gripper.modbus]
+timeout_ms = 5000
 transport = tcp
 host = 127.0.0.1
 port = $modbus_port
