@@ -147,7 +147,10 @@ static char *with_bin(char *xml, const sim_cell_config *cfg) {
   if (!end) return xml;
   *end = 0;
   fg_strbuf b = {0};
-  fg_strbuf_printf(&b, "%s  <worldbody>\n    <body name=\"fg_bin\" pos=\"%.6f %.6f 0\">\n"
+  /* objects piled in the bin touch in many places: MuJoCo 2.2's default of 100 contacts
+   * overflowed ("contact buffer is full") when four fell in */
+  fg_strbuf_printf(&b, "%s  <size nconmax=\"1000\" njmax=\"6000\"/>\n"
+                   "  <worldbody>\n    <body name=\"fg_bin\" pos=\"%.6f %.6f 0\">\n"
                    "      <geom name=\"fg_bin/floor\" type=\"box\" size=\"%.6f %.6f %.6f\" "
                    "pos=\"0 0 %.6f\" rgba=\"0.35 0.35 0.38 1\"/>\n",
                    xml, cfg->bin_xy[0], cfg->bin_xy[1], 0.5 * SIM_BIN_INNER_M + SIM_BIN_WALL_M,
