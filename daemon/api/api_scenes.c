@@ -86,15 +86,20 @@ int fg_api_scenes_create(fg_req *req, fg_resp *resp) {
   return 0;
 }
 
-int fg_api_scene_get(fg_req *req, fg_resp *resp) {
-  fg_scene *s = fg_api_scene_param(req, resp);
-  if (!s) return 0;
+/* 200 with scene s's view as it is now; drops the caller's reference. */
+static int answer_scene(fg_req *req, fg_resp *resp, fg_scene *s) {
   fg_scene_info info;
   fg_scene_get_info(s, &info);
   fg_scene_unref(s);
   fg_api_scene_info_refresh(req->app, &info);
   fg_resp_json(resp, 200, fg_json_scene(&info));
   return 0;
+}
+
+int fg_api_scene_get(fg_req *req, fg_resp *resp) {
+  fg_scene *s = fg_api_scene_param(req, resp);
+  if (!s) return 0;
+  return answer_scene(req, resp, s);
 }
 
 /* PATCH /v1/scenes/{s}: the field settings, the only ones a scene's data does not depend on
@@ -126,12 +131,7 @@ int fg_api_scene_patch(fg_req *req, fg_resp *resp) {
     fg_scene_unref(s);
     return fg_api_fail(resp, rc);
   }
-  fg_scene_info info;
-  fg_scene_get_info(s, &info);
-  fg_scene_unref(s);
-  fg_api_scene_info_refresh(req->app, &info);
-  fg_resp_json(resp, 200, fg_json_scene(&info));
-  return 0;
+  return answer_scene(req, resp, s);
 }
 
 int fg_api_scene_delete(fg_req *req, fg_resp *resp) {
