@@ -10,6 +10,7 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #define CELL_MAX_OBJECTS 64
 #define CELL_MAX_PHASES 8
@@ -407,18 +408,37 @@ static void update_rest(sim_cell *c) {
                (objects_at_rest(c) || c->d->time - c->last_activity > CELL_REST_AFTER);
 }
 
+/* The longest a call at a time scale above 0 steps the cell before the cell's clock slips
+ * behind the wall's: fieldgrip-sim holds its lock while the cell steps, so on a machine that
+ * cannot keep up with the time scale the Modbus clients and the camera would otherwise wait
+ * for as long as it falls behind. A slip makes motions take longer in wall time, never in
+ * the cell's time, and a command's done waits for the cell's program to end. */
+#define ADVANCE_BUDGET_NS 50000000
+
+static int64_t mono_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
 void sim_cell_advance(sim_cell *c, int64_t now_ns) {
   if (sim_cell_busy(c)) {
     /* at time scale 0 up to a minute of the cell's time per call, so that the server answers
      * even if something never comes to rest */
-    const double until = c->cfg.time_scale > 0
-                             ? c->anchor_sim + (double)(now_ns - c->anchor_wall_ns) * 1e-9 /
-                                                   c->cfg.time_scale
-                             : c->d->time + 60;
+    const int scaled = c->cfg.time_scale > 0;
+    const double until = scaled ? c->anchor_sim + (double)(now_ns - c->anchor_wall_ns) * 1e-9 /
+                                                      c->cfg.time_scale
+                                : c->d->time + 60;
+    const int64_t give_up = scaled ? mono_ns() + ADVANCE_BUDGET_NS : 0;
     while (c->d->time < until) {
       step(c);
       update_rest(c);
       if (c->at_rest) break;
+      if (scaled && mono_ns() > give_up) { /* behind: the cell's clock slips */
+        c->anchor_wall_ns = mono_ns();
+        c->anchor_sim = c->d->time;
+        break;
+      }
     }
   }
   if (!sim_cell_busy(c)) {

@@ -43,14 +43,19 @@ void cellproc_stop(cellproc *c) {
 
 static uint16_t s16(double v) { return (uint16_t)(int16_t)lround(v); }
 
-int cellproc_command(cellproc *c, int seq, int cmd, const double p[3], const double rv[3],
-                     double width, double approach, double retreat) {
+void cellproc_command_start(cellproc *c, int seq, int cmd, const double p[3], const double rv[3],
+                           double width, double approach, double retreat, double speed) {
   const uint16_t w[13] = {(uint16_t)seq, (uint16_t)cmd, s16(p[0] * 1e4), s16(p[1] * 1e4),
                           s16(p[2] * 1e4), s16(rv[0] * 1e3), s16(rv[1] * 1e3), s16(rv[2] * 1e3),
                           (uint16_t)lround(width * 1e4), 40, (uint16_t)lround(approach * 1e4),
-                          (uint16_t)lround(retreat * 1e4), 100};
+                          (uint16_t)lround(retreat * 1e4), (uint16_t)lround(speed * 1e3)};
   if (modbus_write_registers(c->robot, CELLPROC_BASE, 13, w) != 13)
     FG_TEST_FAIL("write the block: %s", modbus_strerror(errno));
+}
+
+int cellproc_command(cellproc *c, int seq, int cmd, const double p[3], const double rv[3],
+                     double width, double approach, double retreat) {
+  cellproc_command_start(c, seq, cmd, p, rv, width, approach, retreat, 0.1);
   const double deadline = simproc_now_ms() + 60000;
   for (;;) {
     uint16_t v[2];

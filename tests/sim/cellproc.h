@@ -33,6 +33,10 @@ void cellproc_stop(cellproc *c);
 int cellproc_command(cellproc *c, int seq, int cmd, const double p[3], const double rv[3],
                      double width, double approach, double retreat);
 
+/* Writes that block with speed (m/s) and returns at once. */
+void cellproc_command_start(cellproc *c, int seq, int cmd, const double p[3], const double rv[3],
+                           double width, double approach, double retreat, double speed);
+
 /* The report's last line about seq, parsed; the caller decrefs. */
 json_t *cellproc_report(const cellproc *c, int seq);
 

@@ -3,7 +3,8 @@
  * the camera's true pose (X-Camera-Pose), the board's pose on the table, the intrinsics and
  * the distortion given on the command line put it; the depth image agrees; the TCP pose
  * registers, composed with the mount, give that same camera pose. Per-patch features from
- * the cell's labelled geoms. Bad requests and refused options too.
+ * the cell's labelled geoms. A cell far behind its time scale still answers. Bad requests
+ * and refused options too.
  * argv[1]: fieldgrip-sim, argv[2]: the cells folder. */
 #include <arpa/inet.h>
 #include <errno.h>
@@ -126,7 +127,9 @@ static void header_pose(const char *head, double T[16]) {
 
 /* ---------------------------------------------------------------- cases */
 
-static void start(cellproc *c) {
+/* The simulator on cells/blocks.xml with the camera and board above; time_scale NULL: the
+ * motions at once (cellproc's default). */
+static void start_scaled(cellproc *c, const char *time_scale) {
   char scene[PATH_MAX + 32], port_file[PATH_MAX + 16];
   snprintf(scene, sizeof scene, "%s/blocks.xml", g_cells);
   snprintf(port_file, sizeof port_file, "%s/camera.port", g_dir);
@@ -134,9 +137,11 @@ static void start(cellproc *c) {
   const char *extra[] = {"--camera-listen", "127.0.0.1:0", "--camera-port-file", port_file,
                          "--camera-mount", MOUNT, "--camera",
                          "610 605 322.4 236.8 640 480 -0.08 0.02 0.001 -0.0015", "--board",
-                         BOARD, NULL};
+                         BOARD, time_scale ? "--time-scale" : NULL, time_scale, NULL};
   cellproc_start(c, scene, "int16", g_dir, extra);
 }
+
+static void start(cellproc *c) { start_scaled(c, NULL); }
 
 static void test_sees_the_board(void) {
   cellproc c;
@@ -228,6 +233,34 @@ static void test_sees_the_board(void) {
   cellproc_stop(&c);
 }
 
+/* A cell far behind its time scale answers (sim/cell.c, ADVANCE_BUDGET_NS): at 1e-4 the cell
+ * would have to step 10,000 times faster than the wall clock, which no machine does. A move of
+ * 0.30 m at 1 mm/s (300 s of the cell's time) is under way: the camera shows the tool on its
+ * way, far from the end, and the block reads busy, instead of both waiting for the motion's
+ * end; and the simulator stops at once when told. */
+static void test_answers_while_behind(void) {
+  cellproc c;
+  start_scaled(&c, "0.0001");
+  const double from[3] = {0.35, -0.15, 0.30}, to[3] = {0.35, 0.15, 0.30}, rv[3] = {M_PI, 0, 0};
+  ASSERT_EQ(cellproc_command(&c, 1, 5, from, rv, 0.085, 0, 0), 2);
+  cellproc_command_start(&c, 2, 5, to, rv, 0.085, 0, 0, 0.001);
+  response r;
+  http_get(camera_port(), "GET /rgb.png HTTP/1.1\r\n\r\n", &r);
+  ASSERT_EQ(r.status, 200);
+  free(r.body);
+  double T_wc[16];
+  header_pose(r.head, T_wc);
+  /* pointing down, the camera is 0.02 m beside the tool in y */
+  fprintf(stderr, "behind its time scale: the camera at y %.3f m on the way from %.2f to %.2f\n",
+          T_wc[7] - 0.02, from[1], to[1]);
+  ASSERT(T_wc[7] - 0.02 < to[1] - 0.10);
+  uint16_t v[2];
+  ASSERT_EQ(modbus_read_registers(c.robot, CELLPROC_BASE + 13, 2, v), 2);
+  ASSERT_EQ(v[0], 2);
+  ASSERT_EQ(v[1], 1); /* busy */
+  cellproc_stop(&c);
+}
+
 /* Features: a cell whose geoms carry vectors (cells/labelled.xml) serves one per 16 x 16
  * patch, the vector of what most of the patch shows; a cell without them answers 404. */
 static void test_features(void) {
@@ -307,6 +340,7 @@ int main(int argc, char **argv) {
   simproc_init(g_sim, g_dir);
   signal(SIGPIPE, SIG_IGN);
   test_sees_the_board();
+  test_answers_while_behind();
   fprintf(stderr, "ok sees_the_board\n");
   test_features();
   fprintf(stderr, "ok features\n");
