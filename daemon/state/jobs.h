@@ -186,6 +186,10 @@ void fg_jobs_count(fg_jobs *jobs, size_t counts[FG_JOB_N_STATES]);
 /* The job object of the API (proto/openapi.yaml, Job). */
 json_t *fg_job_info_json(const fg_job_info *info);
 
+/* Reads a job back from last_job.json (the API object plus created_ms, started_ms,
+ * finished_ms). FG_EFORMAT when it is not one. */
+int fg_job_info_from_json(json_t *o, fg_job_info *info);
+
 /* ---------------------------------------------------------------- for run functions
  * Called by a kind's run function, on the worker thread, while its job runs. */
 
