@@ -75,6 +75,11 @@ struct fg_trainer {
   float *occ_x, *occ_sigma;
   int32_t occ_cap;
   void *mem;
+  /* Focus (fg_trainer_focus): the kept cells, over the training frames and those with
+   * features, and the share of rays drawn from them. */
+  struct focus_cell *focus, *focus_f;
+  size_t n_focus, n_focus_f;
+  float focus_fraction;
 };
 
 void fg_train_opts_default(fg_train_opts *o) {
@@ -269,6 +274,8 @@ void fg_trainer_free(fg_trainer *t) {
   free(t->train_idx);
   free(t->feat_idx);
   free(t->held_idx);
+  free(t->focus);
+  free(t->focus_f);
   free(t);
 }
 
@@ -342,22 +349,55 @@ static float pixel_depth(const fg_frame *fr, float px, float py, float margin) {
   return (z00 * (1.0f - fx) + z01 * fx) * (1.0f - fy) + (z10 * (1.0f - fx) + z11 * fx) * fy;
 }
 
+/* ---- focus: where the views changed (fg_trainer_focus) ---------------------------------- */
+
+typedef struct focus_cell {
+  uint32_t frame; /* index into frames */
+  uint16_t cu, cv; /* the cell's column and row */
+} focus_cell;
+
+/* The cell side (pixels) for a w x h frame: FG_TRAIN_FOCUS_CELL, or more so that about 4096
+ * cells cover it. */
+static int focus_side(int w, int h) {
+  const int s = (int)ceil(sqrt((double)w * (double)h / 4096.0));
+  return s > FG_TRAIN_FOCUS_CELL ? s : FG_TRAIN_FOCUS_CELL;
+}
+
 /* Draws the step's R rays (the first R_f from frames with features), each jittered within its
- * pixel, with the depth measured at its position (pixel_depth). */
+ * pixel, with the depth measured at its position (pixel_depth); with a focus, a share of them
+ * from its kept cells. */
 static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
   const uint64_t seed = t->opts.seed;
   const int64_t step = t->step;
 #pragma omp parallel for schedule(static) num_threads(t->opts.n_threads)
   for (int32_t r = 0; r < R; r++) {
-    const size_t fi = r < R_f ? t->feat_idx[below(hash4(seed, step, (uint64_t)r, STREAM_FRAME),
-                                                  (uint32_t)t->n_feat)]
-                              : t->train_idx[below(hash4(seed, step, (uint64_t)r, STREAM_FRAME),
-                                                   (uint32_t)t->n_train)];
-    const fg_frame *fr = &t->frames[fi];
     const uint64_t hp = hash4(seed, step, (uint64_t)r, STREAM_PIXEL);
     const uint64_t hj = hash4(seed, step, (uint64_t)r, STREAM_JITTER);
-    const int u = (int)below(hp, (uint32_t)fr->cam.w);
-    const int v = (int)below(hp << 32, (uint32_t)fr->cam.h);
+    const focus_cell *fc = NULL;
+    const size_t n_fc = r < R_f ? t->n_focus_f : t->n_focus;
+    if (n_fc && t->focus_fraction > 0.0f) {
+      const uint64_t hf = fg_mix64(hj ^ 0x243f6a8885a308d3ull);
+      if (unit24(hf, 0) < t->focus_fraction)
+        fc = (r < R_f ? t->focus_f : t->focus) + below(hf, (uint32_t)n_fc);
+    }
+    size_t fi;
+    if (fc)
+      fi = fc->frame;
+    else if (r < R_f)
+      fi = t->feat_idx[below(hash4(seed, step, (uint64_t)r, STREAM_FRAME), (uint32_t)t->n_feat)];
+    else
+      fi = t->train_idx[below(hash4(seed, step, (uint64_t)r, STREAM_FRAME), (uint32_t)t->n_train)];
+    const fg_frame *fr = &t->frames[fi];
+    int u, v;
+    if (fc) {
+      const int side = focus_side(fr->cam.w, fr->cam.h);
+      const int u0 = fc->cu * side, v0 = fc->cv * side;
+      u = u0 + (int)below(hp, (uint32_t)(fr->cam.w - u0 < side ? fr->cam.w - u0 : side));
+      v = v0 + (int)below(hp << 32, (uint32_t)(fr->cam.h - v0 < side ? fr->cam.h - v0 : side));
+    } else {
+      u = (int)below(hp, (uint32_t)fr->cam.w);
+      v = (int)below(hp << 32, (uint32_t)fr->cam.h);
+    }
     const float px = (float)u + unit24(hj, 0), py = (float)v + unit24(hj, 24);
     const float z = t->geometry && t->opts.depth_weight > 0.0f
                         ? pixel_depth(fr, px, py, t->opts.depth_margin)
@@ -367,6 +407,112 @@ static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
     if (t->geometry) t->depth_z[r] = (float)(z * per_z / t->f->cfg.box_size); /* 0: none */
     if (r < R_f) pixel_feature(fr, u, v, t->ftarget + (size_t)r * (size_t)t->D);
   }
+}
+
+/* Which cells of frame fr changed (changed[nx * ny]), before rendered at their centres
+ * through the rays' buffers o, d, ow (3 * nx * ny each) and out (5 * nx * ny). */
+static int focus_frame(const fg_trainer *t, const fg_field *before, const fg_frame *fr, int side,
+                       int nx, int ny, float *o, float *d, float *ow, float *out,
+                       unsigned char *changed) {
+  const int n = nx * ny;
+  const fg_field *f = t->f;
+  float *rgb = out, *dist = out + 3 * (size_t)n, *opacity = out + 4 * (size_t)n;
+  double *per_z = malloc((size_t)n * sizeof *per_z);
+  if (!per_z) return fg_fail(FG_ENOMEM, "cannot allocate the focus's rays");
+  for (int c = 0; c < n; c++) {
+    const int u = (c % nx) * side + side / 2, v = (c / nx) * side + side / 2;
+    const float px = (float)(u < fr->cam.w ? u : fr->cam.w - 1) + 0.5f;
+    const float py = (float)(v < fr->cam.h ? v : fr->cam.h - 1) + 0.5f;
+    per_z[c] = frame_ray(f, fr, px, py, o + 3 * c, d + 3 * c);
+    for (int k = 0; k < 3; k++)
+      ow[3 * c + k] = (float)(o[3 * c + k] * f->cfg.box_size + f->cfg.box_min[k]);
+  }
+  int rc = fg_field_render_rays(before, ow, d, n,
+                                before->cfg.learn_background ? NULL : t->opts.background, rgb,
+                                dist, opacity, NULL, t->opts.n_threads);
+  for (int c = 0; c < n && rc == 0; c++) {
+    const int u = (c % nx) * side + side / 2, v = (c / nx) * side + side / 2;
+    const int uu = u < fr->cam.w ? u : fr->cam.w - 1, vv = v < fr->cam.h ? v : fr->cam.h - 1;
+    float ref[3];
+    pixel_rgb(fr, uu, vv, ref);
+    const float drgb = (fabsf(rgb[3 * c] - ref[0]) + fabsf(rgb[3 * c + 1] - ref[1]) +
+                        fabsf(rgb[3 * c + 2] - ref[2])) / 3.0f;
+    changed[c] = drgb > FG_TRAIN_FOCUS_RGB;
+    const float zm = pixel_depth(fr, (float)uu + 0.5f, (float)vv + 0.5f, t->opts.depth_margin);
+    if (changed[c] || !(zm > 0.0f)) continue;
+    const double along = zm * per_z[c] / f->cfg.box_size; /* cube units */
+    int inside = 1;
+    for (int k = 0; k < 3; k++) {
+      const double x = o[3 * c + k] + d[3 * c + k] * along;
+      inside &= x >= 0.0 && x <= 1.0;
+    }
+    if (!inside) continue;
+    changed[c] = opacity[c] < 0.5f ||
+                 fabs(dist[c] / opacity[c] / per_z[c] - zm) > FG_TRAIN_FOCUS_DEPTH;
+  }
+  free(per_z);
+  return rc;
+}
+
+int fg_trainer_focus(fg_trainer *t, const fg_field *before, float fraction,
+                     fg_train_focus_stats *stats) {
+  if (!before || !(fraction >= 0.0f && fraction <= 1.0f))
+    return fg_fail(FG_EINVAL, "focus: no field before, or a fraction outside [0, 1]");
+  char why[160];
+  if (!fg_field_config_same(&before->cfg, &t->f->cfg, why, sizeof why))
+    return fg_fail(FG_EINVAL, "focus: the field before differs from the trainer's: %s", why);
+  free(t->focus);
+  free(t->focus_f);
+  t->focus = t->focus_f = NULL;
+  t->n_focus = t->n_focus_f = 0;
+  t->focus_fraction = 0.0f;
+  fg_train_focus_stats st = {0};
+  size_t cap = 0, max_cells = 0;
+  for (size_t k = 0; k < t->n_train; k++) {
+    const fg_frame *fr = &t->frames[t->train_idx[k]];
+    const int side = focus_side(fr->cam.w, fr->cam.h);
+    const size_t n = (size_t)((fr->cam.w + side - 1) / side) * (size_t)((fr->cam.h + side - 1) / side);
+    cap += n;
+    max_cells = n > max_cells ? n : max_cells;
+  }
+  float *buf = malloc(max_cells * 14 * sizeof(float));
+  unsigned char *changed = malloc(max_cells);
+  t->focus = malloc(cap * sizeof *t->focus);
+  t->focus_f = malloc(cap * sizeof *t->focus_f);
+  int rc = buf && changed && t->focus && t->focus_f
+             ? 0 : fg_fail(FG_ENOMEM, "cannot allocate the focus's cells");
+  for (size_t k = 0; k < t->n_train && rc == 0; k++) {
+    const size_t fi = t->train_idx[k];
+    const fg_frame *fr = &t->frames[fi];
+    const int side = focus_side(fr->cam.w, fr->cam.h);
+    const int nx = (fr->cam.w + side - 1) / side, ny = (fr->cam.h + side - 1) / side;
+    const size_t n = (size_t)nx * (size_t)ny;
+    rc = focus_frame(t, before, fr, side, nx, ny, buf, buf + 3 * n, buf + 6 * n, buf + 9 * n,
+                     changed);
+    for (int c = 0; c < (int)n && rc == 0; c++) {
+      const int cu = c % nx, cv = c / nx;
+      int near = 0;
+      for (int y = cv - 1; y <= cv + 1 && !near; y++)
+        for (int x = cu - 1; x <= cu + 1 && !near; x++)
+          near = x >= 0 && x < nx && y >= 0 && y < ny && changed[y * nx + x];
+      st.cells++;
+      st.changed += changed[c];
+      if (!near) continue;
+      const focus_cell fc = {(uint32_t)fi, (uint16_t)cu, (uint16_t)cv};
+      t->focus[t->n_focus++] = fc;
+      if (fr->feat_d) t->focus_f[t->n_focus_f++] = fc;
+    }
+  }
+  free(changed);
+  free(buf);
+  if (rc != 0) {
+    t->n_focus = t->n_focus_f = 0;
+    return rc;
+  }
+  st.kept = (int64_t)t->n_focus;
+  t->focus_fraction = fraction;
+  if (stats) *stats = st;
+  return 0;
 }
 
 /* Marches R rays; when their samples exceed the capacity, keeps the longest prefix of rays

@@ -107,6 +107,35 @@ int fg_trainer_step(fg_trainer *t, fg_train_stats *stats);
 int fg_trainer_loss_grad(fg_trainer *t, fg_train_stats *stats);
 const float *fg_trainer_grad(const fg_trainer *t);
 
+/* Where the views changed: an update's rays drawn more where the scene changed (issue 39,
+ * "only what changed"). before is the scene's field as it was (its own occupancy grid; the
+ * trainer's field, fg_field_copy_for_update's copy of it, has a new one), with the trainer's
+ * configuration. Every training frame is cut into square cells of FG_TRAIN_FOCUS_CELL pixels
+ * (larger for frames of more than 4096 such cells, so that at most about 4096 are looked at
+ * per frame); before is rendered at each cell's centre pixel, and a cell changed where
+ *   - the mean absolute colour difference over the three channels exceeds FG_TRAIN_FOCUS_RGB, or
+ *   - the frame measured a depth there (as the depth loss reads it) on a surface inside the
+ *     field's cube, and before's render there is less than half opaque or its z-depth is more
+ *     than FG_TRAIN_FOCUS_DEPTH metres from the measurement;
+ * the changed cells and their 8 neighbours are kept. From then on a share `fraction` of every
+ * step's rays (feature rays from the kept cells of frames with features) picks a kept cell
+ * uniformly and a pixel in it uniformly; the others are drawn as without focus. fraction 0 or
+ * no changed cell: the trainer draws as before the call. The draws stay a function of the
+ * seed, step and ray. stats (may be NULL): the cells looked at and kept. 0, FG_EINVAL (fraction
+ * outside [0, 1], before NULL or of another configuration), FG_ENOMEM. */
+#define FG_TRAIN_FOCUS_CELL 4    /* pixels */
+#define FG_TRAIN_FOCUS_RGB 0.1f  /* mean absolute difference, colour in [0, 1] */
+#define FG_TRAIN_FOCUS_DEPTH 0.02f /* metres */
+
+typedef struct fg_train_focus_stats {
+  int64_t cells;   /* cells looked at, over the training frames */
+  int64_t changed; /* of them, changed */
+  int64_t kept;    /* changed or beside a changed one: where the focus draws */
+} fg_train_focus_stats;
+
+int fg_trainer_focus(fg_trainer *t, const fg_field *before, float fraction,
+                     fg_train_focus_stats *stats);
+
 /* Number of held-out frames. */
 size_t fg_trainer_n_heldout(const fg_trainer *t);
 

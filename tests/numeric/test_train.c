@@ -5,6 +5,8 @@
  *  - determinism: two trainings with the same frames, seed and threads give the same
  *    parameters and byte-identical checkpoints;
  *  - a checkpoint loads into a field that renders the same pixels and features;
+ *  - an update's focus (fg_trainer_focus) finds the cells where the frames differ from the
+ *    field before, in colour or in measured depth, and draws its rays there;
  *  - bad input to the trainer is refused with a detail. */
 #include <unistd.h>
 
@@ -363,11 +365,154 @@ static void test_bad_input(void) {
   for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
 }
 
+/* ---- focus (fg_trainer_focus) --------------------------------------------------------- */
+
+/* An empty field (an empty occupancy grid: every ray sees the white background, opacity 0)
+ * and frames that show exactly that: white, no depth, features on. */
+static fg_field *empty_field(void) {
+  fg_field_config cfg;
+  small_config(&cfg, FD);
+  fg_field *f;
+  ASSERT_OK(fg_field_new(&f, &cfg, 11));
+  const int N = fg_occgrid_resolution(f->occ);
+  uint64_t *bits = calloc((size_t)N * N * N / 64, sizeof *bits);
+  ASSERT(bits);
+  ASSERT_OK(fg_occgrid_set_bits(f->occ, bits, 1));
+  free(bits);
+  return f;
+}
+
+static void white_frames(fg_frame *fr) {
+  make_frames(fr, 1);
+  for (int i = 0; i < N_FRAMES; i++)
+    for (int k = 0; k < W * H * 3; k++) fr[i].rgb[k] = 65535;
+}
+
+/* Pixels [8, 16) x [4, 12): the centres of exactly the 4 cells (2, 1), (3, 1), (2, 2), (3, 2)
+ * of 4 pixels; with their neighbours, 16 cells. */
+static int in_patch(int u, int v) { return u >= 8 && u < 16 && v >= 4 && v < 12; }
+
+static void paint_red(fg_frame *fr) {
+  for (int v = 0; v < H; v++)
+    for (int u = 0; u < W; u++)
+      if (in_patch(u, v)) {
+        fr->rgb[(v * W + u) * 3 + 1] = 0;
+        fr->rgb[(v * W + u) * 3 + 2] = 0;
+      }
+}
+
+/* A depth map: z metres in the patch (patch_only) or everywhere, none elsewhere. */
+static void give_depth(fg_frame *fr, float z, int patch_only) {
+  fr->depth = calloc(W * H, sizeof(float));
+  ASSERT(fr->depth);
+  for (int v = 0; v < H; v++)
+    for (int u = 0; u < W; u++)
+      if (!patch_only || in_patch(u, v)) fr->depth[v * W + u] = z;
+}
+
+static fg_trainer *focus_trainer(const fg_field *before, fg_frame *fr, fg_field **copy) {
+  ASSERT_OK(fg_field_copy_for_update(before, copy));
+  fg_train_opts o = small_opts();
+  o.target_samples = 1 << 16; /* 256 rays a step through the full grid at first */
+  fg_trainer *t;
+  ASSERT_OK(fg_trainer_new(&t, *copy, fr, N_FRAMES, &o));
+  return t;
+}
+
+static void test_focus(void) {
+  fg_field *before = empty_field(), *copy, *plain;
+  fg_frame fr[N_FRAMES];
+  fg_train_focus_stats st;
+
+  /* Nothing changed: nothing kept, and the draws are those of no focus, bit for bit. */
+  white_frames(fr);
+  fg_trainer *t = focus_trainer(before, fr, &copy), *u = focus_trainer(before, fr, &plain);
+  ASSERT_OK(fg_trainer_focus(t, before, 0.5f, &st));
+  ASSERT_EQ(st.cells, N_FRAMES * 6 * 5); /* 24 x 18 pixels: 6 x 5 cells a frame */
+  ASSERT_EQ(st.changed, 0);
+  ASSERT_EQ(st.kept, 0);
+  for (int s = 0; s < 3; s++) {
+    ASSERT_OK(fg_trainer_step(t, NULL));
+    ASSERT_OK(fg_trainer_step(u, NULL));
+  }
+  ASSERT(memcmp(copy->params, plain->params, copy->n_params * sizeof(float)) == 0);
+  fg_trainer_free(t);
+  fg_trainer_free(u);
+  fg_field_free(copy);
+  fg_field_free(plain);
+  for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
+
+  /* A red patch in frame 0; a surface 1 m away in frame 1's patch, where before has none;
+   * frame 2 measures 100 m everywhere, outside the field's cube: not a change. */
+  white_frames(fr);
+  paint_red(&fr[0]);
+  give_depth(&fr[1], 1.0f, 1);
+  give_depth(&fr[2], 100.0f, 0);
+  t = focus_trainer(before, fr, &copy);
+  ASSERT_OK(fg_trainer_focus(t, before, 0.5f, &st));
+  ASSERT_EQ(st.changed, 8);
+  ASSERT_EQ(st.kept, 32);
+  fg_trainer_free(t);
+  fg_field_free(copy);
+  for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
+
+  /* The draws: only frame 1's patch has depth. Every ray from its 16 kept cells (fraction 1)
+   * carries depth about a fifth of the time (the patch's quarter of them, less its border,
+   * where the depth loss's four neighbours are not all measured), against about 3 % of the
+   * rays drawn over all frames. */
+  white_frames(fr);
+  give_depth(&fr[1], 1.0f, 1);
+  t = focus_trainer(before, fr, &copy);
+  fg_train_stats s0, s1;
+  ASSERT_OK(fg_trainer_loss_grad(t, &s0));
+  ASSERT_OK(fg_trainer_focus(t, before, 1.0f, &st));
+  ASSERT_EQ(st.kept, 16);
+  ASSERT_OK(fg_trainer_loss_grad(t, &s1));
+  ASSERT_EQ(s1.rays, s0.rays);
+  printf("focus: %d of %d rays with depth drawn over all frames, %d with the focus\n",
+         s0.depth_rays, s0.rays, s1.depth_rays);
+  ASSERT(s1.depth_rays > 4 * s0.depth_rays);
+  ASSERT(s1.depth_rays > s1.rays / 10);
+  fg_trainer_free(t);
+  fg_field_free(copy);
+
+  /* The same frames, seed and focus give the same parameters. */
+  t = focus_trainer(before, fr, &copy);
+  u = focus_trainer(before, fr, &plain);
+  ASSERT_OK(fg_trainer_focus(t, before, 0.5f, NULL));
+  ASSERT_OK(fg_trainer_focus(u, before, 0.5f, NULL));
+  for (int s = 0; s < 3; s++) {
+    ASSERT_OK(fg_trainer_step(t, NULL));
+    ASSERT_OK(fg_trainer_step(u, NULL));
+  }
+  ASSERT(memcmp(copy->params, plain->params, copy->n_params * sizeof(float)) == 0);
+  fg_trainer_free(u);
+  fg_field_free(plain);
+
+  /* Bad input. */
+  ASSERT_ERR(fg_trainer_focus(t, before, -0.1f, NULL), FG_EINVAL, "fraction");
+  ASSERT_ERR(fg_trainer_focus(t, before, 1.5f, NULL), FG_EINVAL, "fraction");
+  ASSERT_ERR(fg_trainer_focus(t, before, NAN, NULL), FG_EINVAL, "fraction");
+  ASSERT_ERR(fg_trainer_focus(t, NULL, 0.5f, NULL), FG_EINVAL, "no field");
+  fg_field_config cfg;
+  small_config(&cfg, FD);
+  cfg.box_size *= 2.0;
+  fg_field *other;
+  ASSERT_OK(fg_field_new(&other, &cfg, 1));
+  ASSERT_ERR(fg_trainer_focus(t, other, 0.5f, NULL), FG_EINVAL, "differs");
+  fg_field_free(other);
+  fg_trainer_free(t);
+  fg_field_free(copy);
+  for (int i = 0; i < N_FRAMES; i++) fg_frame_clear(&fr[i]);
+  fg_field_free(before);
+}
+
 int main(void) {
   test_gradient();
   test_gradient_geometry();
   test_determinism_and_checkpoint();
   test_bad_input();
+  test_focus();
   printf("ok\n");
   return 0;
 }
