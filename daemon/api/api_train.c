@@ -8,6 +8,7 @@
 
 #include "core/clock.h"
 #include "core/error.h"
+#include "field/train.h"
 
 #include <errno.h>
 #include <math.h>
@@ -103,17 +104,35 @@ static int json_init(json_t *obj, fg_job_params *p) {
                  "from the scene's field)");
 }
 
+/* "focus": the share of an update's rays drawn where the views changed, 0..1; default
+ * FG_TRAIN_FOCUS_FRACTION for an update, none for a new field (which has no views to
+ * compare). After json_init. */
+static int json_focus(json_t *obj, fg_job_params *p) {
+  p->focus = p->init_current ? FG_TRAIN_FOCUS_FRACTION : 0.0;
+  double f;
+  const int rc = fg_json_number(obj, "focus", &f);
+  FG_TRY(rc);
+  if (!rc) return 0;
+  if (!(f >= 0.0 && f <= 1.0))
+    return fg_fail(FG_EINVAL, "\"focus\" must be a share of the rays from 0 to 1");
+  if (f > 0.0 && !p->init_current)
+    return fg_fail(FG_EINVAL, "\"focus\" draws an update's rays where the views differ from "
+                   "the scene's field; it needs \"init\": \"current\"");
+  p->focus = f;
+  return 0;
+}
+
 /* Reads the body of POST .../train over the defaults. 0, or FG_EINVAL with a detail. */
 static int train_params(json_t *body, const fg_conf *conf, fg_job_params *p) {
   static const char *const keys[] = {"steps",        "seed",
                                      "max_seconds",  "holdout_every",
                                      "depth_weight", "distortion_weight",
                                      "captures",     "init",
-                                     NULL};
+                                     "focus",        NULL};
   const char *key = fg_json_unknown_key(body, keys);
   if (key)
     return fg_fail(FG_EINVAL, "unknown key \"%s\"; a training takes steps, seed, max_seconds, "
-                   "holdout_every, depth_weight, distortion_weight, captures and init", key);
+                   "holdout_every, depth_weight, distortion_weight, captures, init and focus", key);
   memset(p, 0, sizeof *p);
   p->steps = conf->train_steps;
   long long x = 0;
@@ -137,6 +156,7 @@ static int train_params(json_t *body, const fg_conf *conf, fg_job_params *p) {
   FG_TRY(json_loss_weight(body, "distortion_weight", &p->distortion_weight));
   FG_TRY(json_captures(body, p));
   FG_TRY(json_init(body, p));
+  FG_TRY(json_focus(body, p));
   return 0;
 }
 

@@ -58,6 +58,13 @@ json_t *fg_job_info_json(const fg_job_info *j) {
   }
   json_object_set_new(o, "captures", captures);
   json_object_set_new(o, "init", json_string(j->params.init_current ? "current" : "random"));
+  json_object_set_new(o, "focus", json_real(j->params.focus));
+  json_object_set_new(o, "changes", j->changes_cells
+                                      ? json_pack("{s:I,s:I,s:I}", "cells",
+                                                  (json_int_t)j->changes_cells, "changed",
+                                                  (json_int_t)j->changes_changed, "kept",
+                                                  (json_int_t)j->changes_kept)
+                                      : json_null());
   json_object_set_new(o, "frames", json_integer(j->n_frames));
   json_object_set_new(o, "heldout_frames", json_integer(j->n_heldout));
   if (strcmp(j->kind, "scan") == 0 || strcmp(j->kind, "calibrate") == 0)
@@ -140,6 +147,12 @@ int fg_job_info_from_json(json_t *o, fg_job_info *j) {
   }
   const char *init = json_string_value(json_object_get(o, "init"));
   j->params.init_current = init && strcmp(init, "current") == 0;
+  const double focus = jnum(o, "focus"); /* absent before focus: none */
+  j->params.focus = isfinite(focus) ? focus : 0.0;
+  json_t *changes = json_object_get(o, "changes");
+  j->changes_cells = jint(changes, "cells");
+  j->changes_changed = jint(changes, "changed");
+  j->changes_kept = jint(changes, "kept");
   j->n_frames = (int)jint(o, "frames");
   j->n_heldout = (int)jint(o, "heldout_frames");
   const char *phase = json_string_value(json_object_get(o, "phase"));

@@ -40,6 +40,7 @@ typedef struct train_run {
   int *frame_numbers;     /* (n_frames), each frame's number in the scene */
   size_t n_frames;
   fg_field *field;        /* the field it trains; NULL once the scene has it */
+  fg_field_ref *before;   /* an update's field as it was, until its focus is set up */
   fg_trainer *trainer;
   size_t n_heldout;       /* frames held out for PSNR */
   int64_t steps_done;
@@ -282,6 +283,10 @@ static int make_field(train_run *run, const fg_scene_info *info, int feature_dim
   if (rc == 0)
     rc = current ? fg_field_copy_for_update(current, &run->field)
                  : fg_field_new(&run->field, &cfg, run->params.seed);
+  if (rc == 0 && current && run->params.focus > 0.0) {
+    run->before = ref; /* setup_trainer compares the new views with it */
+    ref = NULL;
+  }
   fg_field_ref_release(ref);
   if (rc != 0) return rc;
   fg_job_info *ji = fg_job_update_begin(run->job);
@@ -321,6 +326,27 @@ static int setup_trainer(train_run *run) {
     return rc;
   }
   run->n_heldout = fg_trainer_n_heldout(run->trainer);
+  if (run->before) {
+    const double t0 = fg_mono_s();
+    fg_train_focus_stats st;
+    rc = fg_trainer_focus(run->trainer, fg_field_ref_field(run->before), (float)run->params.focus,
+                          &st);
+    fg_field_ref_release(run->before);
+    run->before = NULL;
+    if (rc != 0) {
+      fg_job_fail(run->job, "cannot compare the views with the scene's field: %s",
+                  fg_error_detail());
+      return rc;
+    }
+    fg_job_info *ji = fg_job_update_begin(run->job);
+    ji->changes_cells = st.cells;
+    ji->changes_changed = st.changed;
+    ji->changes_kept = st.kept;
+    fg_job_update_end(run->job);
+    fg_info("job %s: the views changed in %lld of %lld cells; %g of the rays drawn from %lld "
+            "cells around them (%.2f s)", run->id, (long long)st.changed, (long long)st.cells,
+            run->params.focus, (long long)st.kept, fg_mono_s() - t0);
+  }
   fg_job_info *info = fg_job_update_begin(run->job);
   info->n_frames = (int)run->n_frames;
   info->n_heldout = (int)run->n_heldout;
@@ -481,6 +507,7 @@ static int handle_stop(train_run *run) {
 }
 
 static void train_run_free(train_run *run) {
+  fg_field_ref_release(run->before);
   fg_trainer_free(run->trainer);
   fg_field_free(run->field);
   fg_scene_frames_free(run->frames, run->n_frames);

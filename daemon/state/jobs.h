@@ -74,6 +74,8 @@ typedef struct fg_job_params {
   int n_captures;
   int all_captures;
   int init_current; /* 1: start from the scene's field ("init": "current"), 0: "random" */
+  double focus;     /* an update's share of rays drawn where the views changed
+                       (fg_trainer_focus); 0: none */
 } fg_job_params;
 
 /* A consistent copy of a job. Times in Unix milliseconds, 0 when not yet. */
@@ -104,6 +106,10 @@ typedef struct fg_job_info {
   int field_learn_background; /* ... its background ... */
   char field_chosen_by[16]; /* ... and what chose them: "settings", "depth", "cameras",
                                "current field"; "" until the field is set up */
+  int64_t changes_cells;   /* an update's focus (fg_train_focus_stats): cells looked at, 0
+                              until then and without a focus ... */
+  int64_t changes_changed; /* ... those that changed ... */
+  int64_t changes_kept;    /* ... and those its rays are drawn from */
   char error[512];       /* "" unless failed */
   uint64_t version;      /* +1 for every change */
 } fg_job_info;

@@ -123,6 +123,7 @@ const float *fg_trainer_grad(const fg_trainer *t);
  * no changed cell: the trainer draws as before the call. The draws stay a function of the
  * seed, step and ray. stats (may be NULL): the cells looked at and kept. 0, FG_EINVAL (fraction
  * outside [0, 1], before NULL or of another configuration), FG_ENOMEM. */
+#define FG_TRAIN_FOCUS_FRACTION 0.5f /* the daemon's default for an update */
 #define FG_TRAIN_FOCUS_CELL 4    /* pixels */
 #define FG_TRAIN_FOCUS_RGB 0.1f  /* mean absolute difference, colour in [0, 1] */
 #define FG_TRAIN_FOCUS_DEPTH 0.02f /* metres */

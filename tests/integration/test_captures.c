@@ -2,7 +2,8 @@
  * GET .../captures, trainings on the newest capture by default, on "all" or on named ones
  * (404 for one that does not exist), "init": "current" (409 without a field, or with a field
  * of another workspace or feature dimension; an update goes on from the scene's field, is
- * deterministic, and a cancelled one leaves the field as it was), deleting a capture (its
+ * deterministic, and a cancelled one leaves the field as it was), an update's focus where
+ * the views changed ("focus": its default, 0, and 400s), deleting a capture (its
  * frames and their cached features gone, 404 the second time, 409 while a job runs, a
  * deletion cut short finished at the next start), and all of it across a restart.
  *
@@ -220,7 +221,14 @@ static void test_update(void) {
   char *again = file_bytes("cap", "field.fgc", &a_len);
   ASSERT(a_len == base_len && memcmp(again, base, a_len) == 0);
   free(again);
-  json_decref(train_done("cap", "{\"steps\": 6, \"captures\": [2], \"init\": \"current\"}"));
+  u = train_done("cap", "{\"steps\": 6, \"captures\": [2], \"init\": \"current\"}");
+  /* an update draws half its rays where its views differ from the field by default */
+  ASSERT(fabs(JNUM(u, "focus") - 0.5) < 1e-9);
+  const long long cells = JINT(u, "changes.cells"), changed = JINT(u, "changes.changed");
+  const long long kept = JINT(u, "changes.kept");
+  fprintf(stderr, "update's focus: %lld of %lld cells changed, %lld kept\n", changed, cells, kept);
+  ASSERT(cells > 0 && changed >= 0 && changed <= kept && kept <= cells);
+  json_decref(u);
   char *a = file_bytes("cap", "field.fgc", &a_len);
   json_t *s = t_scene_json("cap");
   ASSERT_EQ(JINT(s, "trained_steps"), 6); /* the update's own */
@@ -230,6 +238,28 @@ static void test_update(void) {
   char *b = file_bytes("cap", "field.fgc", &b_len);
   ASSERT(a_len == b_len && memcmp(a, b, a_len) == 0);
   ASSERT(a_len != base_len || memcmp(a, base, a_len) != 0);
+
+  /* focus 0: every ray drawn as a new field's, nothing compared; a focus is a share, and a
+   * new field has nothing to compare with */
+  json_decref(train_done("cap", "{\"steps\": 20, \"captures\": [1], \"seed\": 4}"));
+  u = train_done("cap", "{\"steps\": 6, \"captures\": [2], \"init\": \"current\", "
+                 "\"focus\": 0}");
+  ASSERT(JNUM(u, "focus") == 0.0);
+  ASSERT(json_is_null(JGET(u, "changes")));
+  json_decref(u);
+  char *c = file_bytes("cap", "field.fgc", &b_len);
+  ASSERT(b_len != a_len || memcmp(c, a, a_len) != 0); /* the focus changed the update */
+  free(c);
+  json_t *fresh_job = train_done("cap", "{\"steps\": 1, \"captures\": [1]}");
+  ASSERT(JNUM(fresh_job, "focus") == 0.0);
+  json_decref(fresh_job);
+  static const char *const bad_focus[] = {
+      "{\"init\": \"current\", \"focus\": 1.5}", "{\"init\": \"current\", \"focus\": -0.1}",
+      "{\"init\": \"current\", \"focus\": \"half\"}", "{\"focus\": 0.5}"};
+  for (size_t i = 0; i < sizeof bad_focus / sizeof *bad_focus; i++)
+    expect_error("POST", "/v1/scenes/cap/train", bad_focus[i], 400, "invalid_request");
+  free(b);
+  b = file_bytes("cap", "field.fgc", &b_len); /* the field the cancelled update must keep */
 
   /* cancelled half way: the field stays; meanwhile no capture can be deleted */
   char *id = t_train("cap", LONG_JOB);
