@@ -10,6 +10,8 @@
  * scratch. After, two trainings on the new views, each looked at every --every steps up to
  * --max:
  *   update   from the field before (fg_field_copy_for_update: "init": "current");
+ *   focus    the same, with --focus percent of the rays drawn where the views changed
+ *            (fg_trainer_focus; --focus 0 leaves this run out);
  *   scratch  from random weights.
  * At each look: the share of the mug's voxels (where it stood, 1 cm; those 1.5 cm above the
  * table) that are free (alpha < 0.1), and the moved box's heatmap IoU (its class against the
@@ -18,14 +20,15 @@
  * own (not the looks').
  *
  * Usage: bench_update --scenegen PROGRAM [--seed N] [--steps N] [--max N] [--every N]
- *                     [--threads N] [--depth both|with|without]
- * Defaults: seed 0, 1500 steps before, up to 1500 after, every 50, 2 threads, both.
+ *                     [--threads N] [--depth both|with|without] [--focus PERCENT]
+ * Defaults: seed 0, 1500 steps before, up to 1500 after, every 50, 2 threads, both, focus 50.
  * Output, per look:
- *   bench=update_look depth=yes|no mode=update|scratch step=.. seconds=.. removed_free=..
+ *   bench=update_look depth=yes|no mode=update|focus|scratch step=.. seconds=.. removed_free=..
  *   box_iou=..
  * and per depth mode:
- *   bench=update depth=.. update_steps=.. update_s=.. scratch_steps=.. scratch_s=..
- *   step_ratio=.. time_ratio=.. (scratch over update; "none" when a training never met it)
+ *   bench=update depth=.. update_steps=.. update_s=.. focus_steps=.. focus_s=.. scratch_steps=..
+ *   scratch_s=.. step_ratio=.. time_ratio=.. (scratch over update; "none" when a training
+ *   never met it) focus=.. focus_time_ratio=.. (scratch over focus)
  *   pass=yes|no (the update met the quality, in fewer steps than the scratch training) */
 #include "testutil.h"
 
@@ -50,6 +53,7 @@ typedef struct look {
 typedef struct opts {
   const char *scenegen, *seed;
   int steps, max, every, threads, with, without;
+  float focus;
 } opts;
 
 /* The share of the voxels of owner == k whose alpha is below the occupancy threshold, of those
@@ -72,10 +76,10 @@ static double free_share(const sg_layout *L, const signed char *owner, int k) {
 
 /* Trains the changed layout from init (NULL: scratch) up to o->max steps, looking every
  * o->every; returns the number of looks. */
-static int run(const opts *o, int depth, const fg_field *init, const signed char *mug_owner,
-               int mug, const char *mode, look *looks) {
+static int run(const opts *o, int depth, const fg_field *init, float focus,
+               const signed char *mug_owner, int mug, const char *mode, look *looks) {
   static const char *const edit[] = {"--remove", "mug", "--move", "box,0.10,0", NULL};
-  const sg_layout_spec spec = {o->seed, o->seed, depth, 0, o->max, o->threads, edit, init};
+  const sg_layout_spec spec = {o->seed, o->seed, depth, 0, o->max, o->threads, edit, init, focus};
   sg_layout L;
   sg_layout_prepare(o->scenegen, &spec, &L);
   const int box_k = sg_object_index(&L.gt, "box");
@@ -115,26 +119,34 @@ static void mode_pair(const opts *o, int depth) {
   ASSERT(owner && cavity);
   sg_gt_voxelise(&B.gt, &g, owner, cavity);
   const int mug = sg_object_index(&B.gt, "mug");
-  static look up[MAX_LOOKS], sc[MAX_LOOKS];
-  const int nu = run(o, depth, B.field, owner, mug, "update", up);
-  const int ns = run(o, depth, NULL, owner, mug, "scratch", sc);
+  static look up[MAX_LOOKS], fo[MAX_LOOKS], sc[MAX_LOOKS];
+  const int nu = run(o, depth, B.field, 0.0f, owner, mug, "update", up);
+  const int nf = o->focus > 0.0f ? run(o, depth, B.field, o->focus, owner, mug, "focus", fo) : 0;
+  const int ns = run(o, depth, NULL, 0.0f, owner, mug, "scratch", sc);
   ASSERT(ns > 0);
   const double iou_ref = sc[ns - 1].box_iou;
   const int iu = first_met(up, nu, iou_ref), is = first_met(sc, ns, iou_ref);
+  const int iff = first_met(fo, nf, iou_ref);
   char su[64] = "update_steps=none update_s=none", ss[64] = "scratch_steps=none scratch_s=none";
-  char ratio_steps[32] = "none", ratio_s[32] = "none";
+  char sf[64] = "focus_steps=none focus_s=none";
+  char ratio_steps[32] = "none", ratio_s[32] = "none", ratio_f[32] = "none";
   if (iu >= 0)
     snprintf(su, sizeof su, "update_steps=%d update_s=%.2f", up[iu].step, up[iu].seconds);
+  if (iff >= 0)
+    snprintf(sf, sizeof sf, "focus_steps=%d focus_s=%.2f", fo[iff].step, fo[iff].seconds);
   if (is >= 0)
     snprintf(ss, sizeof ss, "scratch_steps=%d scratch_s=%.2f", sc[is].step, sc[is].seconds);
   if (iu >= 0 && is >= 0) {
     snprintf(ratio_steps, sizeof ratio_steps, "%.2f", (double)sc[is].step / up[iu].step);
     snprintf(ratio_s, sizeof ratio_s, "%.2f", sc[is].seconds / up[iu].seconds);
   }
+  if (iff >= 0 && is >= 0)
+    snprintf(ratio_f, sizeof ratio_f, "%.2f", sc[is].seconds / fo[iff].seconds);
   const int pass = iu >= 0 && (is < 0 || up[iu].step < sc[is].step);
-  printf("bench=update depth=%s seed=%s before_steps=%d box_iou_ref=%.4f %s %s step_ratio=%s "
-         "time_ratio=%s pass=%s\n", depth ? "yes" : "no", o->seed, o->steps, iou_ref, su, ss,
-         ratio_steps, ratio_s, pass ? "yes" : "no");
+  printf("bench=update depth=%s seed=%s before_steps=%d box_iou_ref=%.4f %s %s %s step_ratio=%s "
+         "time_ratio=%s focus=%.2f focus_time_ratio=%s pass=%s\n", depth ? "yes" : "no",
+         o->seed, o->steps, iou_ref, su, sf, ss, ratio_steps, ratio_s, o->focus, ratio_f,
+         pass ? "yes" : "no");
   fflush(stdout);
   free(owner);
   free(cavity);
@@ -152,12 +164,13 @@ static int parse_int(const char *s, int lo, int hi) {
 }
 
 int main(int argc, char **argv) {
-  opts o = {NULL, "0", 1500, 1500, 50, 2, 1, 1};
+  opts o = {NULL, "0", 1500, 1500, 50, 2, 1, 1, 0.5f};
   static const struct option lo[] = {
       {"scenegen", required_argument, NULL, 'g'}, {"seed", required_argument, NULL, 's'},
       {"steps", required_argument, NULL, 'n'},    {"max", required_argument, NULL, 'm'},
       {"every", required_argument, NULL, 'e'},    {"threads", required_argument, NULL, 't'},
-      {"depth", required_argument, NULL, 'd'},    {NULL, 0, NULL, 0}};
+      {"depth", required_argument, NULL, 'd'},    {"focus", required_argument, NULL, 'f'},
+      {NULL, 0, NULL, 0}};
   int c;
   while ((c = getopt_long(argc, argv, "", lo, NULL)) != -1) {
     switch (c) {
@@ -167,6 +180,7 @@ int main(int argc, char **argv) {
     case 'm': o.max = parse_int(optarg, 1, 100000); break;
     case 'e': o.every = parse_int(optarg, 1, 100000); break;
     case 't': o.threads = parse_int(optarg, 1, 256); break;
+    case 'f': o.focus = (float)parse_int(optarg, 0, 100) / 100.0f; break;
     case 'd':
       o.with = strcmp(optarg, "without") != 0;
       o.without = strcmp(optarg, "with") != 0;
@@ -177,7 +191,7 @@ int main(int argc, char **argv) {
       break;
     default:
       fprintf(stderr, "usage: bench_update --scenegen PROGRAM [--seed N] [--steps N] [--max N] "
-              "[--every N] [--threads N] [--depth both|with|without]\n");
+              "[--every N] [--threads N] [--depth both|with|without] [--focus PERCENT]\n");
       return 2;
     }
   }

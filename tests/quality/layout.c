@@ -45,6 +45,14 @@ void sg_layout_prepare(const char *scenegen, const sg_layout_spec *spec, sg_layo
   o.target_samples = 1 << 15;
   memcpy(o.background, L->background, sizeof o.background);
   ASSERT_OK(fg_trainer_new(&L->trainer, L->field, L->frames, L->n_frames, &o));
+  if (spec->init && spec->focus > 0.0f) {
+    fg_train_focus_stats st;
+    const double t0 = fg_mono_s();
+    ASSERT_OK(fg_trainer_focus(L->trainer, spec->init, spec->focus, &st));
+    L->train_s += fg_mono_s() - t0;
+    printf("seed %s: focus on %lld of %lld cells (%lld changed), %.2f s\n", spec->seed,
+           (long long)st.kept, (long long)st.cells, (long long)st.changed, fg_mono_s() - t0);
+  }
   free(transforms);
   free(gt_path);
 }

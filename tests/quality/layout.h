@@ -35,6 +35,8 @@ typedef struct sg_layout_spec {
                                  none): the layout after the scene changed */
   const fg_field *init;       /* NULL: a new field; else go on from it (an update:
                                  fg_field_copy_for_update) */
+  float focus;                /* with init: the share of rays drawn where the views changed
+                                 (fg_trainer_focus); 0 none */
 } sg_layout_spec;
 
 typedef struct sg_layout {
