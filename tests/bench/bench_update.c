@@ -29,7 +29,8 @@
  *   bench=update depth=.. update_steps=.. update_s=.. focus_steps=.. focus_s=.. scratch_steps=..
  *   scratch_s=.. step_ratio=.. time_ratio=.. (scratch over update; "none" when a training
  *   never met it) focus=.. focus_time_ratio=.. (scratch over focus)
- *   pass=yes|no (the update met the quality, in fewer steps than the scratch training) */
+ *   pass=yes|no (the update as fieldgripd makes it, with the focus unless --focus 0, met the
+ *   quality in fewer steps than the scratch training) */
 #include "testutil.h"
 
 #include <getopt.h>
@@ -142,7 +143,9 @@ static void mode_pair(const opts *o, int depth) {
   }
   if (iff >= 0 && is >= 0)
     snprintf(ratio_f, sizeof ratio_f, "%.2f", sc[is].seconds / fo[iff].seconds);
-  const int pass = iu >= 0 && (is < 0 || up[iu].step < sc[is].step);
+  /* the update as fieldgripd runs it: with the focus when there is one */
+  const look *best = o->focus > 0.0f ? (iff >= 0 ? &fo[iff] : NULL) : (iu >= 0 ? &up[iu] : NULL);
+  const int pass = best && (is < 0 || best->step < sc[is].step);
   printf("bench=update depth=%s seed=%s before_steps=%d box_iou_ref=%.4f %s %s %s step_ratio=%s "
          "time_ratio=%s focus=%.2f focus_time_ratio=%s pass=%s\n", depth ? "yes" : "no",
          o->seed, o->steps, iou_ref, su, sf, ss, ratio_steps, ratio_s, o->focus, ratio_f,

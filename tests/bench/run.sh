@@ -128,11 +128,12 @@
 #           seconds, per viewpoint, frames stored and skipped, and the worst frame pose error
 #           against the simulator's truth (targets: per view <= 1 s, <= 2 mm, <= 0.3 deg)
 #   update  a changed scene (bench_update): the same scenegen layout with the mug taken away
-#           and the box moved 10 cm, its field updated from the old one against trained from
-#           scratch, looked at every 50 steps, with and without depth: steps and seconds to
-#           the update test's quality (the mug's voxels >= 95 % free, the box's heatmap IoU
-#           within 0.05 of the scratch field's at 1500 steps) and their ratios (target: the
-#           update meets it in fewer steps). About 25 minutes
+#           and the box moved 10 cm, its field updated from the old one (without and with
+#           BENCH_UPDATE_FOCUS percent of its rays where the views changed, default 50) against
+#           trained from scratch, looked at every 50 steps, with and without depth: steps and
+#           seconds to the update test's quality (the mug's voxels >= 95 % free, the box's
+#           heatmap IoU within 0.05 of the scratch field's at 1500 steps) and their ratios
+#           (target: the update meets it in fewer steps). About 35 minutes
 #   first_grasp  time to first grasp after a 30-view RGB-D scan in the simulator
 #           (bench_first_grasp, BENCH_FIRST_GRASP_STEPS steps, default 500): scan, load,
 #           training, save, the first grasp (voxel cache, grasp field, search) and a second
@@ -707,7 +708,8 @@ bench_update() {
     echo "bench=update error=not_built hint=meson_compile_bench_update pass=no"
     failed=1; return
   fi
-  out=$("$bin" --scenegen "$build/tests/scenegen/fieldgrip-scenegen") || rc=$?
+  out=$("$bin" --scenegen "$build/tests/scenegen/fieldgrip-scenegen" \
+    --focus "${BENCH_UPDATE_FOCUS:-50}") || rc=$?
   printf '%s\n' "$out" | grep -E '^bench=update_look ' || true
   if ! printf '%s\n' "$out" | grep -q '^bench=update '; then
     echo "bench=update error=bench_update_exit_$rc pass=no"
