@@ -21,7 +21,6 @@
 #include "io/image.h"
 #include "io/npy.h"
 
-#define SNAPSHOT_TIMEOUT_MS 5000
 #define SNAPSHOT_MAX_BYTES ((size_t)64 << 20)
 /* The robot moved during a capture when its TCP did by more than this. */
 #define STILL_M 0.0005
@@ -247,13 +246,13 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
     FG_TRY(robot_pose(robot, out->T_base_tcp));
   else if (fg_robot_svc_has_robot(robot))
     posed = robot_pose(robot, out->T_base_tcp) == 0;
-  int rc = fg_snapshot_fetch(c->grabber, cam->source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES, &out->image,
+  int rc = fg_snapshot_fetch(c->grabber, cam->source, cam->timeout_ms, SNAPSHOT_MAX_BYTES, &out->image,
                              &out->image_len);
   if (rc == 0 && !fg_image_sniff(out->image, out->image_len))
     rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent %zu bytes that are no image "
                     "(PNG, JPEG, EXR or TIFF)", cam->source, out->image_len);
   if (rc == 0 && cam->depth_source && !image_only) {
-    rc = fg_snapshot_fetch(c->grabber, cam->depth_source, SNAPSHOT_TIMEOUT_MS, SNAPSHOT_MAX_BYTES,
+    rc = fg_snapshot_fetch(c->grabber, cam->depth_source, cam->timeout_ms, SNAPSHOT_MAX_BYTES,
                            &out->depth, &out->depth_len);
     if (rc == 0 && !fg_image_sniff(out->depth, out->depth_len))
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no image",
@@ -261,7 +260,7 @@ int fg_camera_capture(fg_cameras *c, fg_robot_svc *robot, const fg_conf_camera *
   }
   if (rc == 0 && cam->features_source && !image_only) {
     fg_npy npy;
-    rc = fg_snapshot_fetch(c->grabber, cam->features_source, SNAPSHOT_TIMEOUT_MS,
+    rc = fg_snapshot_fetch(c->grabber, cam->features_source, cam->timeout_ms,
                            SNAPSHOT_MAX_BYTES, &out->features, &out->features_len);
     if (rc == 0 && fg_npy_parse(out->features, out->features_len, &npy) != 0)
       rc = fg_fail_as(FG_EUNAVAIL, "camera_unavailable", "%s sent no .npy: %s",

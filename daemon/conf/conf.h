@@ -78,6 +78,7 @@ typedef struct fg_conf_scene {
 typedef enum { FG_MOUNT_HAND = 0, FG_MOUNT_FIXED } fg_camera_mount;
 
 #define FG_CAMERA_NAME_MAX 63
+#define FG_CAMERA_TIMEOUT_MS 5000 /* a snapshot's default limit */
 
 typedef struct fg_conf_camera {
   char name[FG_CAMERA_NAME_MAX + 1]; /* a scene name's characters */
@@ -88,6 +89,7 @@ typedef struct fg_conf_camera {
   char *features_source; /* a URL that serves the view's patch features (.npy, SPEC.md's
                             layout: what a feature extractor beside the camera computes), or
                             NULL: the frames get CLIP's ([clip]) or none */
+  int timeout_ms;       /* key "timeout_ms" (100..600000): how long each snapshot may take */
 } fg_conf_camera;
 
 typedef struct fg_conf {

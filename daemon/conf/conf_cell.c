@@ -12,8 +12,8 @@ const char *const conf_calibration_keys[] = {"squares_x", "squares_y", "square_m
 enum { K_SQUARES_X, K_SQUARES_Y, K_SQUARE_M, K_MARKER_M, K_DICTIONARY };
 
 const char *const conf_camera_keys[] = {"source", "depth_source", "depth_scale", "mount",
-                                        "features_source", NULL};
-enum { K_SOURCE, K_DEPTH_SOURCE, K_DEPTH_SCALE, K_MOUNT, K_FEATURES_SOURCE };
+                                        "features_source", "timeout_ms", NULL};
+enum { K_SOURCE, K_DEPTH_SOURCE, K_DEPTH_SCALE, K_MOUNT, K_FEATURES_SOURCE, K_TIMEOUT_MS };
 _Static_assert(sizeof conf_camera_keys / sizeof *conf_camera_keys - 1 <= MAX_KEYS,
                "camera_meta.key_line holds a line per camera key");
 
@@ -44,6 +44,7 @@ int conf_enter_camera(conf_parse *st, const char *name) {
   snprintf(cam->name, sizeof cam->name, "%s", name);
   cam->depth_scale = 0.001;
   cam->mount = FG_MOUNT_HAND;
+  cam->timeout_ms = FG_CAMERA_TIMEOUT_MS;
   memset(&meta[c->n_cameras], 0, sizeof *meta);
   meta[c->n_cameras].header_line = st->line;
   st->camera = c->n_cameras++;
@@ -131,6 +132,8 @@ int conf_set_camera(conf_parse *st, int k, const char *name, const char *v) {
                           "expected a URL that serves the view's features as .npy "
                           "(http://HOST:PORT/PATH), got '%s'", v);
     return conf_set_string(st, &cam->features_source, v);
+  case K_TIMEOUT_MS:
+    return conf_parse_int(st, name, v, 100, 600000, &cam->timeout_ms);
   }
   return 1;
 }

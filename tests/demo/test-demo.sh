@@ -75,6 +75,7 @@ dictionary = DICT_5X5_100
 source = http://127.0.0.1:$camera_port/rgb.png
 depth_source = http://127.0.0.1:$camera_port/depth.png
 features_source = http://127.0.0.1:$camera_port/features.npy
+timeout_ms = 60000
 CONF
 
 run_demo() { # CONFIG [demo.sh options]: runs it into $tmp/out, output in $out_log

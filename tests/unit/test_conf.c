@@ -708,7 +708,7 @@ static void test_errors(void) {
     fg_conf *c = load_ok("[camera wrist]\nsource = http://127.0.0.1:8081/rgb.png\n"
                          "depth_source = http://127.0.0.1:8081/depth.png\n"
                          "[camera over]\nsource = http://10.0.0.5/snap.jpg\nmount = fixed\n"
-                         "depth_scale = 0.0001\n");
+                         "depth_scale = 0.0001\ntimeout_ms = 60000\n");
     ASSERT_EQ(c->n_cameras, 2);
     const fg_conf_camera *w = fg_conf_find_camera(c, "wrist"), *o = fg_conf_find_camera(c, "over");
     ASSERT(w && o && !fg_conf_find_camera(c, "none"));
@@ -719,8 +719,12 @@ static void test_errors(void) {
     ASSERT_EQ(o->mount, FG_MOUNT_FIXED);
     ASSERT(o->depth_source == NULL);
     ASSERT_NEAR(o->depth_scale, 0.0001, 1e-15);
+    ASSERT_EQ(w->timeout_ms, 5000);
+    ASSERT_EQ(o->timeout_ms, 60000);
     fg_conf_free(c);
   }
+  EXPECT_ERROR("[camera w]\nsource = http://h/a.png\ntimeout_ms = 50\n", 3,
+               "[camera w] timeout_ms:", "from 100 to 600000");
   EXPECT_ERROR("[camera]\nsource = http://10.0.0.5/snap.jpg\n", 1, "[camera]:", "needs a name");
   EXPECT_ERROR("[camera a b]\n", 1, "[camera a b]:", "a camera's name");
   EXPECT_ERROR("[camera w]\nmount = hand\n", 1, "[camera w] source:", "missing");
