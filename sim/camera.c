@@ -332,6 +332,8 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
     free(zc);
     return;
   }
+  /* a ray a pixel through the cell (mj_ray only reads the view), rows over the cores */
+#pragma omp parallel for schedule(dynamic, 8)
   for (int v = 0; v < c->h; v++)
     for (int u = 0; u < c->w; u++) {
       const size_t i = (size_t)v * c->w + u;
