@@ -2,6 +2,7 @@
 #include "cell.h"
 #include "hand.h"
 
+#include "core/clock.h"
 #include "core/pose.h"
 #include "core/strbuf.h"
 
@@ -10,7 +11,6 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #define CELL_MAX_OBJECTS 64
 #define CELL_MAX_PHASES 8
@@ -413,13 +413,7 @@ static void update_rest(sim_cell *c) {
  * cannot keep up with the time scale the Modbus clients and the camera would otherwise wait
  * for as long as it falls behind. A slip makes motions take longer in wall time, never in
  * the cell's time, and a command's done waits for the cell's program to end. */
-#define ADVANCE_BUDGET_NS 50000000
-
-static int64_t mono_ns(void) {
-  struct timespec ts;
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-}
+#define ADVANCE_BUDGET_S 0.05
 
 void sim_cell_advance(sim_cell *c, int64_t now_ns) {
   if (sim_cell_busy(c)) {
@@ -429,13 +423,13 @@ void sim_cell_advance(sim_cell *c, int64_t now_ns) {
     const double until = scaled ? c->anchor_sim + (double)(now_ns - c->anchor_wall_ns) * 1e-9 /
                                                       c->cfg.time_scale
                                 : c->d->time + 60;
-    const int64_t give_up = scaled ? mono_ns() + ADVANCE_BUDGET_NS : 0;
+    const double give_up = scaled ? fg_mono_s() + ADVANCE_BUDGET_S : 0;
     while (c->d->time < until) {
       step(c);
       update_rest(c);
       if (c->at_rest) break;
-      if (scaled && mono_ns() > give_up) { /* behind: the cell's clock slips */
-        c->anchor_wall_ns = mono_ns();
+      if (scaled && fg_mono_s() > give_up) { /* behind: the cell's clock slips */
+        c->anchor_wall_ns = (int64_t)(fg_mono_s() * 1e9); /* sim.c's clock, CLOCK_MONOTONIC */
         c->anchor_sim = c->d->time;
         break;
       }

@@ -233,7 +233,7 @@ static void test_sees_the_board(void) {
   cellproc_stop(&c);
 }
 
-/* A cell far behind its time scale answers (sim/cell.c, ADVANCE_BUDGET_NS): at 1e-4 the cell
+/* A cell far behind its time scale answers (sim/cell.c, ADVANCE_BUDGET_S): at 1e-4 the cell
  * would have to step 10,000 times faster than the wall clock, which no machine does. A move of
  * 0.30 m at 1 mm/s (300 s of the cell's time) is under way: the camera shows the tool on its
  * way, far from the end, and the block reads busy, instead of both waiting for the motion's
