@@ -352,8 +352,8 @@ static float pixel_depth(const fg_frame *fr, float px, float py, float margin) {
 /* ---- focus: where the views changed (fg_trainer_focus) ---------------------------------- */
 
 typedef struct focus_cell {
-  uint32_t frame; /* index into frames */
-  uint16_t cu, cv; /* the cell's column and row */
+  uint32_t frame;        /* index into frames */
+  uint16_t cu, cv, side; /* the cell's column and row, and its side (focus_side) */
 } focus_cell;
 
 /* The cell side (pixels) for a w x h frame: FG_TRAIN_FOCUS_CELL, or more so that about 4096
@@ -390,7 +390,7 @@ static void draw_rays(fg_trainer *t, int32_t R, int32_t R_f) {
     const fg_frame *fr = &t->frames[fi];
     int u, v;
     if (fc) {
-      const int side = focus_side(fr->cam.w, fr->cam.h);
+      const int side = fc->side;
       const int u0 = fc->cu * side, v0 = fc->cv * side;
       u = u0 + (int)below(hp, (uint32_t)(fr->cam.w - u0 < side ? fr->cam.w - u0 : side));
       v = v0 + (int)below(hp << 32, (uint32_t)(fr->cam.h - v0 < side ? fr->cam.h - v0 : side));
@@ -498,7 +498,7 @@ int fg_trainer_focus(fg_trainer *t, const fg_field *before, float fraction,
       st.cells++;
       st.changed += changed[c];
       if (!near) continue;
-      const focus_cell fc = {(uint32_t)fi, (uint16_t)cu, (uint16_t)cv};
+      const focus_cell fc = {(uint32_t)fi, (uint16_t)cu, (uint16_t)cv, (uint16_t)side};
       t->focus[t->n_focus++] = fc;
       if (fr->feat_d) t->focus_f[t->n_focus_f++] = fc;
     }
