@@ -419,6 +419,15 @@ static fg_trainer *focus_trainer(const fg_field *before, fg_frame *fr, fg_field 
   return t;
 }
 
+/* Three steps of trainers t (of field a) and u (of b) leave a and b the same. */
+static void same_after_steps(fg_trainer *t, const fg_field *a, fg_trainer *u, const fg_field *b) {
+  for (int s = 0; s < 3; s++) {
+    ASSERT_OK(fg_trainer_step(t, NULL));
+    ASSERT_OK(fg_trainer_step(u, NULL));
+  }
+  ASSERT(memcmp(a->params, b->params, a->n_params * sizeof(float)) == 0);
+}
+
 static void test_focus(void) {
   fg_field *before = empty_field(), *copy, *plain;
   fg_frame fr[N_FRAMES];
@@ -431,11 +440,7 @@ static void test_focus(void) {
   ASSERT_EQ(st.cells, N_FRAMES * 6 * 5); /* 24 x 18 pixels: 6 x 5 cells a frame */
   ASSERT_EQ(st.changed, 0);
   ASSERT_EQ(st.kept, 0);
-  for (int s = 0; s < 3; s++) {
-    ASSERT_OK(fg_trainer_step(t, NULL));
-    ASSERT_OK(fg_trainer_step(u, NULL));
-  }
-  ASSERT(memcmp(copy->params, plain->params, copy->n_params * sizeof(float)) == 0);
+  same_after_steps(t, copy, u, plain);
   fg_trainer_free(t);
   fg_trainer_free(u);
   fg_field_free(copy);
@@ -481,11 +486,7 @@ static void test_focus(void) {
   u = focus_trainer(before, fr, &plain);
   ASSERT_OK(fg_trainer_focus(t, before, 0.5f, NULL));
   ASSERT_OK(fg_trainer_focus(u, before, 0.5f, NULL));
-  for (int s = 0; s < 3; s++) {
-    ASSERT_OK(fg_trainer_step(t, NULL));
-    ASSERT_OK(fg_trainer_step(u, NULL));
-  }
-  ASSERT(memcmp(copy->params, plain->params, copy->n_params * sizeof(float)) == 0);
+  same_after_steps(t, copy, u, plain);
   fg_trainer_free(u);
   fg_field_free(plain);
 
