@@ -137,6 +137,7 @@ static void test_joining(void) {
   double T[16];
   h_pose(T, 0, 0, 0, 0.45, 0, 0.6);
   char *meta0 = h_meta(T, "opengl", 30, 16, 12, 32, 24);
+  ASSERT(meta0 != NULL);
   const char *bad[] = {"0", "-3", "\"newest\"", "1.5", "[1]", "10000000000"};
   for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
     char *meta = h_fmt("%.*s, \"capture\": %s}", (int)strlen(meta0) - 1, meta0, bad[i]);
