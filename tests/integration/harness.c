@@ -792,6 +792,16 @@ void h_assert_error_at(const char *file, int line, const h_resp *r, long status,
   }
 }
 
+void h_expect_error_at(const char *file, int line, const char *method, const char *path,
+                       const char *body, long status, const char *code) {
+  h_req q = {.method = method, .path = path, .body = body, .body_len = body ? strlen(body) : 0};
+  h_resp *r = h_request(&q);
+  if (r->status != status)
+    fprintf(stderr, "%s:%d: %s %s %s\n", file, line, method, path, body ? body : "");
+  h_assert_error_at(file, line, r, status, code);
+  h_resp_free(r);
+}
+
 json_t *h_jfind(json_t *root, const char *path) {
   json_t *cur = root;
   const char *p = path;

@@ -177,6 +177,10 @@ void h_assert_status_at(const char *file, int line, const h_resp *r, long status
 /* status, JSON body {"error":{"code":code,"message":non-empty string}}. */
 void h_assert_error_at(const char *file, int line, const h_resp *r, long status,
                        const char *code);
+/* Sends METHOD PATH with BODY (JSON, or NULL for none) and asserts its error reply as
+ * h_assert_error_at does; a failure names the request. */
+void h_expect_error_at(const char *file, int line, const char *method, const char *path,
+                       const char *body, long status, const char *code);
 json_t *h_jget_at(const char *file, int line, json_t *root, const char *path);
 double h_jnum_at(const char *file, int line, json_t *root, const char *path);
 long long h_jint_at(const char *file, int line, json_t *root, const char *path);
@@ -187,6 +191,8 @@ void h_assert_json_equal_at(const char *file, int line, json_t *a, json_t *b);
 
 #define ASSERT_STATUS(r, st) h_assert_status_at(__FILE__, __LINE__, (r), (st))
 #define ASSERT_HTTP_ERROR(r, st, code) h_assert_error_at(__FILE__, __LINE__, (r), (st), (code))
+#define EXPECT_ERROR(method, path, body, st, code) \
+  h_expect_error_at(__FILE__, __LINE__, (method), (path), (body), (st), (code))
 /* Paths are dot-separated keys and array indices: "frames.0.camera.fl_x". Missing: fail. */
 #define JGET(root, path) h_jget_at(__FILE__, __LINE__, (root), (path))
 #define JNUM(root, path) h_jnum_at(__FILE__, __LINE__, (root), (path))

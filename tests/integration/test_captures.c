@@ -18,15 +18,6 @@
 
 static char *g_sg; /* data set folder */
 
-static void expect_error(const char *method, const char *path, const char *body, long status,
-                         const char *code) {
-  h_req q = {.method = method, .path = path, .body = body, .body_len = body ? strlen(body) : 0};
-  h_resp *r = h_request(&q);
-  if (r->status != status) fprintf(stderr, "%s %s %s\n", method, path, body ? body : "");
-  ASSERT_HTTP_ERROR(r, status, code);
-  h_resp_free(r);
-}
-
 static char *file_bytes(const char *scene, const char *name, size_t *len) {
   char *p = h_fmt("%s/scenes/%s/%s", h_state_dir(), scene, name);
   char *b = h_read_file(p, len);
@@ -149,7 +140,7 @@ static void test_joining(void) {
   free(meta0);
   free(png);
   char *body = h_fmt("{\"path\": \"%s\", \"capture\": \"old\"}", g_sg);
-  expect_error("POST", "/v1/scenes/cap/import", body, 400, "invalid_request");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/import", body, 400, "invalid_request");
   free(body);
   s = t_scene_json("cap");
   ASSERT_EQ(JINT(s, "frames"), 2 * VIEWS + 5); /* nothing stored */
@@ -173,28 +164,28 @@ static void test_training_captures(void) {
   ASSERT_EQ(JINT(j, "frames"), 2 * VIEWS + 5);
   json_decref(j);
 
-  expect_error("POST", "/v1/scenes/cap/train", "{\"captures\": [2, 99]}", 404,
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"captures\": [2, 99]}", 404,
                "capture_not_found");
-  expect_error("POST", "/v1/scenes/cap/train", "{\"captures\": [2, 2]}", 400, "invalid_request");
-  expect_error("POST", "/v1/scenes/cap/train", "{\"captures\": []}", 400, "invalid_request");
-  expect_error("POST", "/v1/scenes/cap/train", "{\"captures\": \"newest\"}", 400,
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"captures\": [2, 2]}", 400, "invalid_request");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"captures\": []}", 400, "invalid_request");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"captures\": \"newest\"}", 400,
                "invalid_request");
-  expect_error("POST", "/v1/scenes/cap/train", "{\"init\": \"warm\"}", 400, "invalid_request");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"init\": \"warm\"}", 400, "invalid_request");
   /* holdout counts the frames of the captures chosen: 2 here */
-  expect_error("POST", "/v1/scenes/cap/train", "{\"holdout_every\": 1}", 400, "invalid_request");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"holdout_every\": 1}", 400, "invalid_request");
 
   /* an update needs a field, of the feature dimension the frames give */
   h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"plain\", \"workspace\": {\"min\": "
                           "[0.1, -0.45, -0.05], \"max\": [0.8, 0.45, 0.35]}}");
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
-  expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "no_frames");
+  EXPECT_ERROR("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "no_frames");
   for (int i = 0; i < 3; i++) upload("plain", NULL, 0);
-  expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "not_trained");
+  EXPECT_ERROR("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409, "not_trained");
   json_decref(train_done("plain", "{\"steps\": 3}"));
   json_decref(train_done("plain", "{\"steps\": 3, \"init\": \"current\"}"));
   ASSERT_EQ(upload("plain", "\"new\"", 8), 2); /* features of D = 8; the field has none */
-  expect_error("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409,
+  EXPECT_ERROR("POST", "/v1/scenes/plain/train", "{\"init\": \"current\"}", 409,
                "feature_dim_mismatch");
 }
 
@@ -258,14 +249,14 @@ static void test_update(void) {
       "{\"init\": \"current\", \"focus\": 1.5}", "{\"init\": \"current\", \"focus\": -0.1}",
       "{\"init\": \"current\", \"focus\": \"half\"}", "{\"focus\": 0.5}"};
   for (size_t i = 0; i < sizeof bad_focus / sizeof *bad_focus; i++)
-    expect_error("POST", "/v1/scenes/cap/train", bad_focus[i], 400, "invalid_request");
+    EXPECT_ERROR("POST", "/v1/scenes/cap/train", bad_focus[i], 400, "invalid_request");
   free(b);
   b = file_bytes("cap", "field.fgc", &b_len); /* the field the cancelled update must keep */
 
   /* cancelled half way: the field stays; meanwhile no capture can be deleted */
   char *id = t_train("cap", LONG_JOB);
   t_wait_running(id, 1, 600);
-  expect_error("DELETE", "/v1/scenes/cap/captures/7", NULL, 409, "training_in_progress");
+  EXPECT_ERROR("DELETE", "/v1/scenes/cap/captures/7", NULL, 409, "training_in_progress");
   char *path = h_fmt("/v1/jobs/%s", id);
   h_resp *r = h_delete(path);
   ASSERT_STATUS(r, 200);
@@ -343,10 +334,10 @@ static void test_delete(void) {
   ASSERT(frame_file_exists("cap", VIEWS));
   ASSERT(access(f1, F_OK) != 0);
   ASSERT(access(f2, F_OK) == 0);
-  expect_error("DELETE", "/v1/scenes/cap/captures/1", NULL, 404, "capture_not_found");
-  expect_error("DELETE", "/v1/scenes/cap/captures/x1", NULL, 400, "invalid_request");
-  expect_error("DELETE", "/v1/scenes/nope/captures/1", NULL, 404, "scene_not_found");
-  expect_error("POST", "/v1/scenes/cap/train", "{\"captures\": [1]}", 404, "capture_not_found");
+  EXPECT_ERROR("DELETE", "/v1/scenes/cap/captures/1", NULL, 404, "capture_not_found");
+  EXPECT_ERROR("DELETE", "/v1/scenes/cap/captures/x1", NULL, 400, "invalid_request");
+  EXPECT_ERROR("DELETE", "/v1/scenes/nope/captures/1", NULL, 404, "scene_not_found");
+  EXPECT_ERROR("POST", "/v1/scenes/cap/train", "{\"captures\": [1]}", 404, "capture_not_found");
   json_t *c = captures("cap");
   ASSERT_EQ(json_array_size(c), 2);
   ASSERT_EQ(JINT(c, "0.capture"), 2);

@@ -15,15 +15,6 @@
 #define VIEWS 8
 #define STEPS "{\"steps\": 3}"
 
-static void expect_error(const char *method, const char *path, const char *body, long status,
-                         const char *code) {
-  h_req q = {.method = method, .path = path, .body = body, .body_len = body ? strlen(body) : 0};
-  h_resp *r = h_request(&q);
-  if (r->status != status) fprintf(stderr, "%s %s %s\n", method, path, body ? body : "");
-  ASSERT_HTTP_ERROR(r, status, code);
-  h_resp_free(r);
-}
-
 static json_t *patch(const char *scene, const char *body) {
   char *path = h_fmt("/v1/scenes/%s", scene);
   h_req q = {.method = "PATCH", .path = path, .body = body, .body_len = strlen(body)};
@@ -101,8 +92,8 @@ static void test_create_and_patch(void) {
     "{\"name\": \"b\", \"learn_background\": \"yes\"}",
     "{\"name\": \"b\", \"learn_background\": 1}"};
   for (size_t i = 0; i < sizeof bad_create / sizeof *bad_create; i++)
-    expect_error("POST", "/v1/scenes", bad_create[i], 400, "invalid_request");
-  expect_error("GET", "/v1/scenes/b", NULL, 404, "scene_not_found");
+    EXPECT_ERROR("POST", "/v1/scenes", bad_create[i], 400, "invalid_request");
+  EXPECT_ERROR("GET", "/v1/scenes/b", NULL, 404, "scene_not_found");
 
   /* PATCH: one key keeps the other */
   json_decref(patch("plain", "{\"field_scale\": 8}"));
@@ -124,11 +115,11 @@ static void test_create_and_patch(void) {
     "{\"workspace\": {\"min\": [0, 0, 0], \"max\": [1, 1, 1]}}", "{\"voxel_size\": 0.02}",
     "{\"field_scale\": 4, \"background\": [0, 0, 0]}", "[]"};
   for (size_t i = 0; i < sizeof bad_patch / sizeof *bad_patch; i++)
-    expect_error("PATCH", "/v1/scenes/plain", bad_patch[i], 400, "invalid_request");
-  expect_error("PATCH", "/v1/scenes/plain", "not json", 400, "malformed_json");
+    EXPECT_ERROR("PATCH", "/v1/scenes/plain", bad_patch[i], 400, "invalid_request");
+  EXPECT_ERROR("PATCH", "/v1/scenes/plain", "not json", 400, "malformed_json");
   assert_scene_settings("plain", 2.5, -1);
-  expect_error("PATCH", "/v1/scenes/nope", "{\"field_scale\": 4}", 404, "scene_not_found");
-  expect_error("PATCH", "/v1/scenes/decl", "{\"field_scale\": 8}", 409, "declared_in_config");
+  EXPECT_ERROR("PATCH", "/v1/scenes/nope", "{\"field_scale\": 4}", 404, "scene_not_found");
+  EXPECT_ERROR("PATCH", "/v1/scenes/decl", "{\"field_scale\": 8}", 409, "declared_in_config");
   assert_scene_settings("decl", 4, 1); /* the configuration's */
 }
 
@@ -161,10 +152,10 @@ static void test_auto(const char *colour, const char *rgbd) {
   json_decref(patch("small", "{\"field_scale\": \"auto\", \"learn_background\": \"auto\"}"));
   train_expect("small", "current", 4, 0, "current field");
   json_decref(patch("small", "{\"field_scale\": 8}"));
-  expect_error("POST", "/v1/scenes/small/train", "{\"steps\": 3, \"init\": \"current\"}", 409,
+  EXPECT_ERROR("POST", "/v1/scenes/small/train", "{\"steps\": 3, \"init\": \"current\"}", 409,
                "field_mismatch");
   json_decref(patch("small", "{\"field_scale\": \"auto\", \"learn_background\": true}"));
-  expect_error("POST", "/v1/scenes/small/train", "{\"steps\": 3, \"init\": \"current\"}", 409,
+  EXPECT_ERROR("POST", "/v1/scenes/small/train", "{\"steps\": 3, \"init\": \"current\"}", 409,
                "field_mismatch");
   s = t_scene_json("small"); /* the field is the one trained before */
   ASSERT(fabs(JNUM(s, "field.scale") - 4) < 1e-9);
