@@ -1,5 +1,5 @@
 /* The physics cell (cell.h). */
-#include "cell.h"
+#include "cell_impl.h"
 #include "hand.h"
 
 #include "core/clock.h"
@@ -12,28 +12,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define CELL_MAX_OBJECTS 64
-#define CELL_MAX_PHASES 8
-#define CELL_TIMESTEP 0.001      /* s: contact-rich grasps want a short step */
-#define CELL_REST_V 0.005        /* m/s: an object slower than this... */
-#define CELL_REST_W 0.05         /* rad/s: ...and turning slower than this is at rest */
-#define CELL_REST_AFTER 3.0      /* s: after this long without a command the cell rests anyway */
-#define CELL_SETTLE_MAX 5.0      /* s: objects must come to rest this soon after loading */
-#define CELL_TURN_RATE 1.5       /* rad/s: the TCP's turn rate where a path turns more than moves */
-#define CELL_LIFTED_M 0.02       /* held and this far above its rest height: lifted */
-#define CELL_MOVED_M 0.005       /* not held and moved this far, or turned CELL_MOVED_DEG: moved */
-#define CELL_MOVED_DEG 5.0
-#define CELL_KNOCKED_DEG 45.0    /* tilted this far from how it stood: knocked over */
-#define CELL_PENETRATION_M 0.002 /* deeper into the table at load: inside it */
-
-/* Per model: the gripper's mass and its force and speed ranges, as the registers scale them
- * (force and speed 0..255 map linearly onto these), from the data sheets: Franka Hand 0.73 kg,
- * 70 N continuous, fingers up to 50 mm/s each; Robotiq 2F-85 0.925 kg, 20-235 N, 20-150 mm/s;
- * Robotiq 2F-140 1.025 kg, 10-125 N, 30-250 mm/s. Speeds are of the opening (both fingers). */
-typedef struct {
-  double mass_kg, force_min_n, force_max_n, speed_min_mps, speed_max_mps;
-} hand_drive;
-
 static const hand_drive drives[FG_GRIPPER_N_MODELS] = {
   [FG_GRIPPER_PANDA] = {0.73, 10, 70, 0.02, 0.10},
   [FG_GRIPPER_ROBOTIQ_2F85] = {0.925, 20, 235, 0.02, 0.15},
@@ -41,93 +19,6 @@ static const hand_drive drives[FG_GRIPPER_N_MODELS] = {
 };
 
 #define FINGER_KP 20000.0 /* N/m: the finger servo's stiffness (its damping: SIM_FINGER_KD) */
-
-typedef enum { PH_GRIP, PH_PATH, PH_DWELL } phase_kind;
-
-typedef struct {
-  phase_kind kind;
-  double q, force;   /* PH_GRIP: finger target (closing per finger, m) and force (N) */
-  double p[3], quat[4]; /* PH_PATH: where the TCP goes */
-  double dwell;      /* PH_DWELL: seconds */
-} phase;
-
-typedef struct {
-  int body;
-  char name[64];
-  double rest_pos[3], rest_quat[4]; /* when the cell came to rest after loading */
-  double cmd_pos[3], cmd_quat[4];   /* when the current command started */
-} cell_object;
-
-struct sim_cell {
-  sim_cell_config cfg;
-  const fg_gripper_spec *spec;
-  const hand_drive *drive;
-  mjModel *m;
-  mjData *d;
-  int mocap;              /* mocap index of the target */
-  int hand, finger[2];    /* body ids */
-  int qadr[2], dadr[2];   /* the finger joints' qpos and qvel addresses */
-  int act[2];             /* their motors */
-  int hand_qadr;          /* the hand's free joint */
-  int table_geom;
-  int feat_dim;           /* the length of the model's feature vectors; 0: it has none */
-  int *geom_feat;         /* per geom, the custom numeric of its feature vector */
-  int feat_background;    /* ... and of what a ray that meets nothing shows */
-  cell_object obj[CELL_MAX_OBJECTS];
-  int n_obj;
-  /* clock */
-  int64_t anchor_wall_ns;
-  double anchor_sim;
-  double last_activity;   /* cell time when the last command started or ended */
-  int at_rest;
-  /* fingers */
-  double f_target, f_ramp, f_speed, f_force; /* per finger: m, m, m/s, N */
-  int f_moving, f_obj;
-  double f_win_t, f_win_q; /* where the fingers were at the start of the stall window */
-  double f_deadline;       /* a motion not over by then ends where it is */
-  /* program */
-  phase ph[CELL_MAX_PHASES];
-  int n_ph, i_ph;
-  double ph_t0, ph_p0[3], ph_q0[4], ph_T;
-  int running, result;
-  int closed_in_cmd;      /* a close phase of this command has run */
-  sim_cell_block blk;
-  unsigned char touched[CELL_MAX_OBJECTS], collided[CELL_MAX_OBJECTS];
-};
-
-/* ---------------------------------------------------------------- small maths */
-
-static double clampd(double x, double lo, double hi) { return x < lo ? lo : x > hi ? hi : x; }
-
-static void quat_from_rv(const double rv[3], double q[4]) {
-  const double th = sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]);
-  if (th < 1e-12) {
-    q[0] = 1;
-    q[1] = q[2] = q[3] = 0;
-    return;
-  }
-  const double s = sin(th / 2) / th;
-  q[0] = cos(th / 2);
-  for (int k = 0; k < 3; k++) q[1 + k] = rv[k] * s;
-}
-
-/* The angle between two orientations, radians. */
-static double quat_angle(const double a[4], const double b[4]) {
-  double dot = fabs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
-  return 2 * acos(clampd(dot, 0, 1));
-}
-
-/* The tool's +z of orientation q (w, x, y, z). */
-static void quat_z(const double q[4], double z[3]) {
-  z[0] = 2 * (q[1] * q[3] + q[0] * q[2]);
-  z[1] = 2 * (q[2] * q[3] - q[0] * q[1]);
-  z[2] = 1 - 2 * (q[1] * q[1] + q[2] * q[2]);
-}
-
-static double dist3(const double a[3], const double b[3]) {
-  return sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
-              (a[2] - b[2]) * (a[2] - b[2]));
-}
 
 /* ---------------------------------------------------------------- the model */
 
@@ -239,10 +130,6 @@ static int hand_part_of_body(const sim_cell *c, int body) {
   return -1;
 }
 
-/* Object i's pose from its free joint. */
-static const double *obj_pos(const sim_cell *c, int i) { return c->d->xpos + 3 * c->obj[i].body; }
-static const double *obj_quat(const sim_cell *c, int i) { return c->d->xquat + 4 * c->obj[i].body; }
-
 /* Which hand parts touch object i: bit 0 palm, 1 finger_l, 2 finger_r. */
 static int contact_mask(const sim_cell *c, int i) {
   int mask = 0;
@@ -257,12 +144,12 @@ static int contact_mask(const sim_cell *c, int i) {
   return mask;
 }
 
-static int held(const sim_cell *c, int i) { return (contact_mask(c, i) & 6) == 6; }
+int cell_held(const sim_cell *c, int i) { return (contact_mask(c, i) & 6) == 6; }
 
 /* Every object is still, but one the fingers hold (it moves with the hand, which stands). */
 static int objects_at_rest(const sim_cell *c) {
   for (int i = 0; i < c->n_obj; i++) {
-    if (held(c, i)) continue;
+    if (cell_held(c, i)) continue;
     const double *v = c->d->cvel + 6 * c->obj[i].body; /* angular, then linear */
     if (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) > CELL_REST_W) return 0;
     if (sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5]) > CELL_REST_V) return 0;
@@ -271,8 +158,6 @@ static int objects_at_rest(const sim_cell *c) {
 }
 
 /* ---------------------------------------------------------------- the fingers */
-
-static double finger_q(const sim_cell *c) { return c->d->qpos[c->qadr[0]]; }
 
 static int fingers_position(const sim_cell *c) {
   const double width = c->spec->stroke_m - 2 * finger_q(c);
@@ -351,13 +236,11 @@ static void phase_begin(sim_cell *c) {
   }
 }
 
-static void report_command(sim_cell *c, const char *outcome, const char *why);
-
 static void program_end(sim_cell *c, int result, const char *outcome) {
   c->running = 0;
   c->result = result;
   c->last_activity = c->d->time;
-  report_command(c, outcome, NULL);
+  cell_report_command(c, outcome, NULL);
 }
 
 /* Advances the phase in progress by one step's worth; moves on when it is complete. */
@@ -508,7 +391,7 @@ static int in_reach(const sim_cell *c, const double p[3]) {
          sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) <= c->cfg.reach_m;
 }
 
-static const char *command_name(int command) {
+const char *cell_command_name(int command) {
   static const char *const names[] = {"no-op", "pick", "place", "open", "close", "move"};
   return command >= 0 && command <= 5 ? names[command] : "unknown";
 }
@@ -586,7 +469,7 @@ int sim_cell_program_start(sim_cell *c, const sim_cell_block *b, int64_t now_ns,
   }
   if (program_build(c, b, why, whysz) != 0) {
     c->result = 3;
-    report_command(c, "failed", why);
+    cell_report_command(c, "failed", why);
     return -1;
   }
   c->running = 1;
@@ -604,7 +487,7 @@ void sim_cell_program_stop(sim_cell *c, int64_t now_ns) {
   c->running = 0;
   c->result = 0;
   c->last_activity = c->d->time;
-  report_command(c, "stopped", NULL);
+  cell_report_command(c, "stopped", NULL);
 }
 
 void sim_cell_fingers_goto(sim_cell *c, int position, int speed, int force, int64_t now_ns) {
@@ -619,126 +502,6 @@ void sim_cell_fingers_status(const sim_cell *c, int *position, int *moving, int 
   *position = fingers_position(c);
   *moving = c->f_moving;
   *obj = c->f_moving ? 0 : c->f_obj;
-}
-
-/* ---------------------------------------------------------------- the report */
-
-/* 1 when object i lies in the bin: its centre within the walls (on the floor or on what lies
- * there already) and the gripper not holding it. */
-static int in_bin(const sim_cell *c, int i) {
-  const double *p = obj_pos(c, i);
-  return c->cfg.has_bin && !held(c, i) &&
-         fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
-         fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M;
-}
-
-/* What became of object i during the command that ends. */
-typedef struct {
-  int held, lifted, moved, knocked_over;
-  double dz, distance, turned, tilt;
-} object_outcome;
-
-static object_outcome object_outcome_of(const sim_cell *c, int i) {
-  const cell_object *o = &c->obj[i];
-  const double *p = obj_pos(c, i), *q = obj_quat(c, i);
-  object_outcome r = {.held = held(c, i)};
-  r.dz = p[2] - o->rest_pos[2];
-  r.distance = dist3(p, o->cmd_pos);
-  r.turned = quat_angle(q, o->cmd_quat) * 180 / M_PI;
-  /* tilt: the angle between the object's +z now and when it stood at rest */
-  double zn[3], zr[3];
-  quat_z(q, zn);
-  quat_z(o->rest_quat, zr);
-  r.tilt = acos(clampd(zn[0] * zr[0] + zn[1] * zr[1] + zn[2] * zr[2], -1, 1)) * 180 / M_PI;
-  r.lifted = r.held && r.dz > CELL_LIFTED_M;
-  r.moved = !r.held && (r.distance > CELL_MOVED_M || r.turned > CELL_MOVED_DEG);
-  r.knocked_over = r.tilt > CELL_KNOCKED_DEG;
-  return r;
-}
-
-static void put_num(FILE *f, double v, int decimals) {
-  if (isfinite(v)) fprintf(f, "%.*f", decimals, v);
-  else fputs("null", f);
-}
-
-static const char *tf(int b) { return b ? "true" : "false"; }
-
-/* One line: SPEC.md's fields (seq, command, pose, object_detected, lifted, lift_m, touched,
- * moved), then the simulator's own (proto/modbus.md). */
-static void report_command(sim_cell *c, const char *outcome, const char *why) {
-  FILE *f = c->cfg.report;
-  if (!f) return;
-  const sim_cell_block *b = &c->blk;
-  object_outcome oc[CELL_MAX_OBJECTS];
-  int lifted = -1;
-  for (int i = 0; i < c->n_obj; i++) {
-    oc[i] = object_outcome_of(c, i);
-    if (oc[i].lifted && (lifted < 0 || oc[i].dz > oc[lifted].dz)) lifted = i;
-  }
-  int pos, moving, obj;
-  sim_cell_fingers_status(c, &pos, &moving, &obj);
-  fprintf(f, "{\"seq\":%d,\"command\":\"%s\",\"pose\":{\"position\":[", b->seq,
-          command_name(b->command));
-  double quat[4];
-  quat_from_rv(b->rv, quat);
-  for (int k = 0; k < 3; k++) {
-    if (k) fputc(',', f);
-    put_num(f, b->p[k], 4);
-  }
-  fputs("],\"quaternion\":[", f);
-  for (int k = 0; k < 4; k++) {
-    if (k) fputc(',', f);
-    put_num(f, quat[k], 6);
-  }
-  fprintf(f, "]},\"object_detected\":%s,\"lifted\":", tf(obj == 1 || obj == 2));
-  if (lifted >= 0) fprintf(f, "\"%s\",\"lift_m\":%.4f", c->obj[lifted].name, oc[lifted].dz);
-  else fputs("null,\"lift_m\":null", f);
-  fputs(",\"touched\":[", f);
-  for (int i = 0, n = 0; i < c->n_obj; i++)
-    if (c->touched[i]) fprintf(f, "%s\"%s\"", n++ ? "," : "", c->obj[i].name);
-  fputs("],\"moved\":[", f);
-  for (int i = 0, n = 0; i < c->n_obj; i++)
-    if (oc[i].moved)
-      fprintf(f, "%s{\"name\":\"%s\",\"distance_m\":%.4f,\"tilt_deg\":%.1f}", n++ ? "," : "",
-              c->obj[i].name, oc[i].distance, oc[i].tilt);
-  /* the simulator's own: the outcome, the rest of the block as read (a float32 block may hold
-   * NaN or infinities: null), the fingers, the TCP, every object */
-  fprintf(f, "],\"t\":%.3f,\"outcome\":\"%s\"", c->d->time, outcome);
-  if (why) {
-    fputs(",\"why\":\"", f);
-    for (const char *p = why; *p; p++)
-      if (*p != '"' && *p != '\\' && (unsigned char)*p >= 0x20) fputc(*p, f);
-    fputc('"', f);
-  }
-  fputs(",\"rotation_vector\":[", f);
-  for (int k = 0; k < 3; k++) {
-    if (k) fputc(',', f);
-    put_num(f, b->rv[k], 4);
-  }
-  static const char *const keys[5] = {"width_m", "force_n", "approach_m", "retreat_m",
-                                      "speed_mps"};
-  const double vals[5] = {b->width, b->force, b->approach, b->retreat, b->speed};
-  fputc(']', f);
-  for (int k = 0; k < 5; k++) {
-    fprintf(f, ",\"%s\":", keys[k]);
-    put_num(f, vals[k], 4);
-  }
-  const double *tcp = c->d->xpos + 3 * c->hand;
-  fprintf(f, ",\"fingers\":{\"width_m\":%.4f,\"gobj\":%d},\"tcp\":[%.4f,%.4f,%.4f],\"objects\":[",
-          c->spec->stroke_m - 2 * finger_q(c), obj, tcp[0], tcp[1], tcp[2]);
-  for (int i = 0; i < c->n_obj; i++) {
-    const double *p = obj_pos(c, i);
-    fprintf(f, "%s{\"name\":\"%s\",\"position\":[%.4f,%.4f,%.4f],\"held\":%s,\"lifted\":%s,"
-               "\"dz_m\":%.4f,\"moved_m\":%.4f,\"turned_deg\":%.1f,\"tilt_deg\":%.1f,"
-               "\"moved\":%s,\"knocked_over\":%s,\"touched\":%s,\"collided\":%s",
-            i ? "," : "", c->obj[i].name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
-            oc[i].dz, oc[i].distance, oc[i].turned, oc[i].tilt, tf(oc[i].moved),
-            tf(oc[i].knocked_over), tf(c->touched[i]), tf(c->collided[i]));
-    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, i)));
-    fputc('}', f);
-  }
-  fputs("]}\n", f);
-  fflush(f);
 }
 
 /* ---------------------------------------------------------------- open and close */
