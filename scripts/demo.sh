@@ -36,10 +36,11 @@
 # Options: --exit (stop both processes after the loop and exit 0 if it ran through: the
 # tests run it so), --steps N (training steps per scan, default 300), --clear-table,
 # --update-steps N, --layout N (the cell's scenegen seed, default 0; not 1, the demos'),
-# --config FILE
-# (default config/demo.conf; the daemon's address is its [http] listen, the simulator's its
-# [robot] host and port, its camera's [camera wrist] source's), --out DIR (default
-# demo-out: scans, heatmaps, logs), --build DIR (take the programs from that meson build folder as they are, instead of building build/).
+# --views N (the robot's viewpoints for the calibration and for each scan, default 30),
+# --config FILE (default config/demo.conf; the daemon's address is its [http] listen, the
+# simulator's its [robot] host and port, its camera's [camera wrist] source's), --out DIR
+# (default demo-out: scans, heatmaps, logs), --build DIR (take the programs from that meson
+# build folder as they are, instead of building build/).
 # Needs curl and jq. Exit status: 0 when the loop ran through, 1 on any failed step (the
 # message says which; the daemon's log is in OUT/fieldgripd.log).
 set -euo pipefail
@@ -50,6 +51,7 @@ cd "$root"
 steps=300
 clear=0
 update_steps=200
+n_views=30
 layout_seed=0
 config=config/demo.conf
 out=demo-out
@@ -65,7 +67,8 @@ while [ $# -gt 0 ]; do
     --clear-table) clear=1 ;;
     --update-steps) update_steps=${2:?--update-steps needs a number}; shift ;;
     --layout) layout_seed=${2:?--layout needs a seed}; shift ;;
-    -h|--help) sed -n '2,38p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --views) n_views=${2:?--views needs a number}; shift ;;
+    -h|--help) awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "$0"; exit 0 ;;
     *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
@@ -368,9 +371,9 @@ for task in "${tasks[@]}"; do demo "$task" "$task"; done
 # The camera on the robot's tool, from a bare cell: fieldgripd knows where the board lies on
 # the table (roughly: its centre within a few centimetres) and where the camera sits on the
 # tool as a ruler gives it, and finds its intrinsics, its distortion and its mount itself.
-say "Calibrating the camera on the tool: the robot takes 30 views of the board on the table"
-api_json POST /v1/cameras/wrist/calibrate '{"kind": "both", "drive": {"target": [0.255, -0.45, 0],
-  "mount": {"position": [0.03, -0.02, -0.06], "quaternion": [1, 0, 0, 0]}, "settle_ms": 100}}'
+say "Calibrating the camera on the tool: the robot takes $n_views views of the board on the table"
+api_json POST /v1/cameras/wrist/calibrate "{\"kind\": \"both\", \"drive\": {\"target\": [0.255, -0.45, 0], \"viewpoints\": $n_views,
+  \"mount\": {\"position\": [0.03, -0.02, -0.06], \"quaternion\": [1, 0, 0, 0]}, \"settle_ms\": 100}}"
 expect 202
 follow "the calibration"
 api_curl GET /v1/cameras/wrist
@@ -379,13 +382,13 @@ jq -c '{intrinsics: .intrinsics | {fl_x, fl_y, cx, cy, k1, k2}, T_tcp_cam: .T_tc
         calibration: .calibration | {intrinsics: .intrinsics.rms_px, mount: .mount | {rms_px, spread_mm, spread_deg}}}' <<<"$reply"
 
 # The table scanned by the robot with the calibrated camera, and trained in the same job
-say "Scanning the table: the robot moves the camera through 30 viewpoints, then trains ($steps steps)"
+say "Scanning the table: the robot moves the camera through $n_views viewpoints, then trains ($steps steps)"
 show=0
 api_curl DELETE /v1/scenes/tabletop
 show=1
 api_json POST /v1/scenes "{\"name\": \"tabletop\", \"workspace\": $workspace, \"voxel_size\": 0.01}"
 expect 201
-api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": 30, \"radius_m\": 0.5,
+api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": $n_views, \"radius_m\": 0.5,
   \"elevations_deg\": [40, 75], \"settle_ms\": 100, \"train\": {\"steps\": $steps, \"seed\": 0}}"
 expect 202
 follow "the scan of tabletop"
@@ -506,7 +509,7 @@ clear_table() {
     echo "round $round: the $obj ${outcome:-cleared}; in the bin: ${cleared_list[*]:-nothing}"
     if [ ${#queue[@]} -gt 0 ]; then
       say "A new scan of the changed table, and an update of the field from the current one"
-      api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": 30, \"radius_m\": 0.5,
+      api_json POST /v1/scenes/tabletop/scan "{\"camera\": \"wrist\", \"viewpoints\": $n_views, \"radius_m\": 0.5,
         \"elevations_deg\": [40, 75], \"settle_ms\": 100, \"train\": {\"steps\": $update_steps, \"seed\": 0, \"init\": \"current\"}}"
       expect 202
       follow "the scan and update of tabletop"

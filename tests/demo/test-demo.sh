@@ -142,8 +142,9 @@ fi
   >"$tmp/clip.conf"
 start=$SECONDS
 # A random tiny model's features find nothing in particular, so the trainings need not be
-# long: the run checks the path through CLIP, not the answers (the first run did).
-run_demo "$tmp/clip.conf" --steps 100
+# long, nor the calibration and the scan as thorough: the run checks the path through CLIP, not
+# the answers (the first run did).
+run_demo "$tmp/clip.conf" --steps 100 --views 16
 grep -q '^== Done: the loop ran through' "$out_log" || fail "[clip]: no final line"
 grep -q '^\[clip\] is configured' "$out_log" || fail "[clip] was not noticed"
 grep -q "/v1/scenes/tabletop/heatmap .*-d '{\"text\": \"a mug\"" "$out_log" || fail "[clip]: no text heatmap query"
@@ -156,10 +157,11 @@ grep -q "^in a browser: http://127.0.0.1:$http_port/?scene=tabletop&text=a+mug&t
 echo "ok: with [clip] in $((SECONDS - start)) s"
 
 # --clear-table: every object into the bin, a rescan and an update of the field from the
-# current one after each pick. Short trainings: the loop and physics are under test here
-# (tests/bench/run.sh clear_table measures the share on ten layouts at full length).
+# current one after each pick. Short trainings and 16 viewpoints a scan (of which about 11 are
+# within reach): the loop and physics are under test here (tests/bench/run.sh clear_table
+# measures the share on ten layouts at full length).
 start=$SECONDS
-run_demo "$tmp/demo.conf" --clear-table --steps 150 --update-steps 60
+run_demo "$tmp/demo.conf" --clear-table --steps 150 --update-steps 60 --views 16
 line=$(grep '^clear_table: ' "$out_log") || fail "--clear-table: no summary line"
 echo "$line"
 cleared=$(sed -n 's/.* cleared=\([0-9]*\) .*/\1/p' <<<"$line")
