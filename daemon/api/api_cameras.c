@@ -249,25 +249,32 @@ static json_t *report_json(const fg_conf_camera *cam, const fg_calibration_repor
   return o;
 }
 
-/* "drive": {"target", "viewpoints", "distance_m", "elevations_deg", "roll_deg", "settle_ms",
- * "mount"} into *d (cell/calib_job.h). 0, or -1 after a 400. */
+/* "drive": {"target", "viewpoints", "distance_m", "elevations_deg", "tilt_deg", "roll_deg",
+ * "settle_ms", "mount", "camera_position"} into *d (cell/calib_job.h). 0, or -1 after a 400. */
 static int parse_drive(json_t *v, fg_calib_drive *d, fg_resp *resp) {
   static const char *const keys[] = {"target", "viewpoints", "distance_m", "elevations_deg",
-                                     "roll_deg", "settle_ms", "mount", NULL};
+                                     "tilt_deg", "roll_deg", "settle_ms", "mount",
+                                     "camera_position", NULL};
   const char *unknown = json_is_object(v) ? fg_json_unknown_key(v, keys) : "(not an object)";
   if (unknown)
     return fg_resp_error(resp, 400, "invalid_request", "\"drive\" takes target, viewpoints, "
-                         "distance_m, elevations_deg, roll_deg, settle_ms, mount; not %s",
-                         unknown), -1;
+                         "distance_m, elevations_deg, tilt_deg, roll_deg, settle_ms, mount, "
+                         "camera_position; not %s", unknown), -1;
   d->n = 30;
   d->dist_m[0] = 0.30;
   d->dist_m[1] = 0.40;
   d->el_deg[0] = 50;
   d->el_deg[1] = 80;
+  d->tilt_deg[0] = 15;
+  d->tilt_deg[1] = 45;
   d->roll_deg = 60;
   long long n = d->n, settle = 300;
   json_t *dist = json_object_get(v, "distance_m"), *el = json_object_get(v, "elevations_deg"),
-         *mount = json_object_get(v, "mount");
+         *tilt = json_object_get(v, "tilt_deg"), *mount = json_object_get(v, "mount"),
+         *camera = json_object_get(v, "camera_position");
+  d->has_el = el != NULL;
+  d->has_tilt = tilt != NULL;
+  d->has_camera_guess = camera != NULL;
   if (fg_json_vec(json_object_get(v, "target"), d->target, 3, "target") != 0)
     return fg_resp_error(resp, 400, "invalid_request", "\"drive\" needs \"target\": [x, y, "
                          "z], where the board lies (its centre, or near it) in the base frame, "
@@ -279,6 +286,10 @@ static int parse_drive(json_t *v, fg_calib_drive *d, fg_resp *resp) {
                 !(d->dist_m[0] > 0 && d->dist_m[0] <= d->dist_m[1] && d->dist_m[1] <= 2))) ||
       (el && (fg_json_vec(el, d->el_deg, 2, "elevations_deg") != 0 ||
               !(d->el_deg[0] >= 0 && d->el_deg[0] <= d->el_deg[1] && d->el_deg[1] <= 90))) ||
+      (tilt && (fg_json_vec(tilt, d->tilt_deg, 2, "tilt_deg") != 0 ||
+                !(d->tilt_deg[0] >= 0 && d->tilt_deg[0] <= d->tilt_deg[1] &&
+                  d->tilt_deg[1] <= 60))) ||
+      (camera && fg_json_vec(camera, d->camera_guess, 3, "camera_position") != 0) ||
       (json_object_get(v, "roll_deg") &&
        (fg_json_number(v, "roll_deg", &d->roll_deg) != 1 ||
         !(d->roll_deg >= 0 && d->roll_deg <= 90))) ||
@@ -286,8 +297,10 @@ static int parse_drive(json_t *v, fg_calib_drive *d, fg_resp *resp) {
        fg_json_int_range(v, "settle_ms", 0, 10000, &settle) != 1))
     return fg_resp_error(resp, 400, "invalid_request", "drive: viewpoints %d to %d; "
                          "distance_m [near, far] above 0, at most 2; elevations_deg [low, "
-                         "high] from 0 to 90, low <= high; roll_deg 0 to 90; settle_ms 0 to "
-                         "10000", FG_CALIB_MIN_VIEWS_INTRINSICS, FG_CALIB_DRIVE_MAX_VIEWS), -1;
+                         "high] from 0 to 90, low <= high; tilt_deg [low, high] from 0 to 60, "
+                         "low <= high; camera_position [x, y, z]; roll_deg 0 to 90; settle_ms "
+                         "0 to 10000", FG_CALIB_MIN_VIEWS_INTRINSICS, FG_CALIB_DRIVE_MAX_VIEWS),
+           -1;
   d->n = (int)n;
   d->settle_ms = (int)settle;
   double q[4];

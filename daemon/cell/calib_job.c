@@ -33,6 +33,43 @@ static void drive_viewpoints(const double target[3], const double T_tcp_cam[16],
   }
 }
 
+/* The n TCP poses that show a fixed camera at cam the board the tool holds (its centre at
+ * T_tcp_board on the tool, its printed face along that pose's +z): the board's centre along
+ * the line from cam through target at distances over dist_m, off that line by up to a tenth
+ * of the distance (so that the board crosses the image), its face towards the camera turned
+ * by tilts over tilt_deg about axes all around, and rolled about its normal; the same
+ * interleaved patterns as drive_viewpoints. cam must differ from target. */
+static void show_viewpoints(const double cam[3], const double target[3],
+                            const double T_tcp_board[16], int n, const double dist_m[2],
+                            const double tilt_deg[2], double roll_deg, double *T_base_tcp) {
+  double T_board_tcp[16], u[3], e1[3], e2[3], T_line[16];
+  fg_pose_inverse(T_tcp_board, T_board_tcp);
+  fg_pose_look_at(cam, target, 0, T_line); /* its z along the line, x and y across it */
+  for (int k = 0; k < 3; k++) {
+    e1[k] = T_line[4 * k];
+    e2[k] = T_line[4 * k + 1];
+    u[k] = T_line[4 * k + 2];
+  }
+  for (int i = 0; i < n; i++) {
+    const double d = dist_m[0] + (dist_m[1] - dist_m[0]) * ((i * 2) % 3) / 2.0;
+    const double off = 0.1 * d * ((i * 3) % 5) / 4.0, psi = 2 * M_PI * i / n + 0.3 * (i % 3);
+    const double tilt = (tilt_deg[0] + (tilt_deg[1] - tilt_deg[0]) * ((i * 4) % 5) / 4.0) *
+                        M_PI / 180;
+    const double phi = 2.4 * i; /* the tilt's axis: turns by about 137 degrees a view */
+    const double roll = roll_deg * (-1 + 2 * ((i * 5) % 7) / 6.0) * M_PI / 180;
+    double c[3];
+    for (int k = 0; k < 3; k++)
+      c[k] = cam[k] + d * u[k] + off * (cos(psi) * e1[k] + sin(psi) * e2[k]);
+    double T_face[16], T_tilt[16], T_base_board[16];
+    fg_pose_look_at(c, cam, roll, T_face); /* +z from the board's centre towards the camera */
+    const double zero[3] = {0, 0, 0},
+                 q[4] = {cos(tilt / 2), sin(tilt / 2) * cos(phi), sin(tilt / 2) * sin(phi), 0};
+    fg_pose_from_quat(zero, q, T_tilt);
+    fg_pose_compose(T_face, T_tilt, T_base_board);
+    fg_pose_compose(T_base_board, T_board_tcp, T_base_tcp + 16 * i);
+  }
+}
+
 static void params_free(void *p) {
   fg_calib_drive *r = p;
   free(r->T_base_tcp);
@@ -101,11 +138,12 @@ int fg_calib_drive_submit(fg_app *app, const fg_conf *conf, fg_calib_drive *req,
   const fg_conf_camera *cam = fg_conf_find_camera(conf, req->camera);
   if (!cam)
     return fg_fail_as(FG_ENOENT, "camera_not_found", "no camera \"%s\"", req->camera);
-  if (cam->mount != FG_MOUNT_HAND)
-    return fg_fail_as(FG_EINVAL, "invalid_request", "%s is a fixed camera: \"drive\" moves a "
-                      "camera on the tool around the board; for a fixed camera, move the board "
-                      "with the robot and upload its views (POST /v1/cameras/%s/views)",
-                      cam->name, cam->name);
+  const int fixed = cam->mount == FG_MOUNT_FIXED;
+  if (fixed ? req->has_el : req->has_camera_guess || req->has_tilt)
+    return fg_fail_as(FG_EINVAL, "invalid_request", "%s is %s: \"drive\" takes %s for a %s "
+                      "camera only", cam->name, fixed ? "a fixed camera" : "on the tool",
+                      fixed ? "elevations_deg" : "camera_position and tilt_deg",
+                      fixed ? "hand" : "fixed");
   if (!fg_robot_svc_has_robot(app->robot))
     return fg_fail_as(FG_EUNAVAIL, "not_configured", "\"drive\" moves the robot: set [robot]");
   fg_camera_calib cal;
@@ -113,13 +151,26 @@ int fg_calib_drive_submit(fg_app *app, const fg_conf *conf, fg_calib_drive *req,
   if (req->kind == FG_CALIBRATE_HAND_EYE && !cal.has_intrinsics)
     return fg_fail_as(FG_EINVAL, "not_calibrated", "%s has no intrinsics yet: calibrate them "
                       "first, or both at once (\"kind\": \"both\")", cam->name);
-  double T_guess[16];
+  double T_guess[16], cam_at[3];
   if (req->has_mount_guess)
     memcpy(T_guess, req->T_mount_guess, sizeof T_guess);
-  else if (cal.has_mount)
+  else if (cal.has_mount && !fixed)
     memcpy(T_guess, cal.T_mount, sizeof T_guess);
   else
     fg_pose_identity(T_guess);
+  if (fixed) {
+    if (!req->has_camera_guess && !cal.has_mount)
+      return fg_fail_as(FG_EINVAL, "invalid_request", "%s is a fixed camera with no T_base_cam "
+                        "yet: \"drive\" needs \"camera_position\": [x, y, z], where it "
+                        "stands in the base frame (a ruler's guess is enough)", cam->name);
+    for (int k = 0; k < 3; k++)
+      cam_at[k] = req->has_camera_guess ? req->camera_guess[k] : cal.T_mount[4 * k + 3];
+    const double dx = req->target[0] - cam_at[0], dy = req->target[1] - cam_at[1],
+                 dz = req->target[2] - cam_at[2];
+    if (sqrt(dx * dx + dy * dy + dz * dz) < 1e-3)
+      return fg_fail_as(FG_EINVAL, "invalid_request", "drive: the target is where %s stands: "
+                        "give a point it looks at", cam->name);
+  }
   free(req->T_base_tcp);
   req->T_base_tcp = malloc(sizeof *req->T_base_tcp * 16 * (size_t)req->n);
   fg_calib_drive *own = malloc(sizeof *own);
@@ -127,8 +178,12 @@ int fg_calib_drive_submit(fg_app *app, const fg_conf *conf, fg_calib_drive *req,
     free(own);
     return fg_fail(FG_ENOMEM, "a calibration's viewpoints");
   }
-  drive_viewpoints(req->target, T_guess, req->n, req->dist_m, req->el_deg, req->roll_deg,
-                   req->T_base_tcp);
+  if (fixed)
+    show_viewpoints(cam_at, req->target, T_guess, req->n, req->dist_m, req->tilt_deg,
+                    req->roll_deg, req->T_base_tcp);
+  else
+    drive_viewpoints(req->target, T_guess, req->n, req->dist_m, req->el_deg, req->roll_deg,
+                     req->T_base_tcp);
   *own = *req;
   const fg_job_params jp = {.steps = req->n};
   const int rc = fg_jobs_submit_camera(app->jobs, "calibrate", cam->name, &jp, own, out);

@@ -7,7 +7,8 @@
  * 1 px (principal point), the mount within 1 mm and 0.2 degrees; a capture then gives the
  * camera's pose. Refusals: no views, too few, a degenerate motion (SPEC's bad input). Then the
  * eye-to-hand case: a fixed camera, the board held by the tool, T_base_cam within the same
- * bounds.
+ * bounds, from views the test moves and captures, then from views the robot takes itself
+ * ("drive": the tool shows the camera the board).
  * argv[1]: fieldgripd, argv[2]: fieldgrip-sim. */
 #include "cell_util.h"
 #include "robot_util.h"
@@ -166,6 +167,7 @@ static void pose_error(json_t *pose, const double p[3], const double q[4], doubl
 static double num(json_t *o, const char *k) { return json_number_value(json_object_get(o, k)); }
 
 static void fixed_camera(void);
+static void audit_count(const char *route, const char *id, int *moves, int *requests);
 
 /* A camera on the hand, the board on the table. */
 static void hand_camera(void) {
@@ -376,6 +378,55 @@ static void fixed_camera(void) {
     h_resp_free(r);
   }
   ASSERT(kept >= 24);
+
+  /* The same, driven: the robot shows the camera the board itself, aimed with the camera's
+   * position as a ruler gives it (2 cm off) and the board's centre taken at the TCP (it is 2
+   * cm beyond), both calibrated again from the views it takes. */
+  char body[256];
+  snprintf(body, sizeof body, "{\"kind\": \"both\", \"drive\": {\"target\": [%.2f, %.2f, %.2f], "
+           "\"viewpoints\": 20, \"camera_position\": [%.2f, %.2f, %.2f]}}", at[0], at[1], at[2],
+           eye[0] + 0.02, eye[1] - 0.01, eye[2] + 0.01);
+  static const char *const bad[] = {
+    "{\"kind\": \"both\", \"drive\": {\"target\": [0.45, 0, 0.25], \"elevations_deg\": [40, 60]}}",
+    "{\"kind\": \"both\", \"drive\": {\"target\": [0.8, 0.25, 0.48], \"camera_position\": [0.8, "
+    "0.25, 0.48]}}",
+    "{\"kind\": \"both\", \"drive\": {\"target\": [0.45, 0, 0.25], \"tilt_deg\": [50, 20]}}",
+    "{\"kind\": \"both\", \"drive\": {\"target\": [0.45, 0, 0.25], \"camera_position\": [0.8]}}",
+  };
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    h_resp *r = h_post_json("/v1/cameras/over/calibrate", bad[i]);
+    ASSERT_HTTP_ERROR(r, 400, "invalid_request");
+    h_resp_free(r);
+  }
+  h_resp *r = h_post_json("/v1/cameras/over/calibrate", body);
+  ASSERT_STATUS(r, 202);
+  char id[64];
+  snprintf(id, sizeof id, "%s", json_string_value(json_object_get(r->json, "job")));
+  h_resp_free(r);
+  json_t *job = t_wait_job(id, "done", 300);
+  const json_int_t shown = json_integer_value(json_object_get(job, "frames"));
+  fprintf(stderr, "fixed camera, driven: %lld of 20 views showed the board, %lld skipped\n",
+          (long long)shown, (long long)json_integer_value(json_object_get(job, "skipped")));
+  ASSERT(shown >= 16);
+  json_decref(job);
+  int moves, requests;
+  audit_count("/v1/cameras/over/calibrate", id, &moves, &requests);
+  ASSERT_EQ(moves, 20);
+  r = h_get("/v1/cameras/over");
+  ASSERT_STATUS(r, 200);
+  json_t *in = json_object_get(r->json, "intrinsics");
+  fprintf(stderr, "fixed camera, driven: fx %.2f fy %.2f cx %.2f cy %.2f\n", num(in, "fl_x"),
+          num(in, "fl_y"), num(in, "cx"), num(in, "cy"));
+  ASSERT(fabs(num(in, "fl_x") / K_TRUE[0] - 1) < 0.005);
+  ASSERT(fabs(num(in, "fl_y") / K_TRUE[1] - 1) < 0.005);
+  ASSERT(fabs(num(in, "cx") - K_TRUE[2]) < 1 && fabs(num(in, "cy") - K_TRUE[3]) < 1);
+  double err_mm, err_deg;
+  pose_error(json_object_get(r->json, "T_base_cam"), eye, qc, &err_mm, &err_deg);
+  fprintf(stderr, "fixed camera, driven: T_base_cam %.3f mm, %.4f deg from the truth\n", err_mm,
+          err_deg);
+  ASSERT(err_mm < 1);
+  ASSERT(err_deg < 0.2);
+  h_resp_free(r);
   h_stop();
   simproc_stop(&sim);
 }
@@ -461,7 +512,9 @@ static void driven(void) {
     {"/v1/cameras/arm/calibrate", "{\"kind\": \"hand_eye\", \"drive\": {\"target\": [0.4, 0, "
      "0]}}", 409, "not_calibrated"},
     {"/v1/cameras/top/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0]}}",
-     400, "invalid_request"},
+     400, "invalid_request"}, /* a fixed camera: where it stands is not known */
+    {"/v1/cameras/arm/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0], "
+     "\"camera_position\": [0.8, 0.2, 0.5]}}", 400, "invalid_request"}, /* for a fixed one */
     {"/v1/cameras/none/calibrate", "{\"kind\": \"both\", \"drive\": {\"target\": [0.4, 0, 0]}}",
      404, "camera_not_found"},
   };
@@ -473,7 +526,7 @@ static void driven(void) {
   int moves, requests;
   audit_count("/v1/cameras/arm/calibrate", "", &moves, &requests);
   ASSERT_EQ(moves, 0);
-  ASSERT_EQ(requests, 6); /* each refusal on this route recorded */
+  ASSERT_EQ(requests, 7); /* each refusal on this route recorded */
 
   h_resp *r = h_post_json("/v1/cameras/arm/calibrate", body);
   ASSERT_STATUS(r, 202);
@@ -497,7 +550,7 @@ static void driven(void) {
   json_decref(job);
   audit_count("/v1/cameras/arm/calibrate", id, &moves, &requests);
   ASSERT_EQ(moves, 30);
-  ASSERT_EQ(requests, 8); /* the refusals, the job's request and the busy one */
+  ASSERT_EQ(requests, 9); /* the refusals, the job's request and the busy one */
 
   r = h_get("/v1/cameras/arm");
   ASSERT_STATUS(r, 200);
