@@ -31,6 +31,7 @@ const char *fg_strerror(int err) {
 }
 
 /* Formats into a copy first: the arguments may include the detail itself. */
+__attribute__((format(printf, 2, 0)))
 static void record(const char *why, const char *fmt, va_list ap) {
   char msg[sizeof detail];
   vsnprintf(msg, sizeof msg, fmt, ap);
