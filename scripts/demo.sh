@@ -36,7 +36,7 @@
 # Options: --exit (stop both processes after the loop and exit 0 if it ran through: the
 # tests run it so), --steps N (training steps per scan, default 300), --clear-table,
 # --update-steps N, --layout N (the cell's scenegen seed, default 0; not 1, the demos'),
-# --views N (the robot's viewpoints for the calibration and for each scan, default 30),
+# --views N (the robot's viewpoints for the calibration and for each scan, 4 to 60, default 30),
 # --config FILE (default config/demo.conf; the daemon's address is its [http] listen, the
 # simulator's its [robot] host and port, its camera's [camera wrist] source's), --out DIR
 # (default demo-out: scans, heatmaps, logs), --build DIR (take the programs from that meson
@@ -73,6 +73,13 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
+
+# the calibration takes 4 to 60 viewpoints (the scans up to 200): refused here, not after the
+# trainings
+if ! [[ "$n_views" =~ ^[0-9]+$ ]] || [ "$n_views" -lt 4 ] || [ "$n_views" -gt 60 ]; then
+  echo "demo: --views wants a number from 4 to 60, got '$n_views'" >&2
+  exit 2
+fi
 
 for tool in curl jq; do
   command -v "$tool" >/dev/null || { echo "demo: needs $tool (apt-get install $tool)" >&2; exit 1; }

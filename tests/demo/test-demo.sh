@@ -85,6 +85,12 @@ run_demo() { # CONFIG [demo.sh options]: runs it into $tmp/out, output in $out_l
   bash "$demo" --exit --build "$build" --config "$conf" --out "$tmp/out" "$@" >"$out_log" 2>&1 || rc=$?
   [ "$rc" -eq 0 ] || fail "demo.sh exited $rc"
 }
+# a bad --views is refused before anything runs
+rc=0
+bash "$demo" --exit --build "$build" --views 3 >"$out_log" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] && grep -q -- '--views wants a number from 4 to 60' "$out_log" ||
+  fail "--views 3 was not refused (exit $rc)"
+
 run_demo "$tmp/demo.conf"
 
 grep -q '^== Done: the loop ran through' "$out_log" || fail "no final line"
