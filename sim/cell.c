@@ -144,7 +144,8 @@ static int contact_mask(const sim_cell *c, int i) {
   return mask;
 }
 
-int cell_held(const sim_cell *c, int i) { return (contact_mask(c, i) & 6) == 6; }
+/* 1 when the fingers hold object i (both touch it). */
+static int cell_held(const sim_cell *c, int i) { return (contact_mask(c, i) & 6) == 6; }
 
 /* Every object is still, but one the fingers hold (it moves with the hand, which stands). */
 static int objects_at_rest(const sim_cell *c) {
@@ -236,11 +237,21 @@ static void phase_begin(sim_cell *c) {
   }
 }
 
+/* The report line of the command that ends, with what the cell knows of this moment. */
+static void report(const sim_cell *c, const char *outcome, const char *why) {
+  if (!c->cfg.report) return;
+  cell_report_facts facts = {0};
+  for (int i = 0; i < c->n_obj; i++) facts.held[i] = (unsigned char)cell_held(c, i);
+  int pos, moving;
+  sim_cell_fingers_status(c, &pos, &moving, &facts.gobj);
+  cell_report_command(c, &facts, outcome, why);
+}
+
 static void program_end(sim_cell *c, int result, const char *outcome) {
   c->running = 0;
   c->result = result;
   c->last_activity = c->d->time;
-  cell_report_command(c, outcome, NULL);
+  report(c, outcome, NULL);
 }
 
 /* Advances the phase in progress by one step's worth; moves on when it is complete. */
@@ -391,11 +402,6 @@ static int in_reach(const sim_cell *c, const double p[3]) {
          sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) <= c->cfg.reach_m;
 }
 
-const char *cell_command_name(int command) {
-  static const char *const names[] = {"no-op", "pick", "place", "open", "close", "move"};
-  return command >= 0 && command <= 5 ? names[command] : "unknown";
-}
-
 /* Builds the phases of block b; 0, or -1 with why. */
 static int program_build(sim_cell *c, const sim_cell_block *b, char *why, size_t whysz) {
   const double stroke = c->spec->stroke_m;
@@ -469,7 +475,7 @@ int sim_cell_program_start(sim_cell *c, const sim_cell_block *b, int64_t now_ns,
   }
   if (program_build(c, b, why, whysz) != 0) {
     c->result = 3;
-    cell_report_command(c, "failed", why);
+    report(c, "failed", why);
     return -1;
   }
   c->running = 1;
@@ -487,7 +493,7 @@ void sim_cell_program_stop(sim_cell *c, int64_t now_ns) {
   c->running = 0;
   c->result = 0;
   c->last_activity = c->d->time;
-  cell_report_command(c, "stopped", NULL);
+  report(c, "stopped", NULL);
 }
 
 void sim_cell_fingers_goto(sim_cell *c, int position, int speed, int force, int64_t now_ns) {

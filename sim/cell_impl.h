@@ -130,14 +130,16 @@ static inline const double *obj_quat(const sim_cell *c, int i) {
 /* The fingers' closing, per finger (m). */
 static inline double finger_q(const sim_cell *c) { return c->d->qpos[c->qadr[0]]; }
 
-/* 1 when the fingers hold object i (both touch it). */
-int cell_held(const sim_cell *c, int i);
-
-/* The block's command by name (proto/modbus.md). */
-const char *cell_command_name(int command);
+/* What the cell knows of the moment a command ends, beyond the model's state, for its report:
+ * which objects the fingers hold (both touch it) and the gripper's object status (gOBJ). */
+typedef struct {
+  unsigned char held[CELL_MAX_OBJECTS];
+  int gobj;
+} cell_report_facts;
 
 /* Writes the report line of the command that ends (cfg.report; SPEC.md's fields, then the
  * simulator's own): outcome "done", "failed" (with why) or "stopped". */
-void cell_report_command(sim_cell *c, const char *outcome, const char *why);
+void cell_report_command(const sim_cell *c, const cell_report_facts *facts, const char *outcome,
+                         const char *why);
 
 #endif

@@ -6,9 +6,9 @@
 
 /* 1 when object i lies in the bin: its centre within the walls (on the floor or on what lies
  * there already) and the gripper not holding it. */
-static int in_bin(const sim_cell *c, int i) {
+static int in_bin(const sim_cell *c, const cell_report_facts *facts, int i) {
   const double *p = obj_pos(c, i);
-  return c->cfg.has_bin && !cell_held(c, i) &&
+  return c->cfg.has_bin && !facts->held[i] &&
          fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
          fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M;
 }
@@ -19,10 +19,11 @@ typedef struct {
   double dz, distance, turned, tilt;
 } object_outcome;
 
-static object_outcome object_outcome_of(const sim_cell *c, int i) {
+static object_outcome object_outcome_of(const sim_cell *c, const cell_report_facts *facts,
+                                        int i) {
   const cell_object *o = &c->obj[i];
   const double *p = obj_pos(c, i), *q = obj_quat(c, i);
-  object_outcome r = {.held = cell_held(c, i)};
+  object_outcome r = {.held = facts->held[i]};
   r.dz = p[2] - o->rest_pos[2];
   r.distance = dist3(p, o->cmd_pos);
   r.turned = quat_angle(q, o->cmd_quat) * 180 / M_PI;
@@ -44,22 +45,28 @@ static void put_num(FILE *f, double v, int decimals) {
 
 static const char *tf(int b) { return b ? "true" : "false"; }
 
+/* The block's command by name (proto/modbus.md). */
+static const char *command_name(int command) {
+  static const char *const names[] = {"no-op", "pick", "place", "open", "close", "move"};
+  return command >= 0 && command <= 5 ? names[command] : "unknown";
+}
+
 /* One line: SPEC.md's fields (seq, command, pose, object_detected, lifted, lift_m, touched,
  * moved), then the simulator's own (proto/modbus.md). */
-void cell_report_command(sim_cell *c, const char *outcome, const char *why) {
+void cell_report_command(const sim_cell *c, const cell_report_facts *facts, const char *outcome,
+                         const char *why) {
   FILE *f = c->cfg.report;
   if (!f) return;
   const sim_cell_block *b = &c->blk;
   object_outcome oc[CELL_MAX_OBJECTS];
   int lifted = -1;
   for (int i = 0; i < c->n_obj; i++) {
-    oc[i] = object_outcome_of(c, i);
+    oc[i] = object_outcome_of(c, facts, i);
     if (oc[i].lifted && (lifted < 0 || oc[i].dz > oc[lifted].dz)) lifted = i;
   }
-  int pos, moving, obj;
-  sim_cell_fingers_status(c, &pos, &moving, &obj);
+  const int obj = facts->gobj;
   fprintf(f, "{\"seq\":%d,\"command\":\"%s\",\"pose\":{\"position\":[", b->seq,
-          cell_command_name(b->command));
+          command_name(b->command));
   double quat[4];
   quat_from_rv(b->rv, quat);
   for (int k = 0; k < 3; k++) {
@@ -115,7 +122,7 @@ void cell_report_command(sim_cell *c, const char *outcome, const char *why) {
             i ? "," : "", c->obj[i].name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
             oc[i].dz, oc[i].distance, oc[i].turned, oc[i].tilt, tf(oc[i].moved),
             tf(oc[i].knocked_over), tf(c->touched[i]), tf(c->collided[i]));
-    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, i)));
+    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, facts, i)));
     fputc('}', f);
   }
   fputs("]}\n", f);
