@@ -59,19 +59,6 @@ struct fg_jobs {
   pthread_t worker;
 };
 
-static const char *const state_names[FG_JOB_N_STATES] = {"queued", "running", "done", "failed",
-                                                         "cancelled"};
-
-const char *fg_job_state_name(fg_job_state s) {
-  return s >= 0 && s < FG_JOB_N_STATES ? state_names[s] : "unknown";
-}
-
-int fg_job_state_finished(fg_job_state s) {
-  return s == FG_JOB_DONE || s == FG_JOB_FAILED || s == FG_JOB_CANCELLED;
-}
-
-/* Unix milliseconds, for the job's timestamps. */
-
 /* ---------------------------------------------------------------- job objects */
 
 static fg_job *job_new(void) {

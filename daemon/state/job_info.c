@@ -1,6 +1,5 @@
-/* A job's JSON: the object of the API and, with its times, the record in last_job.json;
- * see jobs.h. */
-#include "jobs.h"
+/* A job's record: its state's names and its JSON both ways; see job_info.h. */
+#include "job_info.h"
 
 #include "json.h"
 
@@ -10,6 +9,17 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+static const char *const state_names[FG_JOB_N_STATES] = {"queued", "running", "done", "failed",
+                                                         "cancelled"};
+
+const char *fg_job_state_name(fg_job_state s) {
+  return s >= 0 && s < FG_JOB_N_STATES ? state_names[s] : "unknown";
+}
+
+int fg_job_state_finished(fg_job_state s) {
+  return s == FG_JOB_DONE || s == FG_JOB_FAILED || s == FG_JOB_CANCELLED;
+}
 
 static json_t *num_or_null(double v) { return isfinite(v) ? json_real(v) : json_null(); }
 
