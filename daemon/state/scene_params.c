@@ -1,6 +1,7 @@
-/* A scene's parameters and their file, scene.json (store_priv.h); its field settings. */
+/* A scene's parameters and their file, scene.json; see scene_params.h. */
+#include "scene_params.h"
+
 #include "json.h"
-#include "store_priv.h"
 
 #include "core/error.h"
 #include "core/fsutil.h"
@@ -51,22 +52,21 @@ int fg_scene_params_equal(const fg_scene_params *a, const fg_scene_params *b) {
 
 /* ---------------------------------------------------------------- scene.json */
 
-int fg_scene_write_json(const fg_scene *s) {
+int fg_scene_json_write(const char *dir, const char *name, const fg_scene_params *p,
+                        int64_t created_ms) {
   json_t *o = json_pack(
-    "{s:s,s:{s:[f,f,f],s:[f,f,f]},s:f,s:[f,f,f],s:I}", "name", s->name, "workspace", "min",
-    s->params.workspace_min[0], s->params.workspace_min[1], s->params.workspace_min[2], "max",
-    s->params.workspace_max[0], s->params.workspace_max[1], s->params.workspace_max[2],
-    "voxel_size", s->params.voxel_size, "background", s->params.background[0],
-    s->params.background[1], s->params.background[2], "created_ms", (json_int_t)s->created_ms);
+    "{s:s,s:{s:[f,f,f],s:[f,f,f]},s:f,s:[f,f,f],s:I}", "name", name, "workspace", "min",
+    p->workspace_min[0], p->workspace_min[1], p->workspace_min[2], "max", p->workspace_max[0],
+    p->workspace_max[1], p->workspace_max[2], "voxel_size", p->voxel_size, "background",
+    p->background[0], p->background[1], p->background[2], "created_ms", (json_int_t)created_ms);
   if (o) {
-    json_object_set_new(o, "field_scale", fg_json_field_scale(s->params.field_scale));
-    json_object_set_new(o, "learn_background",
-                        fg_json_learn_background(s->params.learn_background));
+    json_object_set_new(o, "field_scale", fg_json_field_scale(p->field_scale));
+    json_object_set_new(o, "learn_background", fg_json_learn_background(p->learn_background));
   }
   char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(17)) : NULL;
   json_decref(o);
   if (!text) return fg_fail(FG_ENOMEM, "out of memory");
-  char *path = fg_path_join(s->dir, "scene.json");
+  char *path = fg_path_join(dir, "scene.json");
   int rc = path ? fg_write_file_atomic(path, text, strlen(text)) : fg_fail(FG_ENOMEM, "oom");
   free(path);
   free(text);
@@ -83,8 +83,8 @@ static int read_vec3(json_t *a, double out[3]) {
   return 0;
 }
 
-int fg_scene_read_json(fg_scene *s) {
-  char *path = fg_path_join(s->dir, "scene.json");
+int fg_scene_json_read(const char *dir, fg_scene_params *params, int64_t *created_ms) {
+  char *path = fg_path_join(dir, "scene.json");
   if (!path) return fg_fail(FG_ENOMEM, "out of memory");
   json_error_t jerr;
   json_t *o = json_load_file(path, 0, &jerr);
@@ -92,51 +92,23 @@ int fg_scene_read_json(fg_scene *s) {
   json_t *ws = o ? json_object_get(o, "workspace") : NULL;
   if (!o) {
     rc = fg_fail(FG_EFORMAT, "%s: %s (line %d)", path, jerr.text, jerr.line);
-  } else if (read_vec3(json_object_get(ws, "min"), s->params.workspace_min) ||
-             read_vec3(json_object_get(ws, "max"), s->params.workspace_max) ||
-             read_vec3(json_object_get(o, "background"), s->params.background) ||
+  } else if (read_vec3(json_object_get(ws, "min"), params->workspace_min) ||
+             read_vec3(json_object_get(ws, "max"), params->workspace_max) ||
+             read_vec3(json_object_get(o, "background"), params->background) ||
              !json_is_number(json_object_get(o, "voxel_size"))) {
     rc = fg_fail(FG_EFORMAT, "%s: missing or malformed workspace, voxel_size or background", path);
   } else {
-    s->params.field_scale = FG_FIELD_SCALE_AUTO;
-    s->params.learn_background = FG_LEARN_BACKGROUND_AUTO;
-    s->params.voxel_size = json_number_value(json_object_get(o, "voxel_size"));
-    s->created_ms = json_integer_value(json_object_get(o, "created_ms"));
+    params->field_scale = FG_FIELD_SCALE_AUTO;
+    params->learn_background = FG_LEARN_BACKGROUND_AUTO;
+    params->voxel_size = json_number_value(json_object_get(o, "voxel_size"));
+    *created_ms = json_integer_value(json_object_get(o, "created_ms"));
     /* absent in scenes made before the settings existed: auto */
-    if (fg_json_read_field_settings(o, &s->params.field_scale, &s->params.learn_background))
+    if (fg_json_read_field_settings(o, &params->field_scale, &params->learn_background))
       rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
-    else if (fg_scene_params_validate(&s->params) != 0)
+    else if (fg_scene_params_validate(params) != 0)
       rc = fg_fail(FG_EFORMAT, "%s: %s", path, fg_error_detail());
   }
   json_decref(o);
   free(path);
-  return rc;
-}
-
-int fg_scene_set_field_settings(fg_scene *s, const double *field_scale,
-                                const int *learn_background) {
-  pthread_mutex_lock(&s->lock);
-  fg_scene_params p = s->params;
-  if (field_scale) p.field_scale = *field_scale;
-  if (learn_background) p.learn_background = *learn_background;
-  int rc = 0;
-  if (s->deleted)
-    rc = fg_fail_as(FG_ENOENT, "scene_not_found", "scene '%s' was deleted", s->name);
-  else if (s->declared)
-    rc = fg_fail_as(FG_EPERM, "declared_in_config", "scene '%s' is declared in the "
-                    "configuration file: set field_scale and learn_background in its [scene %s] "
-                    "section and reload", s->name, s->name);
-  else if (fg_scene_params_validate(&p) != 0)
-    rc = FG_EINVAL;
-  else if (!fg_scene_params_equal(&p, &s->params)) {
-    const fg_scene_params old = s->params;
-    s->params = p;
-    rc = fg_scene_write_json(s);
-    if (rc != 0) {
-      s->params = old;
-      rc = fg_state_write_failed(rc, "the scene's settings");
-    }
-  }
-  pthread_mutex_unlock(&s->lock);
   return rc;
 }

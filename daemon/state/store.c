@@ -520,7 +520,7 @@ int fg_store_open(fg_store **out, const char *state_dir, const fg_store_limits *
       scene_free(s);
       continue;
     }
-    if (fg_scene_read_json(s) != 0 || fg_scene_frames_read(s) != 0) {
+    if (fg_scene_json_read(s->dir, &s->params, &s->created_ms) != 0 || fg_scene_frames_read(s) != 0) {
       fg_error("scene %s is left out: %s", s->name, fg_error_detail());
       scene_free(s);
       continue;
@@ -589,7 +589,7 @@ int fg_store_create(fg_store *st, const char *name, const fg_scene_params *param
   s->declared = declared;
   s->created_ms = fg_real_ms();
   rc = fg_mkdir_p(s->frames_dir);
-  if (rc == 0) rc = fg_scene_write_json(s);
+  if (rc == 0) rc = fg_scene_json_write(s->dir, s->name, &s->params, s->created_ms);
   if (rc == 0) rc = fg_fsync_dir(st->scenes_dir);
   if (rc == 0) rc = store_insert(st, s);
   if (rc == 0) {
@@ -770,7 +770,7 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
       if (!fg_scene_params_equal(&s->params, &p)) {
         fg_scene_params old = s->params;
         s->params = p;
-        rc = fg_scene_write_json(s);
+        rc = fg_scene_json_write(s->dir, s->name, &s->params, s->created_ms);
         if (rc != 0) s->params = old;
         else fg_info("scene %s: workspace, voxel size, background and field settings updated "
                      "from the configuration file", cs->name);
@@ -792,6 +792,34 @@ int fg_store_sync_declared(fg_store *st, const struct fg_conf *conf) {
   }
   pthread_mutex_unlock(&st->lock);
   return first;
+}
+
+int fg_scene_set_field_settings(fg_scene *s, const double *field_scale,
+                                const int *learn_background) {
+  pthread_mutex_lock(&s->lock);
+  fg_scene_params p = s->params;
+  if (field_scale) p.field_scale = *field_scale;
+  if (learn_background) p.learn_background = *learn_background;
+  int rc = 0;
+  if (s->deleted)
+    rc = fg_fail_as(FG_ENOENT, "scene_not_found", "scene '%s' was deleted", s->name);
+  else if (s->declared)
+    rc = fg_fail_as(FG_EPERM, "declared_in_config", "scene '%s' is declared in the "
+                    "configuration file: set field_scale and learn_background in its [scene %s] "
+                    "section and reload", s->name, s->name);
+  else if (fg_scene_params_validate(&p) != 0)
+    rc = FG_EINVAL;
+  else if (!fg_scene_params_equal(&p, &s->params)) {
+    const fg_scene_params old = s->params;
+    s->params = p;
+    rc = fg_scene_json_write(s->dir, s->name, &s->params, s->created_ms);
+    if (rc != 0) {
+      s->params = old;
+      rc = fg_state_write_failed(rc, "the scene's settings");
+    }
+  }
+  pthread_mutex_unlock(&s->lock);
+  return rc;
 }
 
 int fg_state_write_failed(int rc, const char *what) {

@@ -22,6 +22,7 @@
 
 #include "field/model.h"
 #include "io/frame.h"
+#include "scene_params.h"
 #include "voxcache.h"
 
 typedef struct fg_store fg_store;
@@ -48,20 +49,6 @@ typedef struct fg_store_limits {
 } fg_store_limits;
 
 #define FG_JOB_ID_MAX 40
-
-/* The settings of the field a training makes (field/model.h): its cube is field_scale times
- * the workspace's largest extent, and it learns a background colour or not; "auto" asks the
- * training's frames (field/extent.h). */
-#define FG_FIELD_SCALE_AUTO 0.0
-#define FG_LEARN_BACKGROUND_AUTO (-1)
-
-typedef struct fg_scene_params {
-  double workspace_min[3], workspace_max[3]; /* metres, world frame */
-  double voxel_size;                         /* metres */
-  double background[3];                      /* RGB in [0,1] */
-  double field_scale;   /* 1..64, or FG_FIELD_SCALE_AUTO */
-  int learn_background; /* 0, 1 or FG_LEARN_BACKGROUND_AUTO */
-} fg_scene_params;
 
 /* A consistent copy of a scene's description, taken under its lock. */
 typedef struct fg_scene_info {
@@ -105,10 +92,6 @@ void fg_store_close(fg_store *store);
  * evicted now as far as nothing holds them, the rest as they are released and others
  * acquired. */
 void fg_store_set_limits(fg_store *store, const fg_store_limits *limits);
-
-/* Checks scene parameters: finite, min < max per axis, 0 < voxel_size, background in [0,1],
- * field_scale auto or in [1, 64], learn_background auto, 0 or 1. FG_EINVAL with a detail. */
-int fg_scene_params_validate(const fg_scene_params *p);
 
 /* Creates a scene. FG_EEXIST if the name is taken, FG_EINVAL for a bad name or parameters,
  * FG_ERANGE when the store holds max_scenes scenes already (the detail names the limit and

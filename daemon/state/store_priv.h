@@ -1,4 +1,4 @@
-/* What store.c, store_frames.c and scene_params.c share and nothing else sees: the scene and store objects.
+/* What store.c and store_frames.c share and nothing else sees: the scene and store objects.
  * Everything the rest of the daemon needs goes through store.h. */
 #ifndef FG_DAEMON_STORE_PRIV_H
 #define FG_DAEMON_STORE_PRIV_H
@@ -57,13 +57,6 @@ struct fg_store {
   fg_store_limits limits;
   atomic_ullong field_clock, field_loads, field_evictions;
 };
-
-/* scene_params.c: whether two parameter sets are the same; s's scene.json written (atomically)
- * from s->params and created_ms, or read into them (FG_EFORMAT naming the file when it is
- * malformed; the field settings auto when it has none, as scenes made before them). */
-int fg_scene_params_equal(const fg_scene_params *a, const fg_scene_params *b);
-int fg_scene_write_json(const fg_scene *s);
-int fg_scene_read_json(fg_scene *s);
 
 /* 1 when n is a frame file's name (NNNNNN.fgf, at least six digits), its number in *index. */
 int fg_frame_file_name(const char *n, int *index);
