@@ -3,11 +3,9 @@
  * reset. */
 #include "robot_priv.h"
 
-#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include <jansson.h>
 
@@ -104,72 +102,6 @@ int robot_latch_sync(fg_robot_svc *svc, fg_mb_link *l) {
     pthread_mutex_unlock(&svc->lock);
   }
   if (clear) FG_TRY(clear_block(svc, l));
-  return 0;
-}
-
-/* ---------------------------------------------------------------- stop and reset */
-
-/* On the robot's worker, after the running command (if any) has ended: the stop word and a
- * no-op block, read back through the ack first so that the no-op's seq is a new one. */
-static int stop_run(fg_mb_link *l, void *arg) {
-  fg_robot_svc *svc = arg;
-  FG_TRY(fg_mb_link_ensure(l));
-  return robot_idle(l, svc); /* reads ack, then robot_latch_sync writes what the latch owes */
-}
-
-int fg_robot_stop(fg_robot_svc *svc, const char *reason, int *written, uint64_t *stopped_id) {
-  *written = 0;
-  *stopped_id = 0;
-  if (!svc->robot)
-    return fg_fail_as(FG_EUNAVAIL, "not_configured", "no robot is configured ([robot] "
-                      "transport = none): there is nothing to stop");
-  pthread_mutex_lock(&svc->lock);
-  if (svc->active) *stopped_id = svc->active->v.id;
-  robot_latch_set_locked(svc, reason, *stopped_id, 1);
-  svc->stop_requested = 1;
-  pthread_mutex_unlock(&svc->lock);
-  robot_latch_persist(svc);
-  /* queued behind the running command, whose waits end at their next poll */
-  const int rc = fg_mb_peer_call(svc->robot, stop_run, svc);
-  pthread_mutex_lock(&svc->lock);
-  svc->stop_requested = 0;
-  *written = svc->latch.stop_written;
-  pthread_mutex_unlock(&svc->lock);
-  if (rc < 0)
-    fg_warn("robot: the stop could not be written yet (%s); motion stays refused and the "
-            "stop is written when the robot answers", fg_error_detail());
-  return 0;
-}
-
-/* On the robot's worker: the stop register back to 0, after what the latch still owes (a
- * no-op block must be in place before the robot may run again). */
-static int reset_run(fg_mb_link *l, void *arg) {
-  fg_robot_svc *svc = arg;
-  FG_TRY(fg_mb_link_ensure(l));
-  FG_TRY(robot_idle(l, svc));
-  return fg_robot_write_stop(l, &svc->rp, 0);
-}
-
-int fg_robot_reset(fg_robot_svc *svc) {
-  pthread_mutex_lock(&svc->lock);
-  int rc = 0;
-  if (svc->active || svc->gripper_busy)
-    rc = fg_fail_as(FG_EBUSY, "robot_busy", "a command is still running; wait for it to end, "
-                    "then reset");
-  const int latched = svc->latch.latched;
-  pthread_mutex_unlock(&svc->lock);
-  if (rc < 0) return rc;
-  if (svc->robot && (rc = fg_mb_peer_call(svc->robot, reset_run, svc)) < 0)
-    return fg_fail_as(FG_EUNAVAIL, "robot_disconnected", "the robot could not be reached to "
-                      "clear its stop register (%s); the stop stays latched", fg_error_detail());
-  if (latched && unlink(svc->latch_path) < 0 && errno != ENOENT)
-    return fg_fail_as(FG_EIO, "state_unavailable", "cannot remove %s (%s); the stop stays "
-                      "latched", svc->latch_path, strerror(errno));
-  pthread_mutex_lock(&svc->lock);
-  memset(&svc->latch, 0, sizeof svc->latch);
-  svc->latch_stop = 0;
-  pthread_mutex_unlock(&svc->lock);
-  if (latched) fg_info("robot: reset; motion is allowed again");
   return 0;
 }
 

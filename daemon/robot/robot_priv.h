@@ -66,12 +66,6 @@ struct fg_robot_svc {
   int latch_stop;       /* the latch wants the stop register at 1 (a stop, not an outcome) */
 };
 
-/* ---- robot.c */
-
-/* The robot's idle job (a job fn of peer.h): reads ack and status, then writes what the
- * latch still owes the robot. */
-int robot_idle(fg_mb_link *l, void *arg);
-
 /* ---- robot_tcp.c */
 
 /* Reads the TCP pose on the robot's worker and keeps it (a failure only as its error), when
