@@ -138,7 +138,9 @@
 #   first_grasp  time to first grasp after a 30-view RGB-D scan in the simulator
 #           (bench_first_grasp, BENCH_FIRST_GRASP_STEPS steps, default 500): scan, load,
 #           training, save, the first grasp (voxel cache, grasp field, search) and a second
-#           search, seconds each (target: from the last frame to the first grasp <= 60 s)
+#           search, seconds each; then the first grasp executed in the physics cell: its
+#           distance from the box's true grasp and what it lifted (target: from the last
+#           frame to the first grasp <= 60 s, and the box lifted)
 #   fox     instant-ngp's fox (50 phone photos, OPENCV lens), read from $FG_FOX_DIR (the
 #           repository's data/nerf/fox; not shipped here), through the daemon's API as a
 #           user would: a scene of +-1.5 m with its field settings on auto, the import,
