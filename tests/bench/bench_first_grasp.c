@@ -34,7 +34,6 @@
 #include "trained.h"
 
 #include <limits.h>
-#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -49,46 +48,10 @@ static double grasp_s(char id[64], double *err_m) {
   const double s = h_now_s() - t0;
   json_t *g = r->status == 200 ? JGET(r->json, "grasps.0") : NULL;
   if (!g) FG_TEST_FAIL("no grasp on the scan: %ld %s", r->status, r->body);
-  double d2 = 0;
-  for (int k = 0; k < 3; k++) {
-    const char idx[2] = {(char)('0' + k), 0};
-    d2 += pow(JNUM(JGET(g, "pose.position"), idx) -
-                  JNUM(JGET(g_object("box"), "grasp.position"), idx), 2);
-  }
-  *err_m = sqrt(d2);
+  *err_m = g_grasp_error(g, "box");
   if (id) snprintf(id, 64, "%s", JSTR(g, "id"));
   h_resp_free(r);
   return s;
-}
-
-/* Executes grasp id through fieldgripd and returns what physics lifted, from the last line
- * of the simulator's report (report_path) that a command wrote: the object's name, or
- * "none" (caller frees). */
-static char *execute_lifted(const char *id, const char *report_path) {
-  char *path = h_fmt("/v1/scenes/scan/grasps/%s/execute", id);
-  h_resp *r = r_post(path, "{\"dry_run\": false}", "first-grasp");
-  if (r->status != 200 || strcmp(JSTR(r->json, "state"), "done") != 0)
-    FG_TEST_FAIL("the first grasp's pick did not run: %ld %s", r->status, r->body);
-  h_resp_free(r);
-  free(path);
-  char *text = h_read_file(report_path, NULL);
-  if (!text) FG_TEST_FAIL("no physics report at %s", report_path);
-  json_t *last = NULL;
-  for (char *line = strtok(text, "\n"); line; line = strtok(NULL, "\n")) {
-    json_t *j = json_loads(line, 0, NULL);
-    if (j && json_object_get(j, "command")) {
-      json_decref(last);
-      last = j;
-    } else {
-      json_decref(j);
-    }
-  }
-  if (!last) FG_TEST_FAIL("the physics report has no command's line");
-  const char *lifted = json_string_value(json_object_get(last, "lifted"));
-  char *out = h_fmt("%s", lifted ? lifted : "none");
-  json_decref(last);
-  free(text);
-  return out;
 }
 
 int main(int argc, char **argv) {
@@ -126,13 +89,7 @@ int main(int argc, char **argv) {
                           "\"background\": [0.8, 0.8, 0.82]}");
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
-  /* as a user shows it (and scripts/demo.sh): the gripper open, its default query points */
-  json_t *gt = JGET(g_object("box"), "grasp");
-  json_t *dj = json_pack("{s:s, s:{s:O, s:O}, s:f}", "scene", "sg", "pose", "position",
-                         JGET(gt, "position"), "quaternion", JGET(gt, "quaternion"), "width",
-                         0.085);
-  char *demo = json_dumps(dj, JSON_COMPACT | JSON_REAL_PRECISION(17));
-  json_decref(dj);
+  char *demo = g_demo_body_open("sg", "box"); /* as a user shows it */
   r = g_post("/v1/tasks/box/demos", demo);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
@@ -177,7 +134,7 @@ int main(int argc, char **argv) {
   r = h_get("/v1/scenes/scan");
   const double voxel = JNUM(r->json, "voxel_cache.build_seconds");
   h_resp_free(r);
-  char *lifted = execute_lifted(id, report);
+  char *lifted = cu_execute_lifted("scan", id, "first-grasp", report);
   const double total = load + train + save + first;
   const int pass = total <= TARGET_S && strcmp(lifted, "box") == 0;
   printf("bench=first_grasp steps=%d frames=%lld scan_s=%.2f load_s=%.2f "

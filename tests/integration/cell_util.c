@@ -10,6 +10,7 @@
 
 #include "core/pose.h"
 #include "harness.h"
+#include "robot_util.h"
 
 int cu_sim_start(simproc *sim, const char *const *extra) {
   const char *src = getenv("FG_SOURCE_DIR");
@@ -46,6 +47,35 @@ void cu_look_at(const double eye[3], const double target[3], double roll_deg, do
   fg_pose_look_at(eye, target, roll_deg * M_PI / 180, T);
   fg_pose_get_rotmat(T, R);
   fg_quat_from_rotmat(R, q);
+}
+
+char *cu_execute_lifted(const char *scene, const char *id, const char *key,
+                        const char *report_path) {
+  char *path = h_fmt("/v1/scenes/%s/grasps/%s/execute", scene, id);
+  h_resp *r = r_post(path, "{\"dry_run\": false}", key);
+  if (r->status != 200 || strcmp(JSTR(r->json, "state"), "done") != 0)
+    FG_TEST_FAIL("the pick of grasp %s did not run: %ld %s", id, r->status, r->body);
+  h_resp_free(r);
+  free(path);
+  char *text = h_read_file(report_path, NULL);
+  if (!text) FG_TEST_FAIL("no physics report at %s", report_path);
+  json_t *last = NULL;
+  for (char *save = NULL, *line = strtok_r(text, "\n", &save); line;
+       line = strtok_r(NULL, "\n", &save)) {
+    json_t *j = json_loads(line, 0, NULL);
+    if (j && json_object_get(j, "command")) {
+      json_decref(last);
+      last = j;
+    } else {
+      json_decref(j);
+    }
+  }
+  if (!last) FG_TEST_FAIL("the physics report %s has no command's line", report_path);
+  const char *lifted = json_string_value(json_object_get(last, "lifted"));
+  char *out = h_fmt("%s", lifted ? lifted : "none");
+  json_decref(last);
+  free(text);
+  return out;
 }
 
 uint8_t *cu_unbase64(const char *s, size_t *len) {

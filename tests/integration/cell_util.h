@@ -37,6 +37,12 @@ struct json_t;
 void cu_frame_errors(struct json_t *frames, const char *cam_log, double *worst_mm,
                      double *worst_deg);
 
+/* Executes grasp id of scene through fieldgripd (a pick, Idempotency-Key key) and returns
+ * what physics lifted, from the last line of the simulator's --report file report_path that
+ * a command wrote: the object's name, or "none" (caller frees). */
+char *cu_execute_lifted(const char *scene, const char *id, const char *key,
+                        const char *report_path);
+
 /* Standard base64 (padding allowed), as captures carry their images, into a malloc'd buffer;
  * its length in *len. */
 uint8_t *cu_unbase64(const char *s, size_t *len);

@@ -105,4 +105,24 @@ char *g_demo_body_qp(const char *scene, const char *object, const char *qp, cons
   return s;
 }
 
+char *g_demo_body_open(const char *scene, const char *object) {
+  json_t *g = JGET(g_object(object), "grasp");
+  json_t *o = json_pack("{s:s, s:{s:O, s:O}, s:f}", "scene", scene, "pose", "position",
+                        JGET(g, "position"), "quaternion", JGET(g, "quaternion"), "width", 0.085);
+  char *s = o ? json_dumps(o, JSON_COMPACT | JSON_REAL_PRECISION(17)) : NULL;
+  json_decref(o);
+  if (!s) FG_TEST_FAIL("out of memory");
+  return s;
+}
+
+double g_grasp_error(json_t *grasp, const char *object) {
+  double d2 = 0;
+  for (int k = 0; k < 3; k++) {
+    const char idx[2] = {(char)('0' + k), 0};
+    d2 += pow(JNUM(JGET(grasp, "pose.position"), idx) -
+                  JNUM(JGET(g_object(object), "grasp.position"), idx), 2);
+  }
+  return sqrt(d2);
+}
+
 h_resp *g_post(const char *path, const char *body) { return h_post_json(path, body); }

@@ -53,6 +53,15 @@ char *g_demo_body(const char *scene, const char *object, const char *extra);
 /* The same with "query_points": qp (JSON text; NULL leaves the key out). */
 char *g_demo_body_qp(const char *scene, const char *object, const char *qp, const char *extra);
 
+/* The demo body of object name's ground-truth grasp on scene as a user shows it (and
+ * scripts/demo.sh): the gripper open to the 2F-85's stroke (0.085 m), no query points named
+ * (the daemon's default, the box between the pads); caller frees. */
+char *g_demo_body_open(const char *scene, const char *object);
+
+/* How far (metres) grasp (an item of a grasps reply) lies from object name's ground-truth
+ * grasp. */
+double g_grasp_error(json_t *grasp, const char *object);
+
 /* POST path with a JSON body; the caller frees the reply. */
 h_resp *g_post(const char *path, const char *body);
 
