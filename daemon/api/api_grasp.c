@@ -132,13 +132,14 @@ static json_t *grasps_json(const fg_scene_grasps *g, fg_gripper_model gripper) {
   for (int i = 0; i < p->result.n; i++)
     json_array_append_new(grasps, grasp_json(&g->entries[i], p, i, t));
   const fg_grasp_stats *st = &p->result.stats;
-  json_t *reply = json_pack("{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I, s:I}}", "grasps", grasps,
-                            "task", t->name, "search", "candidates",
-                            (json_int_t)st->candidates, "rotations", st->rotations,
-                            "poses_scored", (json_int_t)st->poses_scored, "poses_optimised",
-                            (json_int_t)st->poses_optimised, "iterations", st->iterations,
-                            "evaluations", (json_int_t)st->evaluations, "rejected_limits",
-                            (json_int_t)st->rejected_limits);
+  json_t *reply = json_pack(
+    "{s:o, s:s, s:{s:I, s:i, s:I, s:I, s:i, s:I, s:I, s:I, s:I}}", "grasps", grasps, "task",
+    t->name, "search", "candidates", (json_int_t)st->candidates, "rotations", st->rotations,
+    "poses_scored", (json_int_t)st->poses_scored, "poses_optimised",
+    (json_int_t)st->poses_optimised, "iterations", st->iterations, "evaluations",
+    (json_int_t)st->evaluations, "collision_checks", (json_int_t)st->collision_checks,
+    "rejected_collisions", (json_int_t)st->rejected_collisions, "rejected_limits",
+    (json_int_t)st->rejected_limits);
   if (!reply) return NULL;
   if (p->retrieval) {
     json_t *a = json_array();

@@ -70,6 +70,11 @@ static int check_reply(const h_resp *r, const char *task, int top_k, double appr
   ASSERT_STREQ(JSTR(r->json, "task"), task);
   ASSERT(JINT(r->json, "search.candidates") > 0);
   ASSERT(JINT(r->json, "search.poses_scored") >= JINT(r->json, "search.candidates") * 8);
+  /* why poses were refused: collisions checked (and some rejected), limits */
+  ASSERT(JINT(r->json, "search.collision_checks") > 0);
+  ASSERT(JINT(r->json, "search.rejected_collisions") >= 0);
+  ASSERT(JINT(r->json, "search.rejected_collisions") <= JINT(r->json, "search.collision_checks"));
+  ASSERT(JINT(r->json, "search.rejected_limits") >= 0);
   json_t *a = JGET(r->json, "grasps");
   int n = (int)json_array_size(a);
   ASSERT(n <= top_k);
