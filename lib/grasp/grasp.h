@@ -39,9 +39,21 @@
  * the seed. Every candidate pose is scored on the first 32 query points; the best ones whose
  * palm is free (up to n_keep) are optimised with Adam over translation and a world-frame
  * rotation vector on all the query points, dropping the worst 2.5 % every iteration down to
- * n_final; the survivors, then the pruned poses (latest pruned first), are checked for
- * collisions with the whole gripper and thinned by non-maximum suppression in position and
- * angle (a parallel gripper turned by 180 degrees about its approach axis is the same grasp).
+ * n_final; the survivors, then the pruned poses (latest pruned first), are centred (below),
+ * checked for collisions with the whole gripper and thinned by non-maximum suppression in
+ * position and angle (a parallel gripper turned by 180 degrees about its approach axis is the
+ * same grasp).
+ *
+ * Centring (opt.centre_m > 0). Along the pads' width (the gripper's x) the pads often meet the
+ * same two faces over a stretch (a box's long side, a cylinder's height), where the cost is
+ * nearly flat and the optimum lands anywhere on it, often near an end. The stretch is read
+ * from the geometry, surer than the features: from the pose, in steps of 2 mm up to three
+ * times centre_m each way along its x, as long as something solid (alpha >= 0.5) lies
+ * between the pads (across the opening, at the TCP's height and 8 mm above and below). The
+ * pose moves towards its middle (at most centre_m), where a lift holds the object with the
+ * least torque, if its cost there stays
+ * within FG_GRASP_CENTRE_TOL (relative) of its own and it is free and within the limits;
+ * else half way; else it stays.
  * Every pose is optimised on its own, so the result is bit-identical for any thread count,
  * and the same inputs and seed give the same poses.
  *
@@ -199,14 +211,18 @@ typedef struct fg_grasp_options {
   int n_threads;              /* <= 0: OpenMP's default */
   int floor_solid;            /* 1: below the grid's lowest face is solid (checked collisions) */
   const fg_motion_limits *limits; /* NULL: none; else results satisfy them (kept by the caller) */
+  double centre_m;            /* centring along the pads' width: how far each way (0: none) */
   double approach_m;          /* the path checked against limits: approach back along -z ... */
   double retreat_m;           /* ... and the lift along world +z after the grasp */
 } fg_grasp_options;
 
+/* How far above a pose's own cost (relative to its magnitude) centring may go. */
+#define FG_GRASP_CENTRE_TOL 0.05
+
 /* The defaults: candidate_alpha 0.1, no mask, mask_dilation 2, 24 rotations, n_keep 1024, n_final 64,
  * 100 iterations, lr 2 mm and 0.03 rad, top_k 10, NMS 1 cm and 15 degrees, panda at its
  * stroke, collisions checked at alpha 0.1, seed 0, n_threads 0, the floor not solid, no
- * limits. */
+ * limits, centring up to 4 cm each way. */
 void fg_grasp_options_default(fg_grasp_options *o);
 
 typedef struct fg_grasp_result_pose {

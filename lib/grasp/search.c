@@ -20,6 +20,9 @@
 #define ADAM_EPS 1e-8
 #define SCORE_CHUNK 256      /* poses collision-checked at a time while filling n_keep */
 #define COARSE_POINTS 32     /* query points that score the candidate poses */
+#define CENTRE_STEP_M 0.002  /* the steps of centring (grasp.h) */
+#define CENTRE_ALPHA 0.5     /* ... the alpha that counts as the object's ... */
+#define CENTRE_SCAN 3.0      /* ... and how far each way the stretch is looked for, in centre_m */
 
 /* ---------------------------------------------------------------- rotations */
 
@@ -158,6 +161,7 @@ void fg_grasp_options_default(fg_grasp_options *o) {
   o->width_m = fg_gripper_spec_get(FG_GRIPPER_PANDA)->stroke_m;
   o->check_collisions = 1;
   o->collision_alpha = 0.1f;
+  o->centre_m = 0.04;
 }
 
 static int check_options(const fg_grasp_options *o) {
@@ -182,6 +186,8 @@ static int check_options(const fg_grasp_options *o) {
   if (!(o->nms_distance_m >= 0) || !(o->nms_angle_rad >= 0) || !isfinite(o->nms_distance_m) ||
       !isfinite(o->nms_angle_rad))
     return fg_fail(FG_EINVAL, "NMS distance and angle must be finite and >= 0");
+  if (!(o->centre_m >= 0 && o->centre_m <= 0.5))
+    return fg_fail(FG_EINVAL, "centre_m must be in [0, 0.5] metres, got %g", o->centre_m);
   if (!(o->collision_alpha >= FG_QUERY_ALPHA_FLOOR && o->collision_alpha <= 1.0f))
     return fg_fail(FG_EINVAL, "the collision alpha must be in [%g, 1]",
                    (double)FG_QUERY_ALPHA_FLOOR);
@@ -335,6 +341,86 @@ static int optimise(const fg_grasp_field *gf, search_bufs *b, const fg_grasp_opt
   }
   qsort(ps, (size_t)n, sizeof *ps, cmp_pose);
   return n;
+}
+
+/* The field's alpha at x (world, metres): trilinear between voxel centres, 0 outside the
+ * grid. */
+static double alpha_at(const fg_grasp_field *gf, const double x[3]) {
+  const fg_voxel_grid *g = &gf->grid;
+  const int n[3] = {g->nx, g->ny, g->nz};
+  int i0[3];
+  double f[3];
+  for (int a = 0; a < 3; a++) {
+    const double u = (x[a] - g->min[a]) / g->voxel_size - 0.5;
+    if (!(u > -1.0 && u < n[a])) return 0.0;
+    i0[a] = (int)floor(u);
+    f[a] = u - i0[a];
+  }
+  double v = 0.0;
+  for (int c = 0; c < 8; c++) {
+    const int ix = i0[0] + (c & 1), iy = i0[1] + (c >> 1 & 1), iz = i0[2] + (c >> 2 & 1);
+    if (ix < 0 || iy < 0 || iz < 0 || ix >= n[0] || iy >= n[1] || iz >= n[2]) continue;
+    const double w = (c & 1 ? f[0] : 1 - f[0]) * (c >> 1 & 1 ? f[1] : 1 - f[1]) *
+                     (c >> 2 & 1 ? f[2] : 1 - f[2]);
+    v += w * gf->alpha[((size_t)iz * g->ny + iy) * g->nx + ix];
+  }
+  return v;
+}
+
+/* 1 when something solid (alpha >= CENTRE_ALPHA) lies between the pads of the pose (R, t)
+ * slid by s along its x: on the segment across the opening (the gripper's y, width_m) at the
+ * TCP and CENTRE_STEP_M * 4 above and below it. */
+static int object_between_pads(const fg_grasp_field *gf, const double R[9], const double t[3],
+                               double s, double width_m) {
+  const int ny = (int)ceil(width_m / CENTRE_STEP_M);
+  for (int kz = -1; kz <= 1; kz++)
+    for (int j = 0; j <= ny; j++) {
+      const double y = -0.5 * width_m + j * width_m / ny, z = kz * 4 * CENTRE_STEP_M;
+      double x[3];
+      for (int a = 0; a < 3; a++) x[a] = t[a] + R[3 * a] * s + R[3 * a + 1] * y + R[3 * a + 2] * z;
+      if (alpha_at(gf, x) >= CENTRE_ALPHA) return 1;
+    }
+  return 0;
+}
+
+/* Centring (grasp.h): p slid along its x to the middle of the stretch over which the object
+ * lies between its pads (looked for up to CENTRE_SCAN centre_m each way; the move at most
+ * centre_m), when its cost there stays within FG_GRASP_CENTRE_TOL of its own and
+ * it is free and within the limits (else half way, else not at all); its cost, likeness and
+ * weight scored again. On the calling thread (scratch[0]). */
+static void centre(const fg_grasp_field *gf, search_bufs *b, const fg_grasp_options *o,
+                   const fg_gripper_box *boxes, pose_state *p, fg_grasp_stats *st) {
+  const int n = (int)floor(CENTRE_SCAN * o->centre_m / CENTRE_STEP_M + 1e-9);
+  if (n < 1 || !isfinite(p->cost) || !object_between_pads(gf, p->R, p->t, 0.0, o->width_m))
+    return;
+  int reach[2] = {0, 0}; /* steps towards -x and +x with the object still between the pads */
+  for (int side = 0; side < 2; side++)
+    while (reach[side] < n && object_between_pads(gf, p->R, p->t, (side ? 1 : -1) *
+                                                  (reach[side] + 1) * CENTRE_STEP_M, o->width_m))
+      reach[side]++;
+  const double to_middle =
+    fmax(-o->centre_m, fmin(o->centre_m, 0.5 * (reach[1] - reach[0]) * CENTRE_STEP_M));
+  const double limit = p->cost + FG_GRASP_CENTRE_TOL * fabs(p->cost);
+  for (int half = 0; half < 2; half++) {
+    const double shift = to_middle / (1 << half);
+    if (shift == 0) return;
+    double t[3], T[16], cosv, weight;
+    for (int a = 0; a < 3; a++) t[a] = p->t[a] + shift * p->R[3 * a];
+    fg_pose_from_rotmat(p->R, t, T);
+    const double c = fg_grasp_cost_fast(gf, &b->prep, T, NULL, NULL, &cosv, &weight,
+                                        &b->scratch[0]);
+    st->evaluations++;
+    if (!(c <= limit) || !within_limits(o, T)) continue;
+    if (o->check_collisions) {
+      st->collision_checks++;
+      if (gripper_collides(gf, b->occ, boxes, T, o->floor_solid)) continue;
+    }
+    memcpy(p->t, t, sizeof t);
+    p->cost = c;
+    p->cosv = cosv;
+    p->weight = weight;
+    return;
+  }
 }
 
 int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
@@ -500,6 +586,8 @@ int fg_grasp_search(const fg_grasp_field *gf, const fg_grasp_target *t,
       st->evaluations++;
     }
     if (!(p->cosv > 0.0)) continue; /* no likeness to the task */
+    centre(gf, &b, &o, boxes, p, st);
+    fg_pose_from_rotmat(p->R, p->t, T);
     if (!within_limits(&o, T)) {
       st->rejected_limits++;
       continue;

@@ -2,7 +2,8 @@
  * against the double-precision reference and its gradient against finite differences, the
  * collision check, and the search on a synthetic scene where the answer is known exactly: an
  * asymmetric object and a copy of it turned by 90 degrees about z and moved, both on the
- * voxel lattice, so a demo on the first must be found again on both. */
+ * voxel lattice, so a demo on the first must be found again on both; and the centring of a
+ * grasp along a bar. */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -775,6 +776,89 @@ static void test_search_synthetic(void) {
   free(s.W);
 }
 
+/* Centring: a bar 8 cm long, 3 cm wide and 3 cm tall of one material, shown grasped from
+ * above across its width 2 cm off its middle. Along its length the pads meet the same two
+ * faces over a stretch where the cost is flat (and, its features the same everywhere, from
+ * any side), so the optimum lands anywhere on it; centred on the stretch the bar's geometry
+ * shows between the pads, every grasp with the pads' width along the bar lies at its middle
+ * (within half a step of 2 mm). */
+static void test_search_centring(void) {
+  synth s = {0};
+  s.D = 32;
+  const double mn[3] = {0, 0, 0}, mx[3] = {NX * VS, NY * VS, NZ * VS};
+  ASSERT_OK(fg_voxel_grid_init(&s.g, mn, mx, VS));
+  const size_t N = fg_voxel_grid_count(&s.g);
+  s.alpha = calloc(N, sizeof *s.alpha);
+  s.h = calloc(N * HID, sizeof *s.h);
+  s.W = malloc((size_t)s.D * HID * sizeof *s.W);
+  ASSERT(s.alpha && s.h && s.W);
+  for (int i = 0; i < s.D * HID; i++) s.W[i] = (float)urand() * 0.2f;
+  float hmat[HID];
+  for (int i = 0; i < HID; i++) hmat[i] = (float)urand();
+  for (int iz = 0; iz < 3; iz++) /* x 0.10..0.18, y 0.14..0.17, z 0..0.03 */
+    for (int iy = 14; iy < 17; iy++)
+      for (int ix = 10; ix < 18; ix++) {
+        const size_t idx = ((size_t)iz * NY + iy) * NX + ix;
+        s.alpha[idx] = 0.95f;
+        memcpy(s.h + idx * HID, hmat, sizeof hmat);
+      }
+  fg_voxel_features *vf = NULL;
+  ASSERT_OK(fg_voxel_features_from_arrays(&vf, &s.g, s.D, s.alpha, s.h, s.W));
+  fg_grasp_field *gf = NULL;
+  ASSERT_OK(fg_grasp_field_new(&gf, vf, 2));
+  const double middle = 0.14, width = 0.06;
+  const double T_demo[16] = {-1, 0, 0, middle + 0.02, 0, 1, 0, 0.155, 0, 0, -1, 0.015,
+                             0, 0, 0, 1};
+  enum { NQ = 100 };
+  float p[NQ * 3];
+  double mean[3], size[3];
+  ASSERT_OK(fg_grasp_query_box_default(FG_GRIPPER_ROBOTIQ_2F85, width, mean, size));
+  ASSERT_OK(fg_grasp_query_points_box(NQ, mean, size, p));
+  float *Z = malloc((size_t)NQ * s.D * sizeof *Z);
+  ASSERT(Z);
+  ASSERT_OK(fg_grasp_sample(gf, T_demo, p, NQ, Z));
+  const fg_grasp_target t = {NQ, s.D, p, Z, NULL};
+
+  fg_grasp_options o;
+  for (int centred = 0; centred < 2; centred++) {
+    fg_grasp_options_default(&o);
+    o.gripper = FG_GRIPPER_ROBOTIQ_2F85;
+    o.width_m = width;
+    o.top_k = 4;
+    o.n_threads = 2;
+    if (!centred) o.centre_m = 0;
+    fg_grasp_result r;
+    ASSERT_OK(fg_grasp_search(gf, &t, &o, &r));
+    ASSERT(r.n >= 1);
+    int along_bar = 0;
+    for (int k = 0; k < r.n; k++) {
+      const double *T = r.poses[k].T_world_gripper;
+      const int along = fabs(T[0]) > 0.9; /* the pads' width along the bar */
+      printf("centring %s: %d: score %.4f, %.1f mm along the bar from its middle%s\n",
+             centred ? "on " : "off", k, r.poses[k].score, 1e3 * (T[3] - middle),
+             along ? ", the pads' width along it" : "");
+      if (!along) continue;
+      along_bar++;
+      if (centred) ASSERT(fabs(T[3] - middle) <= 0.004);
+    }
+    ASSERT(along_bar >= 1);
+    if (centred) ASSERT(fabs(r.poses[0].T_world_gripper[3] - middle) <= 0.004);
+    fg_grasp_result_release(&r);
+  }
+  /* refused: a negative or huge stretch */
+  fg_grasp_result r;
+  o.centre_m = -0.01;
+  ASSERT_ERR(fg_grasp_search(gf, &t, &o, &r), FG_EINVAL, "centre_m");
+  o.centre_m = 1;
+  ASSERT_ERR(fg_grasp_search(gf, &t, &o, &r), FG_EINVAL, "centre_m");
+  free(Z);
+  fg_grasp_field_free(gf);
+  fg_voxel_features_free(vf);
+  free(s.alpha);
+  free(s.h);
+  free(s.W);
+}
+
 int main(void) {
   test_query_points();
   test_query_points_box();
@@ -783,6 +867,7 @@ int main(void) {
   test_so3();
   test_cost();
   test_search_synthetic();
+  test_search_centring();
   printf("grasp_unit: ok\n");
   return 0;
 }
