@@ -1,8 +1,8 @@
-/* fieldgrip-sim's Robotiq gripper (sim.h): activation, go-to at the requested speed and
+/* fieldgrip-sim's Robotiq gripper (gripper.h): activation, go-to at the requested speed and
  * force, the fingers kinematic (stopping on --object-width-mm) or the cell's. */
 #include <string.h>
 
-#include "sim.h"
+#include "gripper.h"
 
 /* ---------------------------------------------------------------- gripper */
 

@@ -1,11 +1,11 @@
-/* fieldgrip-sim's robot block (sim.h): the acknowledgement, the robot program's path at the
+/* fieldgrip-sim's robot block (robot.h): the acknowledgement, the robot program's path at the
  * block's speed in the kinematic mode or the cell's program in the physics mode, the stop
  * register. */
 #include <string.h>
 
 #include "core/pose.h"
 #include "modbus/regs.h"
-#include "sim.h"
+#include "robot.h"
 
 /* ---------------------------------------------------------------- robot block */
 

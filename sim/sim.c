@@ -48,7 +48,8 @@
 #include <unistd.h>
 
 #include "modbus/regs.h"
-#include "sim.h"
+#include "gripper.h"
+#include "robot.h"
 
 #define SIM_MAX_CLIENTS 32
 
