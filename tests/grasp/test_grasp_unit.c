@@ -580,17 +580,31 @@ static void put_object(synth *s, const int pivot[3], int quarter_turns, const fl
   }
 }
 
-static void test_search_synthetic(void) {
-  synth s = {0};
-  s.D = 32;
+/* An empty NX x NY x NZ grid of VS voxels with D = 32 and a random feature head. */
+static void synth_init(synth *s) {
+  memset(s, 0, sizeof *s);
+  s->D = 32;
   const double mn[3] = {0, 0, 0}, mx[3] = {NX * VS, NY * VS, NZ * VS};
-  ASSERT_OK(fg_voxel_grid_init(&s.g, mn, mx, VS));
-  ASSERT_EQ(fg_voxel_grid_count(&s.g), NX * NY * NZ);
+  ASSERT_OK(fg_voxel_grid_init(&s->g, mn, mx, VS));
+  ASSERT_EQ(fg_voxel_grid_count(&s->g), NX * NY * NZ);
+  const size_t N = fg_voxel_grid_count(&s->g);
+  s->alpha = calloc(N, sizeof *s->alpha);
+  s->h = calloc(N * HID, sizeof *s->h);
+  s->W = malloc((size_t)s->D * HID * sizeof *s->W);
+  ASSERT(s->alpha && s->h && s->W);
+  for (int i = 0; i < s->D * HID; i++) s->W[i] = (float)urand() * 0.2f;
+}
+
+static void synth_free(synth *s) {
+  free(s->alpha);
+  free(s->h);
+  free(s->W);
+}
+
+static void test_search_synthetic(void) {
+  synth s;
+  synth_init(&s);
   const size_t N = fg_voxel_grid_count(&s.g);
-  s.alpha = calloc(N, sizeof *s.alpha);
-  s.h = calloc(N * HID, sizeof *s.h);
-  s.W = malloc((size_t)s.D * HID * sizeof *s.W);
-  for (int i = 0; i < s.D * HID; i++) s.W[i] = (float)urand() * 0.2f;
   float hmat[2 * HID];
   for (int i = 0; i < 2 * HID; i++) hmat[i] = (float)urand();
   /* the demo object at pivot A; its copy at B turned by +90 degrees about z */
@@ -771,9 +785,7 @@ static void test_search_synthetic(void) {
   free(Z);
   fg_grasp_field_free(gf);
   fg_voxel_features_free(vf);
-  free(s.alpha);
-  free(s.h);
-  free(s.W);
+  synth_free(&s);
 }
 
 /* Centring: a bar 8 cm long, 3 cm wide and 3 cm tall of one material, shown grasped from
@@ -783,16 +795,8 @@ static void test_search_synthetic(void) {
  * shows between the pads, every grasp with the pads' width along the bar lies at its middle
  * (within half a step of 2 mm). */
 static void test_search_centring(void) {
-  synth s = {0};
-  s.D = 32;
-  const double mn[3] = {0, 0, 0}, mx[3] = {NX * VS, NY * VS, NZ * VS};
-  ASSERT_OK(fg_voxel_grid_init(&s.g, mn, mx, VS));
-  const size_t N = fg_voxel_grid_count(&s.g);
-  s.alpha = calloc(N, sizeof *s.alpha);
-  s.h = calloc(N * HID, sizeof *s.h);
-  s.W = malloc((size_t)s.D * HID * sizeof *s.W);
-  ASSERT(s.alpha && s.h && s.W);
-  for (int i = 0; i < s.D * HID; i++) s.W[i] = (float)urand() * 0.2f;
+  synth s;
+  synth_init(&s);
   float hmat[HID];
   for (int i = 0; i < HID; i++) hmat[i] = (float)urand();
   for (int iz = 0; iz < 3; iz++) /* x 0.10..0.18, y 0.14..0.17, z 0..0.03 */
@@ -854,9 +858,7 @@ static void test_search_centring(void) {
   free(Z);
   fg_grasp_field_free(gf);
   fg_voxel_features_free(vf);
-  free(s.alpha);
-  free(s.h);
-  free(s.W);
+  synth_free(&s);
 }
 
 int main(void) {
