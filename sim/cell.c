@@ -1,6 +1,8 @@
 /* The physics cell (cell.h). */
-#include "cell_impl.h"
+#include "cell.h"
+#include "cell_report.h"
 #include "hand.h"
+#include "maths.h"
 
 #include "core/clock.h"
 #include "core/pose.h"
@@ -11,6 +13,87 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+
+#define CELL_MAX_PHASES 8
+#define CELL_TIMESTEP 0.001      /* s: contact-rich grasps want a short step */
+#define CELL_REST_V 0.005        /* m/s: an object slower than this... */
+#define CELL_REST_W 0.05         /* rad/s: ...and turning slower than this is at rest */
+#define CELL_REST_AFTER 3.0      /* s: after this long without a command the cell rests anyway */
+#define CELL_SETTLE_MAX 5.0      /* s: objects must come to rest this soon after loading */
+#define CELL_TURN_RATE 1.5       /* rad/s: the TCP's turn rate where a path turns more than moves */
+#define CELL_PENETRATION_M 0.002 /* deeper into the table at load: inside it */
+
+/* Per model: the gripper's mass and its force and speed ranges, as the registers scale them
+ * (force and speed 0..255 map linearly onto these), from the data sheets: Franka Hand 0.73 kg,
+ * 70 N continuous, fingers up to 50 mm/s each; Robotiq 2F-85 0.925 kg, 20-235 N, 20-150 mm/s;
+ * Robotiq 2F-140 1.025 kg, 10-125 N, 30-250 mm/s. Speeds are of the opening (both fingers). */
+typedef struct {
+  double mass_kg, force_min_n, force_max_n, speed_min_mps, speed_max_mps;
+} hand_drive;
+
+typedef enum { PH_GRIP, PH_PATH, PH_DWELL } phase_kind;
+
+typedef struct {
+  phase_kind kind;
+  double q, force;   /* PH_GRIP: finger target (closing per finger, m) and force (N) */
+  double p[3], quat[4]; /* PH_PATH: where the TCP goes */
+  double dwell;      /* PH_DWELL: seconds */
+} phase;
+
+typedef struct {
+  int body;
+  char name[64];
+  double rest_pos[3], rest_quat[4]; /* when the cell came to rest after loading */
+  double cmd_pos[3], cmd_quat[4];   /* when the current command started */
+} cell_object;
+
+struct sim_cell {
+  sim_cell_config cfg;
+  const fg_gripper_spec *spec;
+  const hand_drive *drive;
+  mjModel *m;
+  mjData *d;
+  int mocap;              /* mocap index of the target */
+  int hand, finger[2];    /* body ids */
+  int qadr[2], dadr[2];   /* the finger joints' qpos and qvel addresses */
+  int act[2];             /* their motors */
+  int hand_qadr;          /* the hand's free joint */
+  int table_geom;
+  int feat_dim;           /* the length of the model's feature vectors; 0: it has none */
+  int *geom_feat;         /* per geom, the custom numeric of its feature vector */
+  int feat_background;    /* ... and of what a ray that meets nothing shows */
+  cell_object obj[CELL_MAX_OBJECTS];
+  int n_obj;
+  /* clock */
+  int64_t anchor_wall_ns;
+  double anchor_sim;
+  double last_activity;   /* cell time when the last command started or ended */
+  int at_rest;
+  /* fingers */
+  double f_target, f_ramp, f_speed, f_force; /* per finger: m, m, m/s, N */
+  int f_moving, f_obj;
+  double f_win_t, f_win_q; /* where the fingers were at the start of the stall window */
+  double f_deadline;       /* a motion not over by then ends where it is */
+  /* program */
+  phase ph[CELL_MAX_PHASES];
+  int n_ph, i_ph;
+  double ph_t0, ph_p0[3], ph_q0[4], ph_T;
+  int running, result;
+  int closed_in_cmd;      /* a close phase of this command has run */
+  sim_cell_block blk;
+  unsigned char touched[CELL_MAX_OBJECTS], collided[CELL_MAX_OBJECTS];
+};
+
+/* Object i's pose from its free joint. */
+static inline const double *obj_pos(const sim_cell *c, int i) {
+  return c->d->xpos + 3 * c->obj[i].body;
+}
+static inline const double *obj_quat(const sim_cell *c, int i) {
+  return c->d->xquat + 4 * c->obj[i].body;
+}
+
+/* The fingers' closing, per finger (m). */
+static inline double finger_q(const sim_cell *c) { return c->d->qpos[c->qadr[0]]; }
 
 static const hand_drive drives[FG_GRIPPER_N_MODELS] = {
   [FG_GRIPPER_PANDA] = {0.73, 10, 70, 0.02, 0.10},
@@ -243,11 +326,31 @@ static void phase_begin(sim_cell *c) {
 /* The report line of the command that ends, with what the cell knows of this moment. */
 static void report(const sim_cell *c, const char *outcome, const char *why) {
   if (!c->cfg.report) return;
-  cell_report_facts facts = {0};
-  for (int i = 0; i < c->n_obj; i++) facts.held[i] = (unsigned char)cell_held(c, i);
+  cell_report_moment m;
+  m.blk = &c->blk;
+  m.t = c->d->time;
+  m.fingers_width_m = c->spec->stroke_m - 2 * finger_q(c);
   int pos, moving;
-  sim_cell_fingers_status(c, &pos, &moving, &facts.gobj);
-  cell_report_command(c, &facts, outcome, why);
+  sim_cell_fingers_status(c, &pos, &moving, &m.gobj);
+  memcpy(m.tcp, c->d->xpos + 3 * c->hand, sizeof m.tcp);
+  m.has_bin = c->cfg.has_bin;
+  memcpy(m.bin_xy, c->cfg.bin_xy, sizeof m.bin_xy);
+  m.n_obj = c->n_obj;
+  for (int i = 0; i < c->n_obj; i++) {
+    const cell_object *o = &c->obj[i];
+    cell_report_object *r = &m.obj[i];
+    r->name = o->name;
+    memcpy(r->pos, obj_pos(c, i), sizeof r->pos);
+    memcpy(r->quat, obj_quat(c, i), sizeof r->quat);
+    memcpy(r->rest_pos, o->rest_pos, sizeof r->rest_pos);
+    memcpy(r->rest_quat, o->rest_quat, sizeof r->rest_quat);
+    memcpy(r->cmd_pos, o->cmd_pos, sizeof r->cmd_pos);
+    memcpy(r->cmd_quat, o->cmd_quat, sizeof r->cmd_quat);
+    r->held = cell_held(c, i);
+    r->touched = c->touched[i];
+    r->collided = c->collided[i];
+  }
+  cell_report_write(c->cfg.report, &m, outcome, why);
 }
 
 static void program_end(sim_cell *c, int result, const char *outcome) {

@@ -1,16 +1,15 @@
-/* The physics cell's report: a line per command (cell_impl.h). */
-#include "cell_impl.h"
+/* The physics cell's report: a line per command (cell_report.h). */
+#include "cell_report.h"
+#include "maths.h"
 
 #include <math.h>
 #include <stdio.h>
 
 /* 1 when object i lies in the bin: its centre within the walls (on the floor or on what lies
  * there already) and the gripper not holding it. */
-static int in_bin(const sim_cell *c, const cell_report_facts *facts, int i) {
-  const double *p = obj_pos(c, i);
-  return c->cfg.has_bin && !facts->held[i] &&
-         fabs(p[0] - c->cfg.bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
-         fabs(p[1] - c->cfg.bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M;
+static int in_bin(const cell_report_moment *m, const cell_report_object *o) {
+  return m->has_bin && !o->held && fabs(o->pos[0] - m->bin_xy[0]) <= 0.5 * SIM_BIN_INNER_M &&
+         fabs(o->pos[1] - m->bin_xy[1]) <= 0.5 * SIM_BIN_INNER_M;
 }
 
 /* What became of object i during the command that ends. */
@@ -19,11 +18,9 @@ typedef struct {
   double dz, distance, turned, tilt;
 } object_outcome;
 
-static object_outcome object_outcome_of(const sim_cell *c, const cell_report_facts *facts,
-                                        int i) {
-  const cell_object *o = &c->obj[i];
-  const double *p = obj_pos(c, i), *q = obj_quat(c, i);
-  object_outcome r = {.held = facts->held[i]};
+static object_outcome object_outcome_of(const cell_report_object *o) {
+  const double *p = o->pos, *q = o->quat;
+  object_outcome r = {.held = o->held};
   r.dz = p[2] - o->rest_pos[2];
   r.distance = dist3(p, o->cmd_pos);
   r.turned = quat_angle(q, o->cmd_quat) * 180 / M_PI;
@@ -53,18 +50,16 @@ static const char *command_name(int command) {
 
 /* One line: SPEC.md's fields (seq, command, pose, object_detected, lifted, lift_m, touched,
  * moved), then the simulator's own (proto/modbus.md). */
-void cell_report_command(const sim_cell *c, const cell_report_facts *facts, const char *outcome,
-                         const char *why) {
-  FILE *f = c->cfg.report;
-  if (!f) return;
-  const sim_cell_block *b = &c->blk;
+void cell_report_write(FILE *f, const cell_report_moment *m, const char *outcome,
+                       const char *why) {
+  const sim_cell_block *b = m->blk;
   object_outcome oc[CELL_MAX_OBJECTS];
   int lifted = -1;
-  for (int i = 0; i < c->n_obj; i++) {
-    oc[i] = object_outcome_of(c, facts, i);
+  for (int i = 0; i < m->n_obj; i++) {
+    oc[i] = object_outcome_of(&m->obj[i]);
     if (oc[i].lifted && (lifted < 0 || oc[i].dz > oc[lifted].dz)) lifted = i;
   }
-  const int obj = facts->gobj;
+  const int obj = m->gobj;
   fprintf(f, "{\"seq\":%d,\"command\":\"%s\",\"pose\":{\"position\":[", b->seq,
           command_name(b->command));
   double quat[4];
@@ -79,19 +74,19 @@ void cell_report_command(const sim_cell *c, const cell_report_facts *facts, cons
     put_num(f, quat[k], 6);
   }
   fprintf(f, "]},\"object_detected\":%s,\"lifted\":", tf(obj == 1 || obj == 2));
-  if (lifted >= 0) fprintf(f, "\"%s\",\"lift_m\":%.4f", c->obj[lifted].name, oc[lifted].dz);
+  if (lifted >= 0) fprintf(f, "\"%s\",\"lift_m\":%.4f", m->obj[lifted].name, oc[lifted].dz);
   else fputs("null,\"lift_m\":null", f);
   fputs(",\"touched\":[", f);
-  for (int i = 0, n = 0; i < c->n_obj; i++)
-    if (c->touched[i]) fprintf(f, "%s\"%s\"", n++ ? "," : "", c->obj[i].name);
+  for (int i = 0, n = 0; i < m->n_obj; i++)
+    if (m->obj[i].touched) fprintf(f, "%s\"%s\"", n++ ? "," : "", m->obj[i].name);
   fputs("],\"moved\":[", f);
-  for (int i = 0, n = 0; i < c->n_obj; i++)
+  for (int i = 0, n = 0; i < m->n_obj; i++)
     if (oc[i].moved)
       fprintf(f, "%s{\"name\":\"%s\",\"distance_m\":%.4f,\"tilt_deg\":%.1f}", n++ ? "," : "",
-              c->obj[i].name, oc[i].distance, oc[i].tilt);
+              m->obj[i].name, oc[i].distance, oc[i].tilt);
   /* the simulator's own: the outcome, the rest of the block as read (a float32 block may hold
    * NaN or infinities: null), the fingers, the TCP, every object */
-  fprintf(f, "],\"t\":%.3f,\"outcome\":\"%s\"", c->d->time, outcome);
+  fprintf(f, "],\"t\":%.3f,\"outcome\":\"%s\"", m->t, outcome);
   if (why) {
     fputs(",\"why\":\"", f);
     for (const char *p = why; *p; p++)
@@ -111,18 +106,18 @@ void cell_report_command(const sim_cell *c, const cell_report_facts *facts, cons
     fprintf(f, ",\"%s\":", keys[k]);
     put_num(f, vals[k], 4);
   }
-  const double *tcp = c->d->xpos + 3 * c->hand;
   fprintf(f, ",\"fingers\":{\"width_m\":%.4f,\"gobj\":%d},\"tcp\":[%.4f,%.4f,%.4f],\"objects\":[",
-          c->spec->stroke_m - 2 * finger_q(c), obj, tcp[0], tcp[1], tcp[2]);
-  for (int i = 0; i < c->n_obj; i++) {
-    const double *p = obj_pos(c, i);
+          m->fingers_width_m, obj, m->tcp[0], m->tcp[1], m->tcp[2]);
+  for (int i = 0; i < m->n_obj; i++) {
+    const cell_report_object *o = &m->obj[i];
+    const double *p = o->pos;
     fprintf(f, "%s{\"name\":\"%s\",\"position\":[%.4f,%.4f,%.4f],\"held\":%s,\"lifted\":%s,"
                "\"dz_m\":%.4f,\"moved_m\":%.4f,\"turned_deg\":%.1f,\"tilt_deg\":%.1f,"
                "\"moved\":%s,\"knocked_over\":%s,\"touched\":%s,\"collided\":%s",
-            i ? "," : "", c->obj[i].name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
+            i ? "," : "", o->name, p[0], p[1], p[2], tf(oc[i].held), tf(oc[i].lifted),
             oc[i].dz, oc[i].distance, oc[i].turned, oc[i].tilt, tf(oc[i].moved),
-            tf(oc[i].knocked_over), tf(c->touched[i]), tf(c->collided[i]));
-    if (c->cfg.has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(c, facts, i)));
+            tf(oc[i].knocked_over), tf(o->touched), tf(o->collided));
+    if (m->has_bin) fprintf(f, ",\"in_bin\":%s", tf(in_bin(m, o)));
     fputc('}', f);
   }
   fputs("]}\n", f);
