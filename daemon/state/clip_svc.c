@@ -38,8 +38,8 @@ struct fg_clip_model {
 };
 
 struct fg_clip_svc {
-  pthread_mutex_t lock; /* guards current and last_error */
-  fg_clip_model *current;
+  fg_ref_slot current;  /* the fg_clip_model requests take */
+  pthread_mutex_t lock; /* guards last_error */
   char last_error[1024];
 };
 
@@ -160,6 +160,7 @@ int fg_clip_svc_new(fg_clip_svc **out) {
   *out = NULL;
   fg_clip_svc *svc = calloc(1, sizeof *svc);
   if (!svc) return fg_fail(FG_ENOMEM, "out of memory");
+  fg_ref_slot_init(&svc->current);
   pthread_mutex_init(&svc->lock, NULL);
   *out = svc;
   return 0;
@@ -167,17 +168,13 @@ int fg_clip_svc_new(fg_clip_svc **out) {
 
 void fg_clip_svc_free(fg_clip_svc *svc) {
   if (!svc) return;
-  fg_clip_model_release(svc->current);
+  fg_clip_model_release(fg_ref_slot_destroy(&svc->current));
   pthread_mutex_destroy(&svc->lock);
   free(svc);
 }
 
 fg_clip_model *fg_clip_svc_acquire(fg_clip_svc *svc) {
-  pthread_mutex_lock(&svc->lock);
-  fg_clip_model *m = svc->current;
-  if (m) fg_ref_get(&m->ref);
-  pthread_mutex_unlock(&svc->lock);
-  return m;
+  return fg_ref_slot_acquire(&svc->current);
 }
 
 void fg_clip_svc_unavailable(fg_clip_svc *svc, char *msg, size_t n) {
@@ -212,9 +209,8 @@ static int model_current(const fg_clip_model *m, const fg_conf *conf) {
 }
 
 static void install(fg_clip_svc *svc, fg_clip_model *m) {
+  fg_clip_model *old = fg_ref_slot_swap(&svc->current, m, m ? &m->ref : NULL);
   pthread_mutex_lock(&svc->lock);
-  fg_clip_model *old = svc->current;
-  svc->current = m;
   svc->last_error[0] = '\0';
   pthread_mutex_unlock(&svc->lock);
   fg_clip_model_release(old);
@@ -222,9 +218,9 @@ static void install(fg_clip_svc *svc, fg_clip_model *m) {
 
 int fg_clip_svc_configure(fg_clip_svc *svc, const fg_conf *conf, int *changed) {
   if (changed) *changed = 0;
-  pthread_mutex_lock(&svc->lock);
-  fg_clip_model *cur = svc->current; /* only this thread replaces it: safe to read on */
-  pthread_mutex_unlock(&svc->lock);
+  fg_clip_model *cur = fg_clip_svc_acquire(svc);
+  /* only this thread replaces it: it stays current until install below */
+  fg_clip_model_release(cur);
   if (!conf->clip_weights || !conf->clip_vocab) {
     if (cur) {
       install(svc, NULL);
