@@ -40,6 +40,16 @@ struct sim_camera {
   int stop_pipe[2];   /* written to stop the thread */
   pthread_t thread;
   int serving;
+  /* The server thread's copies of the cell (made once: a copy of a cell with a bin takes
+   * 0.3 s to allocate) and the last render, answered again while the cell looks the same, so
+   * that a scan's colour, depth and features of one viewpoint cost one render, not three. */
+  sim_cell_view *view;      /* the state now */
+  sim_cell_view *last_view; /* the state last rendered */
+  int rendered;             /* last_* hold a render of last_view */
+  uint8_t *last_rgb;
+  uint16_t *last_d;
+  int *last_geom;
+  double last_T[16];
 };
 
 static int errf(char *err, size_t errsz, const char *fmt, ...)
@@ -471,25 +481,28 @@ static int features_npy(const sim_camera *cam, const int *geom, uint8_t **out, s
  * (PNG), or the patch features (.npy); T_wc: where the camera was. */
 static int snapshot(sim_camera *cam, int kind, uint8_t **out, size_t *len, double T_wc[16]) {
   const size_t n = (size_t)cam->cfg.w * cam->cfg.h;
-  sim_cell_view *view = sim_cell_view_new(cam->cell);
-  uint8_t *rgb = malloc(3 * n);
-  uint16_t *d = malloc(sizeof *d * n);
-  int *geom = kind == SNAP_FEATURES ? malloc(sizeof *geom * n) : NULL;
-  int rc = -1;
-  if (view && rgb && d && (geom || kind != SNAP_FEATURES)) {
-    pthread_mutex_lock(cam->lock);
-    sim_cell_view_take(view, cam->cell);
-    pthread_mutex_unlock(cam->lock);
-    sim_camera_render(cam, view, rgb, d, geom, T_wc);
-    rc = kind == SNAP_FEATURES ? features_npy(cam, geom, out, len)
-         : kind == SNAP_DEPTH  ? fg_image_encode_png(d, cam->cfg.w, cam->cfg.h, 1, 16, out, len)
-                               : fg_image_encode_png(rgb, cam->cfg.w, cam->cfg.h, 3, 8, out, len);
+  if (!cam->view) cam->view = sim_cell_view_new(cam->cell);
+  if (!cam->last_view) cam->last_view = sim_cell_view_new(cam->cell);
+  if (!cam->last_rgb) cam->last_rgb = malloc(3 * n);
+  if (!cam->last_d) cam->last_d = malloc(sizeof *cam->last_d * n);
+  if (!cam->last_geom) cam->last_geom = malloc(sizeof *cam->last_geom * n);
+  if (!cam->view || !cam->last_view || !cam->last_rgb || !cam->last_d || !cam->last_geom)
+    return -1;
+  pthread_mutex_lock(cam->lock);
+  sim_cell_view_take(cam->view, cam->cell);
+  pthread_mutex_unlock(cam->lock);
+  if (!cam->rendered || !sim_cell_view_same(cam->view, cam->last_view)) {
+    sim_camera_render(cam, cam->view, cam->last_rgb, cam->last_d, cam->last_geom, cam->last_T);
+    sim_cell_view *t = cam->last_view;
+    cam->last_view = cam->view;
+    cam->view = t;
+    cam->rendered = 1;
   }
-  sim_cell_view_free(view);
-  free(rgb);
-  free(d);
-  free(geom);
-  return rc;
+  memcpy(T_wc, cam->last_T, sizeof cam->last_T);
+  const int w = cam->cfg.w, h = cam->cfg.h;
+  return kind == SNAP_FEATURES ? features_npy(cam, cam->last_geom, out, len)
+         : kind == SNAP_DEPTH  ? fg_image_encode_png(cam->last_d, w, h, 1, 16, out, len)
+                               : fg_image_encode_png(cam->last_rgb, w, h, 3, 8, out, len);
 }
 
 /* One request: its head read (to the blank line, at most 8 KiB), then the answer. */
@@ -615,5 +628,10 @@ void sim_camera_free(sim_camera *cam) {
   free(cam->ray);
   free(cam->corner);
   free(cam->tex);
+  sim_cell_view_free(cam->view);
+  sim_cell_view_free(cam->last_view);
+  free(cam->last_rgb);
+  free(cam->last_d);
+  free(cam->last_geom);
   free(cam);
 }

@@ -476,6 +476,15 @@ void sim_cell_view_free(sim_cell_view *v) {
 
 void sim_cell_view_take(sim_cell_view *v, const sim_cell *c) { mj_copyData(v->d, c->m, c->d); }
 
+int sim_cell_view_same(const sim_cell_view *a, const sim_cell_view *b) {
+  const size_t ng = (size_t)a->m->ngeom;
+  return a->m == b->m &&
+         memcmp(a->d->geom_xpos, b->d->geom_xpos, 3 * ng * sizeof *a->d->geom_xpos) == 0 &&
+         memcmp(a->d->geom_xmat, b->d->geom_xmat, 9 * ng * sizeof *a->d->geom_xmat) == 0 &&
+         memcmp(a->d->xpos + 3 * a->hand, b->d->xpos + 3 * b->hand, 3 * sizeof(mjtNum)) == 0 &&
+         memcmp(a->d->xquat + 4 * a->hand, b->d->xquat + 4 * b->hand, 4 * sizeof(mjtNum)) == 0;
+}
+
 void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]) {
   memcpy(p, v->d->xpos + 3 * v->hand, 3 * sizeof *p);
   memcpy(q_wxyz, v->d->xquat + 4 * v->hand, 4 * sizeof *q_wxyz);

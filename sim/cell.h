@@ -103,6 +103,9 @@ sim_cell_view *sim_cell_view_new(const sim_cell *c);
 void sim_cell_view_free(sim_cell_view *v);
 void sim_cell_view_take(sim_cell_view *v, const sim_cell *c);
 
+/* 1 when two copies look the same to a camera: every geom and the hand where they were. */
+int sim_cell_view_same(const sim_cell_view *a, const sim_cell_view *b);
+
 /* The hand's pose in the copy (as sim_cell_tcp). */
 void sim_cell_view_tcp(const sim_cell_view *v, double p[3], double q_wxyz[4]);
 

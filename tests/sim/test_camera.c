@@ -223,6 +223,27 @@ static void test_sees_the_board(void) {
   ASSERT(fg_pose_angle_rad(T_est, T_wc) < 0.002);
   ASSERT(hypot(hypot(T_est[3] - T_wc[3], T_est[7] - T_wc[7]), T_est[11] - T_wc[11]) < 0.0005);
 
+  /* At rest the camera answers from its last render (one render for a viewpoint's colour,
+   * depth and features); once the tool has moved it renders anew, from where the tool is. */
+  response a;
+  http_get(port, "GET /rgb.png HTTP/1.1\r\n\r\n", &a);
+  ASSERT_EQ(a.status, 200);
+  const double p2[3] = {p[0] + 0.05, p[1], p[2]};
+  ASSERT_EQ(cellproc_command(&c, 2, 5, p2, rv, 0.085, 0, 0), 2);
+  http_get(port, "GET /rgb.png HTTP/1.1\r\n\r\n", &r);
+  ASSERT_EQ(r.status, 200);
+  double T_wc3[16];
+  header_pose(r.head, T_wc3);
+  ASSERT(fabs(T_wc3[3] - T_wc[3] - 0.05) < 0.001);
+  ASSERT(r.len != a.len || memcmp(r.body, a.body, a.len) != 0);
+  free(r.body);
+  http_get(port, "GET /depth.png HTTP/1.1\r\n\r\n", &r);
+  double T_wc4[16];
+  header_pose(r.head, T_wc4);
+  ASSERT(fg_pose_angle_rad(T_wc3, T_wc4) < 1e-9 && T_wc3[3] == T_wc4[3]);
+  free(r.body);
+  free(a.body);
+
   /* what else it answers */
   http_get(port, "GET /nothing.png HTTP/1.1\r\n\r\n", &r);
   ASSERT_EQ(r.status, 404);
