@@ -71,6 +71,7 @@
 
 #include "benchstat.h"
 #include "cellproc.h"
+#include "cellreport.h"
 #include "core/clock.h"
 #include "core/pose.h"
 #include "grasp/grasp.h"
@@ -147,27 +148,6 @@ typedef struct pick {
   char knocked_names[64]; /* the objects knocked over, comma-separated; "none" */
 } pick;
 
-/* The cell's report line of the pick (the last with a "command"); the caller decrefs. */
-static json_t *report_line(const char *text) {
-  json_t *found = NULL;
-  char *copy = strdup(text), *save = NULL;
-  ASSERT(copy);
-  for (char *line = strtok_r(copy, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
-    json_error_t e;
-    json_t *j = json_loads(line, 0, &e);
-    if (!j) FG_TEST_FAIL("a report line is not JSON (%s): %s", e.text, line);
-    if (json_object_get(j, "command")) {
-      json_decref(found);
-      found = j;
-    } else {
-      json_decref(j);
-    }
-  }
-  free(copy);
-  if (!found) FG_TEST_FAIL("the cell reported no command");
-  return found;
-}
-
 /* Picks with the gripper at T_world_gripper in a fresh cell on cell_xml; target is the
  * queried object's index in gt. */
 static void pick_run(const char *cell_xml, const sg_gt *gt, int target,
@@ -203,7 +183,7 @@ static void pick_run(const char *cell_xml, const sg_gt *gt, int target,
   }
   sim_cell_close(c);
   ASSERT_EQ(fclose(report), 0);
-  json_t *r = report_line(text);
+  json_t *r = cellreport_line(text, -1, "the cell's report");
   free(text);
   out->gobj = cellproc_gobj(r);
   strcpy(out->knocked_names, "none");

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "cellreport.h"
 #include "core/pose.h"
 #include "harness.h"
 #include "robot_util.h"
@@ -59,18 +60,7 @@ char *cu_execute_lifted(const char *scene, const char *id, const char *key,
   free(path);
   char *text = h_read_file(report_path, NULL);
   if (!text) FG_TEST_FAIL("no physics report at %s", report_path);
-  json_t *last = NULL;
-  for (char *save = NULL, *line = strtok_r(text, "\n", &save); line;
-       line = strtok_r(NULL, "\n", &save)) {
-    json_t *j = json_loads(line, 0, NULL);
-    if (j && json_object_get(j, "command")) {
-      json_decref(last);
-      last = j;
-    } else {
-      json_decref(j);
-    }
-  }
-  if (!last) FG_TEST_FAIL("the physics report %s has no command's line", report_path);
+  json_t *last = cellreport_line(text, -1, report_path);
   const char *lifted = json_string_value(json_object_get(last, "lifted"));
   char *out = h_fmt("%s", lifted ? lifted : "none");
   json_decref(last);

@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "cellreport.h"
 #include "test.h"
 
 static modbus_t *client(int port, int unit) {
@@ -69,21 +70,8 @@ int cellproc_command(cellproc *c, int seq, int cmd, const double p[3], const dou
 json_t *cellproc_report(const cellproc *c, int seq) {
   char *text = simproc_read(c->report);
   ASSERT(text != NULL);
-  json_t *found = NULL;
-  char *save = NULL;
-  for (char *line = strtok_r(text, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
-    json_error_t e;
-    json_t *j = json_loads(line, 0, &e);
-    if (!j) FG_TEST_FAIL("report line is not JSON (%s): %s", e.text, line);
-    if (json_integer_value(json_object_get(j, "seq")) == seq && json_object_get(j, "command")) {
-      json_decref(found);
-      found = j;
-    } else {
-      json_decref(j);
-    }
-  }
+  json_t *found = cellreport_line(text, seq, c->report);
   free(text);
-  if (!found) FG_TEST_FAIL("no report line for seq %d in %s", seq, c->report);
   return found;
 }
 
