@@ -62,35 +62,11 @@ int main(int argc, char **argv) {
   if (steps < 1) FG_TEST_FAIL("STEPS is a whole number >= 1");
   h_set_log_level("info");
   simproc_init(argv[3], h_tmpdir());
-  char *imports = f_dataset(argv[2]);
-  char cell[PATH_MAX];
-  snprintf(cell, sizeof cell, "%s/cell.xml", g_dir());
   simproc sim;
   char report[PATH_MAX];
-  snprintf(report, sizeof report, "%s/physics.jsonl", h_tmpdir());
-  const char *args[] = {"--camera", CU_SCAN_CAMERA, "--camera-mount", CU_SCAN_MOUNT,
-                        "--camera-patch", "8", "--reach-m", "1.2", "--report", report, NULL};
-  const int cam_port = cu_sim_start_scene(&sim, cell, args);
-  cu_calibration_truth("wrist");
-  char *extra = h_fmt(
-      "[gripper]\nmodel = robotiq-2f85\n\n"
-      "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 5000\n"
-      "limit_min = -1 -1 -0.15\nlimit_max = 1.2 1 1.2\n\n"
-      "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
-      "depth_source = http://127.0.0.1:%d/depth.png\n"
-      "features_source = http://127.0.0.1:%d/features.npy\n",
-      sim.port, cam_port, cam_port, cam_port);
-  g_config(imports, extra); /* [train] threads = 2 */
-  f_scene("t250", "sg");
-  h_start();
-  ASSERT(r_wait_status("/v1/robot", 10));
-  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"scan\", \"workspace\": {\"min\": [0.1, "
-                          "-0.45, -0.05], \"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": 0.01, "
-                          "\"background\": [0.8, 0.8, 0.82]}");
-  ASSERT_STATUS(r, 201);
-  h_resp_free(r);
+  cu_scan_cell_start(argv[2], NULL, 5000, &sim, report);
   char *demo = g_demo_body_open("sg", "box"); /* as a user shows it */
-  r = g_post("/v1/tasks/box/demos", demo);
+  h_resp *r = g_post("/v1/tasks/box/demos", demo);
   ASSERT_STATUS(r, 201);
   h_resp_free(r);
   free(demo);
@@ -147,8 +123,6 @@ int main(int argc, char **argv) {
   simproc_stop(&sim);
   free(path);
   free(body);
-  free(extra);
-  free(imports);
   h_done();
   return 0;
 }

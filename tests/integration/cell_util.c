@@ -10,8 +10,10 @@
 
 #include "cellreport.h"
 #include "core/pose.h"
+#include "grasp_util.h"
 #include "harness.h"
 #include "robot_util.h"
+#include "trained.h"
 
 int cu_sim_start(simproc *sim, const char *const *extra) {
   const char *src = getenv("FG_SOURCE_DIR");
@@ -41,6 +43,38 @@ int cu_sim_start_scene(simproc *sim, const char *scene, const char *const *extra
   ASSERT_EQ(fscanf(f, "%d", &port), 1);
   fclose(f);
   return port;
+}
+
+void cu_scan_cell_start(const char *scenegen, const char *time_scale, int robot_timeout_ms,
+                        simproc *sim, char *report) {
+  char *imports = f_dataset(scenegen);
+  char cell[PATH_MAX];
+  snprintf(cell, sizeof cell, "%s/cell.xml", g_dir());
+  snprintf(report, PATH_MAX, "%s/physics.jsonl", h_tmpdir());
+  const char *args[] = {"--camera", CU_SCAN_CAMERA, "--camera-mount", CU_SCAN_MOUNT,
+                        "--camera-patch", "8", "--reach-m", "1.2", "--report", report,
+                        "--time-scale", time_scale ? time_scale : "0", NULL};
+  const int cam_port = cu_sim_start_scene(sim, cell, args);
+  cu_calibration_truth("wrist");
+  char *extra = h_fmt(
+      "[gripper]\nmodel = robotiq-2f85\n\n"
+      "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = %d\n"
+      "limit_min = -1 -1 -0.15\nlimit_max = 1.2 1 1.2\n\n"
+      "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
+      "depth_source = http://127.0.0.1:%d/depth.png\n"
+      "features_source = http://127.0.0.1:%d/features.npy\n",
+      sim->port, robot_timeout_ms, cam_port, cam_port, cam_port);
+  g_config(imports, extra); /* [train] threads = 2 */
+  f_scene("t250", "sg");    /* scenegen's poses, trained {"steps": 250} at 1 cm */
+  h_start();
+  ASSERT(r_wait_status("/v1/robot", 10));
+  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"scan\", \"workspace\": {\"min\": [0.1, "
+                          "-0.45, -0.05], \"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": 0.01, "
+                          "\"background\": [0.8, 0.8, 0.82]}");
+  ASSERT_STATUS(r, 201);
+  h_resp_free(r);
+  free(extra);
+  free(imports);
 }
 
 void cu_look_at(const double eye[3], const double target[3], double roll_deg, double q[4]) {

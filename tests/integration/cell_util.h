@@ -26,6 +26,17 @@ void cu_look_at(const double eye[3], const double target[3], double roll_deg, do
 #define CU_SCAN_CAMERA "600 598 318.2 241.4 480 360 -0.05 0.01 0.0005 -0.0007"
 #define CU_SCAN_MOUNT "0.035 0.01 -0.06 0.99966 0.02618 0 0"
 
+/* The cell of scan_grasp and bench_first_grasp: the grasp tests' scenegen layout (the trained
+ * fixture's data set, of fieldgrip-scenegen at scenegen) in the simulator (simproc_init
+ * first), its report written to <tmp>/physics.jsonl (copied into report, PATH_MAX bytes), at
+ * time_scale (NULL: 0, motions at once), the camera CU_SCAN_CAMERA on CU_SCAN_MOUNT serving
+ * features in 8-pixel patches as the data set's, with its true calibration as "wrist"; fieldgripd started with the 2F-85, that robot (its Modbus
+ * timeout robot_timeout_ms) and camera, the fixture's t250 as scene "sg", and a new scene
+ * "scan" over the layout's workspace at 1 cm against the simulator's grey room. The caller
+ * stops sim. */
+void cu_scan_cell_start(const char *scenegen, const char *time_scale, int robot_timeout_ms,
+                        simproc *sim, char *report);
+
 /* Writes that camera's true calibration as camera `name`'s into the state dir, as a
  * calibration would have left it; before h_start. */
 void cu_calibration_truth(const char *name);

@@ -70,43 +70,15 @@ int main(int argc, char **argv) {
   h_init(argc, argv);
   if (argc < 4) FG_TEST_FAIL("usage: %s FIELDGRIPD FIELDGRIP-SCENEGEN FIELDGRIP-SIM", argv[0]);
   simproc_init(argv[3], h_tmpdir());
-  char *imports = f_dataset(argv[2]);
-  char cell[PATH_MAX];
-  snprintf(cell, sizeof cell, "%s/cell.xml", g_dir());
+  /* motions at a tenth of real time, stepped as the clock goes (at time scale 0 a motion
+   * among the layout's hundred geoms is stepped in one go, and a busy machine can keep the
+   * Modbus answer waiting past the robot's timeout); the scan over the same workspace at the
+   * same voxels as sg, trained as sg was */
   simproc sim;
-  /* the layout's features come in 8-pixel patches, as its data set's (G_PATCH); motions at a
-   * tenth of real time, stepped as the clock goes (at time scale 0 a motion among the
-   * layout's hundred geoms is stepped in one go, and a busy machine can keep the Modbus
-   * answer waiting past the robot's timeout) */
   char report[PATH_MAX];
-  snprintf(report, sizeof report, "%s/physics.jsonl", h_tmpdir());
-  const char *args[] = {"--camera", CU_SCAN_CAMERA, "--camera-mount", CU_SCAN_MOUNT,
-                        "--camera-patch", "8", "--reach-m", "1.2", "--time-scale", "0.1",
-                        "--report", report, NULL};
-  const int cam_port = cu_sim_start_scene(&sim, cell, args);
-  cu_calibration_truth("wrist");
-  char *extra = h_fmt(
-      "[gripper]\nmodel = robotiq-2f85\n\n"
-      "[robot]\ntransport = tcp\nhost = 127.0.0.1\nport = %d\ntimeout_ms = 2000\n"
-      "limit_min = -1 -1 -0.15\nlimit_max = 1.2 1 1.2\n\n"
-      "[camera wrist]\nsource = http://127.0.0.1:%d/rgb.png\n"
-      "depth_source = http://127.0.0.1:%d/depth.png\n"
-      "features_source = http://127.0.0.1:%d/features.npy\n",
-      sim.port, cam_port, cam_port, cam_port);
-  g_config(imports, extra);
-  f_scene("t250", "sg"); /* scenegen's poses, trained {"steps": 250} at 1 cm */
-  h_start();
-  ASSERT(r_wait_status("/v1/robot", 10));
-
-  /* the scan, over the same workspace at the same voxels, trained as sg was */
-  /* (the simulated camera's empty room is grey) */
-  h_resp *r = h_post_json("/v1/scenes", "{\"name\": \"scan\", \"workspace\": {\"min\": [0.1, "
-                          "-0.45, -0.05], \"max\": [0.8, 0.45, 0.35]}, \"voxel_size\": 0.01, "
-                          "\"background\": [0.8, 0.8, 0.82]}");
-  ASSERT_STATUS(r, 201);
-  h_resp_free(r);
-  r = h_post_json("/v1/scenes/scan/scan", "{\"camera\": \"wrist\", \"viewpoints\": 30, "
-                  "\"radius_m\": 0.6, \"settle_ms\": 0, \"train\": {\"steps\": 250}}");
+  cu_scan_cell_start(argv[2], "0.1", 2000, &sim, report);
+  h_resp *r = h_post_json("/v1/scenes/scan/scan", "{\"camera\": \"wrist\", \"viewpoints\": 30, "
+                          "\"radius_m\": 0.6, \"settle_ms\": 0, \"train\": {\"steps\": 250}}");
   ASSERT_STATUS(r, 202);
   char *id = h_fmt("%s", JSTR(r->json, "job"));
   h_resp_free(r);
@@ -161,8 +133,6 @@ int main(int argc, char **argv) {
 
   h_stop();
   simproc_stop(&sim);
-  free(extra);
-  free(imports);
   h_done();
   printf("ok\n");
   return 0;
