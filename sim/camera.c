@@ -314,7 +314,7 @@ static double board_pixel(const sim_camera *cam, const double T_bw[16], const do
   return sum / (SUB * SUB);
 }
 
-void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t *rgb,
+int sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t *rgb,
                        uint16_t *depth_mm, int *geom, double T_wc[16]) {
   const sim_camera_config *c = &cam->cfg;
   double p[3], q[4], T_wt[16];
@@ -340,7 +340,7 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
     memset(depth_mm, 0, sizeof *depth_mm * (size_t)c->w * c->h);
     free(lum);
     free(zc);
-    return;
+    return -1;
   }
   /* a ray a pixel through the cell (mj_ray only reads the view), rows over the cores */
 #pragma omp parallel for schedule(dynamic, 8)
@@ -402,6 +402,7 @@ void sim_camera_render(const sim_camera *cam, const sim_cell_view *view, uint8_t
     }
   free(lum);
   free(zc);
+  return 0;
 }
 
 /* ---------------------------------------------------------------- server */
@@ -492,7 +493,10 @@ static int snapshot(sim_camera *cam, int kind, uint8_t **out, size_t *len, doubl
   sim_cell_view_take(cam->view, cam->cell);
   pthread_mutex_unlock(cam->lock);
   if (!cam->rendered || !sim_cell_view_same(cam->view, cam->last_view)) {
-    sim_camera_render(cam, cam->view, cam->last_rgb, cam->last_d, cam->last_geom, cam->last_T);
+    cam->rendered = 0; /* a failed render is not answered again */
+    if (sim_camera_render(cam, cam->view, cam->last_rgb, cam->last_d, cam->last_geom,
+                          cam->last_T) != 0)
+      return -1;
     sim_cell_view *t = cam->last_view;
     cam->last_view = cam->view;
     cam->view = t;

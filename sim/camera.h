@@ -73,8 +73,9 @@ void sim_camera_free(sim_camera *cam);
 
 /* Renders the view: rgb (w * h * 3 bytes) and depth_mm (w * h); geom (w * h; may be NULL)
  * the geom each pixel's ray met, -1 for none, the board's pixels the geom it lies on;
- * T_world_cam: the camera's pose it was rendered from (OpenCV convention). */
-void sim_camera_render(const sim_camera *cam, const sim_cell_view *v, uint8_t *rgb,
+ * T_world_cam: the camera's pose it was rendered from (OpenCV convention). 0, or -1 when
+ * out of memory (the images then black and without depth). */
+int sim_camera_render(const sim_camera *cam, const sim_cell_view *v, uint8_t *rgb,
                        uint16_t *depth_mm, int *geom, double T_world_cam[16]);
 
 /* Serves GET /rgb.png, /depth.png and /features.npy on cfg->listen from a thread of its own, copying the
