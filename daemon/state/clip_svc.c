@@ -216,11 +216,10 @@ static void install(fg_clip_svc *svc, fg_clip_model *m) {
   fg_clip_model_release(old);
 }
 
-int fg_clip_svc_configure(fg_clip_svc *svc, const fg_conf *conf, int *changed) {
+/* fg_clip_svc_configure with cur, a reference to the current model (or NULL). */
+static int reconfigure(fg_clip_svc *svc, const fg_conf *conf, const fg_clip_model *cur,
+                       int *changed) {
   if (changed) *changed = 0;
-  fg_clip_model *cur = fg_clip_svc_acquire(svc);
-  /* only this thread replaces it: it stays current until install below */
-  fg_clip_model_release(cur);
   if (!conf->clip_weights || !conf->clip_vocab) {
     if (cur) {
       install(svc, NULL);
@@ -253,6 +252,13 @@ int fg_clip_svc_configure(fg_clip_svc *svc, const fg_conf *conf, int *changed) {
   install(svc, m);
   if (changed) *changed = 1;
   return 0;
+}
+
+int fg_clip_svc_configure(fg_clip_svc *svc, const fg_conf *conf, int *changed) {
+  fg_clip_model *cur = fg_clip_svc_acquire(svc);
+  const int rc = reconfigure(svc, conf, cur, changed);
+  fg_clip_model_release(cur);
+  return rc;
 }
 
 json_t *fg_clip_model_json(const fg_clip_model *m) {
